@@ -1,0 +1,61 @@
+"""The ``azimut`` command line: one subcommand per job, each implemented next to what it runs.
+
+A subcommand lives in a module that defines ``add_arguments(parser)`` and ``run(args) -> int``.
+Modules are imported only when their subcommand runs, so ``azimut bench-estimators`` does not pay
+for pymunk or torch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "eval": ("control.evaluate", "run controllers on tracks and write a report (the main job)"),
+    "bench-estimators": ("estimation.bench", "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
+    "bench-env": ("azimut_env.bench", "measure simulator throughput (steps/s) with a time breakdown"),
+    "record-d2": ("control.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
+    "train": ("train.cli", "train an RL baseline (needs the [rl] extra)"),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, help_) in COMMANDS.items():
+        if importlib.util.find_spec(module.split(".")[0]) is None:
+            continue
+        try:
+            if importlib.util.find_spec(module) is None:
+                continue
+        except ModuleNotFoundError:
+            continue
+        out[name] = (module, help_)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = _available()
+    parser = argparse.ArgumentParser(prog="azimut", description="AZIMUT-3 simulator, ICR estimation and control.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_, help_) in commands.items():
+        sub.add_parser(name, help=help_, add_help=False)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in commands:
+        if argv and argv[0] not in ("-h", "--help"):
+            parser.print_usage(sys.stderr)
+            print(f"azimut: error: unknown command {argv[0]!r} (choose from {', '.join(commands)})", file=sys.stderr)
+            return 2
+        parser.print_help()
+        return 0
+    name = argv[0]
+    module = importlib.import_module(commands[name][0])
+    cmd_parser = argparse.ArgumentParser(prog=f"azimut {name}", description=commands[name][1])
+    module.add_arguments(cmd_parser)
+    args = cmd_parser.parse_args(argv[1:])
+    return int(module.run(args) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

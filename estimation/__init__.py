@@ -1,0 +1,62 @@
+"""estimation: the H representation of planar motion and ICR estimation from steering angles.
+
+Reference: the paper "Estimation of the Instantaneous Centre of Rotation with Nonholonomic
+Omnidirectional Mobile Robots" (§2–4). Equation numbers in docstrings refer to it.
+"""
+
+from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
+from .hrep import (
+    canonical_eta,
+    canonical_lambda,
+    chart_params,
+    eta_from_twist,
+    lambda_distance,
+    lambda_from_chart,
+    lambda_from_plane,
+    normalize,
+    plane_from_lambda,
+    point_velocity,
+    select_chart,
+    twist_from_eta,
+)
+from .kinematics import (
+    mu_from_wheel_speeds,
+    propulsion_circle_normals,
+    s_perp,
+    singular_wheels,
+    steering_chart_jacobian,
+    steering_from_lambda,
+    steering_gradient,
+    steering_path_derivatives,
+    wheel_speed_coefficients,
+    wheel_speed_path_derivative,
+    wheel_speeds,
+)
+
+__all__ = [
+    "AZIMUT3_ASSUMPTIONS",
+    "RobotGeometry",
+    "canonical_eta",
+    "canonical_lambda",
+    "chart_params",
+    "eta_from_twist",
+    "lambda_distance",
+    "lambda_from_chart",
+    "lambda_from_plane",
+    "mu_from_wheel_speeds",
+    "normalize",
+    "plane_from_lambda",
+    "point_velocity",
+    "propulsion_circle_normals",
+    "s_perp",
+    "select_chart",
+    "singular_wheels",
+    "steering_chart_jacobian",
+    "steering_from_lambda",
+    "steering_gradient",
+    "steering_path_derivatives",
+    "twist_from_eta",
+    "wheel_speed_coefficients",
+    "wheel_speed_path_derivative",
+    "wheel_speeds",
+]

@@ -1,0 +1,193 @@
+"""The H representation of planar motion (§2): η = (λ, μ) with λ ∈ Λ = S² / (λ ~ −λ).
+
+λ = (u, v, w) is the ICR as a unit vector: the gnomonic image of the ICR point (x, y) of the
+chassis plane, eq. (5)–(6), with points at infinity (pure translations) on the equator w = 0.
+μ is the motion around the ICR. The pair (λ, μ) and (−λ, −μ) is the same motion.
+
+The chassis twist ξ̇ = (ẋ, ẏ, θ̇), in the chassis frame, is ``ξ̇ = μ (v, −u, w)``, so
+``λ ∝ (−ẏ, ẋ, θ̇)`` and ``|μ| = ‖ξ̇‖``. The velocity of a chassis point p is the (x, y) part of
+``μ λ × (p_x, p_y, 1)``.
+
+All functions are batched first: a trailing axis of size 3 holds λ, leading axes are batch axes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "normalize",
+    "canonical_lambda",
+    "canonical_eta",
+    "lambda_distance",
+    "select_chart",
+    "chart_params",
+    "lambda_from_chart",
+    "chart_tangents",
+    "lambda_from_plane",
+    "plane_from_lambda",
+    "eta_from_twist",
+    "twist_from_eta",
+    "point_velocity",
+]
+
+#: The charts of the atlas (§2.1, eq. (2)–(4) and circular permutations): chart c is the pair of
+#: identified hemispheres λ_c ≠ 0, and its coordinates are the two other components in circular
+#: order. Chart 2 (w) uses (u, v), chart 0 (u) uses (v, w), chart 1 (v) uses (w, u).
+CHART_COORDS = np.array([[1, 2], [2, 0], [0, 1]])
+
+
+def _check_last3(lam: np.ndarray, name: str = "lam") -> np.ndarray:
+    lam = np.asarray(lam, dtype=np.float64)
+    if lam.ndim == 0 or lam.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got {lam.shape}")
+    if not np.all(np.isfinite(lam)):
+        raise ValueError(f"{name} must be finite")
+    return lam
+
+
+def normalize(lam: np.ndarray) -> np.ndarray:
+    """Project non-zero vectors of R³ onto the unit sphere. Raises ValueError on a zero vector."""
+    lam = _check_last3(lam)
+    norm = np.linalg.norm(lam, axis=-1, keepdims=True)
+    if np.any(norm == 0):
+        raise ValueError("cannot normalise a zero vector to a point of Λ")
+    return lam / norm
+
+
+def _canonical_sign(lam: np.ndarray) -> np.ndarray:
+    """+1 or −1 so that sign·λ has w > 0, or w = 0 and u > 0, or w = u = 0 and v > 0."""
+    u, v, w = lam[..., 0], lam[..., 1], lam[..., 2]
+    key = np.where(w != 0, w, np.where(u != 0, u, v))
+    return np.where(key < 0, -1.0, 1.0)
+
+
+def canonical_lambda(lam: np.ndarray) -> np.ndarray:
+    """The canonical representative of λ ∈ Λ: the unit vector of the antipodal pair with w > 0
+    (ties on the equator broken by u > 0, then v > 0)."""
+    lam = normalize(lam)
+    return lam * _canonical_sign(lam)[..., None]
+
+
+def canonical_eta(lam: np.ndarray, mu: np.ndarray, mu_tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Canonical representative of η = (λ, μ) ≡ (−λ, −μ).
+
+    Where |μ| > ``mu_tol`` the sign is chosen so that μ > 0: λ is then the direction of the twist
+    (−ẏ, ẋ, θ̇)/‖ξ̇‖, continuous along any motion that does not stop. Elsewhere λ takes the
+    hemisphere rule of :func:`canonical_lambda`.
+    """
+    lam = normalize(lam)
+    mu = np.asarray(mu, dtype=np.float64)
+    sign = np.where(np.abs(mu) > mu_tol, np.where(mu < 0, -1.0, 1.0), _canonical_sign(lam))
+    return lam * sign[..., None], mu * sign
+
+
+def lambda_distance(lam1: np.ndarray, lam2: np.ndarray) -> np.ndarray:
+    """Angle [rad] between two points of Λ, in [0, π/2] (antipodes identified)."""
+    lam1, lam2 = normalize(lam1), normalize(lam2)
+    c = np.abs(np.sum(lam1 * lam2, axis=-1))
+    s = np.linalg.norm(np.cross(lam1, lam2), axis=-1)
+    return np.arctan2(s, c)
+
+
+def select_chart(lam: np.ndarray) -> np.ndarray:
+    """Chart index c ∈ {0: u, 1: v, 2: w} whose domain centre is closest to λ (largest |λ_c|)."""
+    lam = _check_last3(lam)
+    return np.argmax(np.abs(lam), axis=-1)
+
+
+def chart_params(lam: np.ndarray, chart: np.ndarray | int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Chart coordinates φ_c(λ), eq. (3): the two non-chart components of the representative
+    with λ_c > 0. Returns ``(chart, params)`` with params of shape (..., 2)."""
+    lam = normalize(lam)
+    chart = select_chart(lam) if chart is None else np.broadcast_to(np.asarray(chart), lam.shape[:-1])
+    lam_c = np.take_along_axis(lam, chart[..., None], axis=-1)
+    lam = lam * np.where(lam_c < 0, -1.0, 1.0)
+    idx = CHART_COORDS[chart]
+    return chart, np.take_along_axis(lam, idx, axis=-1)
+
+
+def lambda_from_chart(chart: np.ndarray | int, params: np.ndarray) -> np.ndarray:
+    """Parametrisation φ_c⁻¹, eq. (4): λ with λ_c = sqrt(1 − p₁² − p₂²) ≥ 0."""
+    params = np.asarray(params, dtype=np.float64)
+    chart = np.broadcast_to(np.asarray(chart), params.shape[:-1])
+    rho2 = np.sum(params**2, axis=-1)
+    if np.any(rho2 > 1 + 1e-12):
+        raise ValueError("chart parameters outside the unit disc are not on the sphere")
+    lam = np.zeros(params.shape[:-1] + (3,))
+    idx = CHART_COORDS[chart]
+    np.put_along_axis(lam, idx, params, axis=-1)
+    np.put_along_axis(lam, chart[..., None], np.sqrt(np.clip(1 - rho2, 0, None))[..., None], axis=-1)
+    return lam
+
+
+def chart_tangents(lam: np.ndarray, chart: np.ndarray | int | None = None) -> np.ndarray:
+    """∂λ/∂p for the chart's two coordinates, eq. (19): ``e_i − (λ_i / λ_c) e_c``.
+
+    Returns shape (..., 2, 3). λ is taken with λ_c > 0 (the chart's representative).
+    """
+    lam = normalize(lam)
+    chart = select_chart(lam) if chart is None else np.broadcast_to(np.asarray(chart), lam.shape[:-1])
+    lam_c = np.take_along_axis(lam, chart[..., None], axis=-1)[..., 0]
+    idx = CHART_COORDS[chart]
+    out = np.zeros(lam.shape[:-1] + (2, 3))
+    for j in range(2):
+        i = idx[..., j]
+        lam_i = np.take_along_axis(lam, i[..., None], axis=-1)[..., 0]
+        np.put_along_axis(out[..., j, :], i[..., None], 1.0, axis=-1)
+        np.put_along_axis(out[..., j, :], chart[..., None], (-lam_i / lam_c)[..., None], axis=-1)
+    return out
+
+
+def lambda_from_plane(xy: np.ndarray) -> np.ndarray:
+    """ICR point (x, y) of the chassis plane -> λ on the North hemisphere, eq. (5)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim == 0 or xy.shape[-1] != 2:
+        raise ValueError(f"xy must have shape (..., 2), got {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise ValueError("xy must be finite")
+    h = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+    return h / np.linalg.norm(h, axis=-1, keepdims=True)
+
+
+def plane_from_lambda(lam: np.ndarray) -> np.ndarray:
+    """λ -> ICR point (x, y) = (u, v)/w on the w = 1 plane, eq. (6). Infinite where w = 0."""
+    lam = _check_last3(lam)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return lam[..., :2] / lam[..., 2:3]
+
+
+def eta_from_twist(twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Chassis twist (ẋ, ẏ, θ̇) [m/s, m/s, rad/s] -> (λ, μ) with μ ≥ 0, from ξ̇ = μ (v, −u, w).
+
+    A zero twist has no ICR; it returns the canonical λ = (0, 0, 1) (rotation about the centre)
+    with μ = 0.
+    """
+    twist = np.asarray(twist, dtype=np.float64)
+    if twist.ndim == 0 or twist.shape[-1] != 3:
+        raise ValueError(f"twist must have shape (..., 3), got {twist.shape}")
+    if not np.all(np.isfinite(twist)):
+        raise ValueError("twist must be finite")
+    vec = np.stack([-twist[..., 1], twist[..., 0], twist[..., 2]], axis=-1)
+    mu = np.linalg.norm(vec, axis=-1)
+    safe = np.where(mu > 0, mu, 1.0)[..., None]
+    lam = np.where(mu[..., None] > 0, vec / safe, np.array([0.0, 0.0, 1.0]))
+    return lam, mu
+
+
+def twist_from_eta(lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """(λ, μ) -> chassis twist ξ̇ = μ (v, −u, w) [m/s, m/s, rad/s]."""
+    lam = _check_last3(lam)
+    mu = np.asarray(mu, dtype=np.float64)[..., None]
+    return mu * np.stack([lam[..., 1], -lam[..., 0], lam[..., 2]], axis=-1)
+
+
+def point_velocity(lam: np.ndarray, mu: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Velocity [m/s] in R of chassis point(s) p = (p_x, p_y): the (x, y) of μ λ × (p_x, p_y, 1).
+
+    ``lam`` (..., 3) and ``mu`` (...) broadcast against ``p`` (..., 2).
+    """
+    lam = _check_last3(lam)
+    p = np.asarray(p, dtype=np.float64)
+    ph = np.concatenate([p, np.ones(p.shape[:-1] + (1,))], axis=-1)
+    return (np.asarray(mu, dtype=np.float64)[..., None] * np.cross(lam, ph))[..., :2]

@@ -1,0 +1,343 @@
+"""Wheel kinematics in the H representation: β = F(λ), its derivatives, wheel speeds and μ.
+
+The constraint of wheel k is eq. (15): ``s⊥1,k(β_k) · λ = 0`` with
+
+* ``s⊥1,k(β) = sin β (a_k − l_k) − cos β a⊥_k``  (normal of the propulsion axis' great circle)
+* ``s⊥2,k(β) = cos β (a_k − l_k) + sin β a⊥_k``
+
+so that ``β_k = F_k(λ) = atan2(a⊥_k·λ, (a_k − l_k)·λ)`` taken modulo π into the steering range,
+eq. (16)–(17). Write ``N_k = a⊥_k·λ``, ``D_k = (a_k − l_k)·λ`` and ``R_k² = N_k² + D_k²``.
+
+Derivative (derived here; the paper's printed eq. (18) carries sign errors)::
+
+    ∂F_k/∂λ = (D_k a⊥_k − N_k (a_k − l_k)) / R_k²
+
+which equals ``−s⊥1,k / (s⊥2,k · λ)`` with β = F(λ). F is homogeneous of degree 0, so the gradient
+is orthogonal to λ. F_k is undefined only where R_k = 0, i.e. λ ∥ s_k: the ICR on steering axis k,
+eq. (21).
+
+The numba kernels in this module (``_beta_grad_wheel``, ``_steering_dist2``) are the single
+implementation of F that every estimator and the public functions use.
+
+Wheel speeds (sidewise wheel with offset b, radius r; positive φ̇ rolls the wheel toward
+(sin γ, −cos γ), γ = α + β)::
+
+    r_k φ̇_k = μ (s⊥2,k − b_k ẑ)·λ − b_k β̇_k
+
+The b_k β̇_k term is the steer-to-drive coupling: turning the module about A_k moves the contact
+point, and the drive must compensate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .geometry import RobotGeometry
+
+__all__ = [
+    "SINGULAR_TOL",
+    "steering_from_lambda",
+    "steering_gradient",
+    "steering_chart_jacobian",
+    "singular_wheels",
+    "s_perp",
+    "propulsion_circle_normals",
+    "wheel_speed_coefficients",
+    "wheel_speeds",
+    "mu_from_wheel_speeds",
+    "steering_path_derivatives",
+    "wheel_speed_path_derivative",
+]
+
+#: R_k below which wheel k is treated as singular (ICR on its steering axis, eq. (21)). R_k is at
+#: least sin(angle(λ, s_k)), so this is an angle of about 1e-9 rad.
+SINGULAR_TOL = 1e-9
+
+
+# ----------------------------------------------------------------------------------------------
+# numba kernels: the one implementation of F and of the joint-space distance
+# ----------------------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def _wrap_into_range(beta: float, steer_max: float) -> float:
+    """Bring an angle of ]−π, π] into ]steer_max − π, steer_max] by adding multiples of π."""
+    while beta > steer_max:
+        beta -= math.pi
+    while beta <= steer_max - math.pi:
+        beta += math.pi
+    return beta
+
+
+@njit(cache=True)
+def _beta_wheel(lam0: float, lam1: float, lam2: float, E, P, k: int, steer_max: float):
+    """F_k(λ) and R_k². Returns (β_k, R_k²); β_k is meaningless when R_k < SINGULAR_TOL."""
+    num = P[k, 0] * lam0 + P[k, 1] * lam1 + P[k, 2] * lam2
+    den = E[k, 0] * lam0 + E[k, 1] * lam1 + E[k, 2] * lam2
+    r2 = num * num + den * den
+    return _wrap_into_range(math.atan2(num, den), steer_max), r2
+
+
+@njit(cache=True)
+def _steering_dist2(lam, q, E, P, steer_max: float) -> float:
+    """‖q − S(λ)‖², the squared joint-space distance to the surface point of λ, eq. (9).
+
+    A wheel whose steering axis holds the ICR takes any angle, so its term is zero (§3.1.3:
+    β_k is copied from the input)."""
+    d = 0.0
+    for k in range(q.shape[0]):
+        beta, r2 = _beta_wheel(lam[0], lam[1], lam[2], E, P, k, steer_max)
+        if r2 >= SINGULAR_TOL * SINGULAR_TOL:
+            diff = q[k] - beta
+            d += diff * diff
+    return d
+
+
+@njit(cache=True)
+def _beta_grad_wheel(lam, E, P, k: int, steer_max: float, grad):
+    """F_k(λ) and ∂F_k/∂λ (written into ``grad``). Returns (β_k, singular)."""
+    num = P[k, 0] * lam[0] + P[k, 1] * lam[1] + P[k, 2] * lam[2]
+    den = E[k, 0] * lam[0] + E[k, 1] * lam[1] + E[k, 2] * lam[2]
+    r2 = num * num + den * den
+    if r2 < SINGULAR_TOL * SINGULAR_TOL:
+        grad[0] = 0.0
+        grad[1] = 0.0
+        grad[2] = 0.0
+        return 0.0, True
+    inv = 1.0 / r2
+    for i in range(3):
+        grad[i] = (den * P[k, i] - num * E[k, i]) * inv
+    return _wrap_into_range(math.atan2(num, den), steer_max), False
+
+
+@njit(cache=True)
+def _steering_batch(lam, E, P, steer_max: float, fill, use_fill: bool, out):
+    n = E.shape[0]
+    for i in range(lam.shape[0]):
+        for k in range(n):
+            beta, r2 = _beta_wheel(lam[i, 0], lam[i, 1], lam[i, 2], E, P, k, steer_max)
+            if r2 < SINGULAR_TOL * SINGULAR_TOL:
+                beta = fill[i, k] if use_fill else 0.0
+            out[i, k] = beta
+
+
+@njit(cache=True)
+def _gradient_batch(lam, E, P, steer_max: float, out):
+    g = np.empty(3)
+    for i in range(lam.shape[0]):
+        for k in range(E.shape[0]):
+            _beta_grad_wheel(lam[i], E, P, k, steer_max, g)
+            out[i, k, 0] = g[0]
+            out[i, k, 1] = g[1]
+            out[i, k, 2] = g[2]
+
+
+# ----------------------------------------------------------------------------------------------
+# input checking shared by the public functions
+# ----------------------------------------------------------------------------------------------
+
+
+def _check_lambda(lam, name: str = "lam") -> tuple[np.ndarray, tuple[int, ...]]:
+    """Validate λ of shape (3,) or (..., 3); return it flattened to (N, 3) and the batch shape."""
+    arr = np.asarray(lam, dtype=np.float64)
+    if arr.ndim == 0 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (3,) or (N, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    flat = np.ascontiguousarray(arr.reshape(-1, 3))
+    norms = np.linalg.norm(flat, axis=1)
+    if np.any(norms == 0):
+        raise ValueError(f"{name} contains a zero vector, which is not a point of Λ")
+    return flat / norms[:, None], arr.shape[:-1]
+
+
+def _check_angles(q, geom: RobotGeometry, name: str = "q") -> tuple[np.ndarray, tuple[int, ...]]:
+    """Validate steering angles of shape (n,) or (..., n); return (N, n) contiguous and batch shape."""
+    arr = np.asarray(q, dtype=np.float64)
+    if arr.ndim == 0 or arr.shape[-1] != geom.n:
+        raise ValueError(f"{name} must have shape ({geom.n},) or (N, {geom.n}) for this robot, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return np.ascontiguousarray(arr.reshape(-1, geom.n)), arr.shape[:-1]
+
+
+# ----------------------------------------------------------------------------------------------
+# public API
+# ----------------------------------------------------------------------------------------------
+
+
+def steering_from_lambda(lam, geom: RobotGeometry, singular_fill=None) -> np.ndarray:
+    """Steering configuration β = F(λ), eq. (16)–(17), wrapped into the steering range.
+
+    Args:
+        lam: (3,) or (N, 3) points of Λ (need not be normalised; any sign).
+        geom: the robot.
+        singular_fill: optional (n,) or (N, n) angles to use for a wheel whose steering axis holds
+            the ICR (eq. (21)), where β_k is undefined. Default 0. Estimators' quality is computed
+            with the measured angles here, since such a wheel may take any angle.
+
+    Returns:
+        (n,) or (N, n) steering angles [rad] in ]β_min, β_max].
+    """
+    flat, batch = _check_lambda(lam)
+    out = np.empty((flat.shape[0], geom.n))
+    if singular_fill is None:
+        fill = np.zeros((1, geom.n))
+        use_fill = False
+    else:
+        fill = np.ascontiguousarray(np.broadcast_to(np.asarray(singular_fill, dtype=np.float64),
+                                                    batch + (geom.n,)).reshape(-1, geom.n))
+        use_fill = True
+    _steering_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, fill, use_fill, out)
+    return out.reshape(batch + (geom.n,))
+
+
+def steering_gradient(lam, geom: RobotGeometry) -> np.ndarray:
+    """∂F_k/∂λ = (D_k a⊥_k − N_k (a_k − l_k)) / (N_k² + D_k²), the corrected eq. (18).
+
+    Returns (n, 3) or (N, n, 3) [rad per unit of λ]; rows of singular wheels are zero (§3.1.3).
+    The gradient is taken at λ as given (normalised); it is odd in λ and orthogonal to λ.
+    """
+    flat, batch = _check_lambda(lam)
+    out = np.empty((flat.shape[0], geom.n, 3))
+    _gradient_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, out)
+    return out.reshape(batch + (geom.n, 3))
+
+
+def steering_chart_jacobian(lam, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Chart-wise derivatives (S_u, S_v) of the constraining surface S(λ), eq. (9)–(10), (19).
+
+    Uses the chart selected for λ and its representative with λ_c > 0. Returns ``(chart, J)`` with
+    J of shape (n, 2) or (N, n, 2): column j is ∂β/∂p_j for the chart's coordinate p_j.
+    """
+    from .hrep import chart_tangents, select_chart
+
+    flat, batch = _check_lambda(lam)
+    chart = select_chart(flat)
+    flat = flat * np.where(np.take_along_axis(flat, chart[:, None], axis=1) < 0, -1.0, 1.0)
+    grad = steering_gradient(flat, geom)  # (N, n, 3)
+    tang = chart_tangents(flat, chart)  # (N, 2, 3)
+    jac = np.einsum("nki,nji->nkj", grad, tang)
+    return chart.reshape(batch), jac.reshape(batch + (geom.n, 2))
+
+
+def singular_wheels(lam, geom: RobotGeometry, tol: float = 1e-6) -> np.ndarray:
+    """Structural singularity test, eq. (21): True where λ ∥ s_k (ICR on steering axis k).
+
+    ``tol`` is the sine of the angle between λ and ŝ_k below which the wheel is singular.
+    Returns (n,) or (N, n) bool.
+    """
+    flat, batch = _check_lambda(lam)
+    sin_angle = np.linalg.norm(np.cross(flat[:, None, :], geom.s_unit[None, :, :]), axis=-1)
+    return (sin_angle <= tol).reshape(batch + (geom.n,))
+
+
+def s_perp(beta, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """(s⊥1, s⊥2) for steering angles β, each (n, 3) or (N, n, 3); see eq. (15), (27)."""
+    beta = np.asarray(beta, dtype=np.float64)
+    sb, cb = np.sin(beta)[..., None], np.cos(beta)[..., None]
+    s1 = sb * geom.a_minus_l - cb * geom.a_perp
+    s2 = cb * geom.a_minus_l + sb * geom.a_perp
+    return s1, s2
+
+
+def propulsion_circle_normals(q, geom: RobotGeometry) -> np.ndarray:
+    """Normal c_k = s⊥1,k(q_k) of the great circle of propulsion axis k, eq. (8), (27).
+
+    λ lies on wheel k's propulsion axis iff c_k · λ = 0. Returns (n, 3) or (N, n, 3)."""
+    return s_perp(q, geom)[0]
+
+
+def wheel_speed_coefficients(lam, geom: RobotGeometry, beta=None) -> np.ndarray:
+    """c_k = (s⊥2,k(β_k) − b_k ẑ) · λ [m], so that r_k φ̇_k = μ c_k − b_k β̇_k.
+
+    ``beta`` defaults to F(λ); pass measured angles to use them instead. c_k is the signed distance
+    from the ICR... scaled by μ: |μ c_k| is the contact point's rolling speed.
+    Returns (n,) or (N, n).
+    """
+    flat, batch = _check_lambda(lam)
+    if beta is None:
+        beta = steering_from_lambda(flat, geom)
+    else:
+        beta = np.broadcast_to(np.asarray(beta, dtype=np.float64), batch + (geom.n,)).reshape(-1, geom.n)
+    _, s2 = s_perp(beta, geom)
+    c = np.einsum("nki,ni->nk", s2, flat) - geom.b[None, :] * flat[:, 2:3]
+    return c.reshape(batch + (geom.n,))
+
+
+def wheel_speeds(lam, mu, geom: RobotGeometry, beta_rate=None, beta=None) -> np.ndarray:
+    """Wheel spin rates φ̇ [rad/s] that realise (λ, μ): r_k φ̇_k = μ (s⊥2,k − b_k ẑ)·λ − b_k β̇_k.
+
+    Args:
+        lam: (3,) or (N, 3); mu: scalar or (N,) [m/s per unit of λ, i.e. μ = ±‖ξ̇‖].
+        beta_rate: optional steering rates β̇ [rad/s], (n,) or (N, n): the steer-to-drive coupling.
+        beta: optional steering angles to use instead of F(λ).
+    """
+    c = wheel_speed_coefficients(lam, geom, beta)
+    mu = np.asarray(mu, dtype=np.float64)
+    if not np.all(np.isfinite(mu)):
+        raise ValueError("mu contains NaN or inf")
+    rphi = mu[..., None] * c
+    if beta_rate is not None:
+        rphi = rphi - geom.b * np.asarray(beta_rate, dtype=np.float64)
+    return rphi / geom.r
+
+
+def mu_from_wheel_speeds(lam, phidot, geom: RobotGeometry, beta=None, beta_rate=None) -> np.ndarray:
+    """μ by least squares of r_k φ̇_k + b_k β̇_k = μ c_k over the wheels, given λ.
+
+    Returns a scalar (as a 0-d array) or (N,). Where every c_k vanishes (cannot happen for a valid
+    geometry and unit λ), μ = 0.
+    """
+    c = wheel_speed_coefficients(lam, geom, beta)
+    phidot = np.asarray(phidot, dtype=np.float64)
+    if phidot.shape[-1:] != (geom.n,):
+        raise ValueError(f"phidot must have shape ({geom.n},) or (N, {geom.n}), got {phidot.shape}")
+    if not np.all(np.isfinite(phidot)):
+        raise ValueError("phidot contains NaN or inf")
+    y = geom.r * phidot
+    if beta_rate is not None:
+        y = y + geom.b * np.asarray(beta_rate, dtype=np.float64)
+    den = np.sum(c * c, axis=-1)
+    return np.sum(c * y, axis=-1) / np.where(den > 0, den, 1.0)
+
+
+def steering_path_derivatives(lam, dlam, ddlam, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """β′ and β″ along a path λ(s) on the sphere, given λ′ and λ″ (′ = d/ds).
+
+    β′_k = ∇F_k · λ′ = −(s⊥1,k · λ′)/(s⊥2,k · λ)
+    β″_k = −(2 β′_k (s⊥2,k · λ′) + s⊥1,k · λ″)/(s⊥2,k · λ)
+
+    (from differentiating s⊥1,k(β_k(s)) · λ(s) = 0 twice, using ds⊥1/dβ = s⊥2, ds⊥2/dβ = −s⊥1).
+    Shapes: λ, λ′, λ″ (3,) or (N, 3) -> (n,) or (N, n) each. Singular wheels give ±inf or NaN-free
+    large values; callers must avoid steering axes (see control/).
+    """
+    lam = np.asarray(lam, dtype=np.float64)
+    beta = steering_from_lambda(lam, geom)
+    s1, s2 = s_perp(beta, geom)
+    dlam = np.asarray(dlam, dtype=np.float64)[..., None, :]
+    ddlam = np.asarray(ddlam, dtype=np.float64)[..., None, :]
+    den = np.sum(s2 * lam[..., None, :], axis=-1)
+    d1 = -np.sum(s1 * dlam, axis=-1) / den
+    d2 = -(2 * d1 * np.sum(s2 * dlam, axis=-1) + np.sum(s1 * ddlam, axis=-1)) / den
+    return d1, d2
+
+
+def wheel_speed_path_derivative(lam, dlam, mu, dmu, ddbeta, geom: RobotGeometry) -> np.ndarray:
+    """φ̇′_k = ((s⊥2,k − b_k ẑ)·(μ λ′ + μ′ λ) + (s⊥2,k)′·μλ − b_k β″_k) / r_k along a path.
+
+    With (s⊥2,k)′ = −β′_k s⊥1,k and s⊥1,k·λ = 0 on the surface, the middle term vanishes, giving
+    the note's φ̇′_k = ((s⊥2,k − b_k ẑ)·(μ λ′ + μ′ λ) − b_k β″_k)/r_k. Here φ̇ is the path form
+    r φ̇ = μ c − b β′ (rates per unit of s).
+    """
+    lam = np.asarray(lam, dtype=np.float64)
+    beta = steering_from_lambda(lam, geom)
+    _, s2 = s_perp(beta, geom)
+    s2b = s2.copy()
+    s2b[..., 2] -= geom.b
+    v = np.asarray(mu, dtype=np.float64)[..., None] * np.asarray(dlam, dtype=np.float64) \
+        + np.asarray(dmu, dtype=np.float64)[..., None] * lam
+    return (np.sum(s2b * v[..., None, :], axis=-1) - geom.b * np.asarray(ddbeta, dtype=np.float64)) / geom.r
