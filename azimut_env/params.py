@@ -1,0 +1,283 @@
+"""Physical parameters of the simulated AZIMUT-3, as frozen dataclasses with units, and the map
+between the env's normalised actions and physical actuator set-points.
+
+Everything a controller needs to know about the actuators is in :class:`ActuatorLimits`
+(``env.unwrapped.limits``). The normalised action of :class:`~azimut_env.env.AzimutEnv` is
+
+* ``action[:n]``  steering set-points: ``β_cmd = action · β_max`` [rad] (β_max = π/2, the stop);
+* ``action[n:]``  propulsion set-points: ``φ̇_cmd = action · φ̇_max`` [rad/s].
+
+:func:`setpoints_from_action` and :func:`action_from_setpoints` convert both ways. They are pure
+functions of arrays (batched over leading axes) and are the single definition of that map.
+
+Default values are assumptions for a robot of AZIMUT-3's size (the paper does not publish them);
+they are chosen so that the steering compliance is visible (a few degrees of deflection under the
+largest tire force) while the simulation stays stable at the default substep.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimation.geometry import RobotGeometry
+
+__all__ = [
+    "ActuatorLimits",
+    "SteeringParams",
+    "WheelParams",
+    "TireParams",
+    "ChassisParams",
+    "SensorParams",
+    "RobotParams",
+    "setpoints_from_action",
+    "action_from_setpoints",
+]
+
+
+def _check_positive(obj, *names: str, allow_zero: bool = False) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
+        if not ok:
+            rel = ">= 0" if allow_zero else "> 0"
+            raise ValueError(f"{type(obj).__name__}.{name} must be finite and {rel}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """Limits of the steering and propulsion actuators (identical for every wheel).
+
+    Attributes:
+        steer_rate_max: steering motor speed limit |θ̇_m| [rad/s].
+        steer_accel_max: steering motor acceleration limit |θ̈_m| [rad/s²].
+        steer_torque_max: torque the steering motor can put through the spring [N·m]; beyond it the
+            motor stalls (its angle stays within ``steer_torque_max / stiffness`` of β).
+        wheel_speed_max: propulsion speed limit |φ̇| [rad/s], also the scale of the propulsion action.
+        wheel_accel_max: propulsion set-point acceleration limit |φ̈_ref| [rad/s²].
+        wheel_torque_max: propulsion motor torque limit [N·m].
+        steer_min, steer_max: steering range ]β_min, β_max] [rad] (hard stops); β_max scales the
+            steering action.
+    """
+
+    steer_rate_max: float = 4.0
+    steer_accel_max: float = 30.0
+    steer_torque_max: float = 15.0
+    wheel_speed_max: float = 20.0
+    wheel_accel_max: float = 40.0
+    wheel_torque_max: float = 5.0
+    steer_min: float = -math.pi / 2
+    steer_max: float = math.pi / 2
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "steer_rate_max", "steer_accel_max", "steer_torque_max", "wheel_speed_max",
+                        "wheel_accel_max", "wheel_torque_max")
+        if not (math.isfinite(self.steer_min) and math.isfinite(self.steer_max) and self.steer_min < 0 < self.steer_max):
+            raise ValueError(f"ActuatorLimits steering range must satisfy steer_min < 0 < steer_max, got "
+                             f"]{self.steer_min}, {self.steer_max}]")
+
+
+def setpoints_from_action(action, limits: ActuatorLimits, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised action (..., 2n) in [−1, 1] -> (β_cmd [rad], φ̇_cmd [rad/s]), each (..., n).
+
+    Values outside [−1, 1] are clipped first (the Gymnasium convention for Box actions). NaN or inf
+    raise ``ValueError``.
+    """
+    a = np.asarray(action, dtype=np.float64)
+    if a.ndim == 0 or a.shape[-1] != 2 * n:
+        raise ValueError(f"action must have shape (..., {2 * n}) for {n} wheels, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action contains NaN or inf: {a}")
+    a = np.clip(a, -1.0, 1.0)
+    beta = a[..., :n] * limits.steer_max
+    beta = np.clip(beta, limits.steer_min, limits.steer_max)
+    return beta, a[..., n:] * limits.wheel_speed_max
+
+
+def action_from_setpoints(beta_cmd, phidot_cmd, limits: ActuatorLimits) -> np.ndarray:
+    """(β_cmd [rad], φ̇_cmd [rad/s]), each (..., n) -> normalised float32 action (..., 2n).
+
+    The inverse of :func:`setpoints_from_action`; set-points beyond the limits are clipped to
+    [−1, 1]. Steering angles are used as given (wrap them into the steering range first).
+    """
+    beta = np.asarray(beta_cmd, dtype=np.float64)
+    phidot = np.asarray(phidot_cmd, dtype=np.float64)
+    if beta.shape != phidot.shape:
+        raise ValueError(f"beta_cmd and phidot_cmd must have the same shape, got {beta.shape} and {phidot.shape}")
+    if not (np.all(np.isfinite(beta)) and np.all(np.isfinite(phidot))):
+        raise ValueError("set-points contain NaN or inf")
+    a = np.concatenate([beta / limits.steer_max, phidot / limits.wheel_speed_max], axis=-1)
+    return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class SteeringParams:
+    """Series-elastic steering module (motor -> spring + damper -> module about A_k).
+
+    Attributes:
+        stiffness: spring stiffness k_s [N·m/rad] between motor and module.
+        damping: damper c_s [N·m·s/rad] in parallel with the spring.
+        position_gain: motor position loop gain [1/s] (desired rate = gain · error, before limits).
+        module_mass: mass of one steering module with its wheel [kg].
+        module_inertia: moment of inertia of a module about its steering axis A_k [kg·m²].
+    """
+
+    stiffness: float = 60.0
+    damping: float = 0.6
+    position_gain: float = 20.0
+    module_mass: float = 2.0
+    module_inertia: float = 0.02
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "stiffness", "position_gain", "module_mass", "module_inertia")
+        _check_positive(self, "damping", allow_zero=True)
+
+
+@dataclass(frozen=True)
+class WheelParams:
+    """Propulsion: the wheel spin DOF and its velocity-controlled motor.
+
+    Attributes:
+        inertia: spin inertia of wheel + reflected rotor [kg·m²].
+        velocity_gain: propulsion velocity loop gain [N·m·s/rad] (τ = gain · (φ̇_ref − φ̇), clipped).
+        bearing_damping: viscous friction on the spin [N·m·s/rad].
+    """
+
+    inertia: float = 0.03
+    velocity_gain: float = 8.0
+    bearing_damping: float = 0.005
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "inertia", "velocity_gain")
+        _check_positive(self, "bearing_damping", allow_zero=True)
+
+
+@dataclass(frozen=True)
+class TireParams:
+    """Tire-ground contact: regularised Coulomb friction inside a friction circle.
+
+    The force on the robot at the contact point is ``−μ N v_slip / v_knee`` for slip speeds below
+    ``v_knee`` and ``−μ N v̂_slip`` above (saturation on the friction circle ‖F‖ ≤ μ N).
+
+    Attributes:
+        friction: friction coefficient μ [-].
+        slip_knee: slip speed at which the force saturates [m/s].
+        rolling_resistance: rolling resistance coefficient C_rr [-] (torque C_rr N r on the spin).
+        rolling_knee: spin surface speed below which rolling resistance fades linearly [m/s].
+    """
+
+    friction: float = 0.8
+    slip_knee: float = 0.05
+    rolling_resistance: float = 0.015
+    rolling_knee: float = 0.02
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "friction", "slip_knee", "rolling_knee")
+        _check_positive(self, "rolling_resistance", allow_zero=True)
+
+
+@dataclass(frozen=True)
+class ChassisParams:
+    """The chassis rigid body (a square plate).
+
+    Attributes:
+        mass: chassis mass without the modules [kg] (total robot ≈ mass + n · module_mass).
+        length: footprint along X_R [m]. width: footprint along Y_R [m].
+    """
+
+    mass: float = 27.0
+    length: float = 0.6
+    width: float = 0.6
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "mass", "length", "width")
+
+    @property
+    def inertia(self) -> float:
+        """Moment of inertia of the plate about its centre [kg·m²]."""
+        return self.mass * (self.length**2 + self.width**2) / 12.0
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """Sensor noise and quantisation. Noise is drawn from the env's RNG.
+
+    Attributes:
+        steer_noise: standard deviation of measured β (wheel side of the spring) [rad].
+        steer_resolution: quantum of the steering and motor-angle encoders [rad] (0: none).
+        motor_noise: standard deviation of measured motor angles [rad].
+        wheel_cpr: wheel encoder counts per revolution; φ̇ is counts per control period (0: exact).
+        wheel_speed_noise: standard deviation added to measured φ̇ [rad/s].
+    """
+
+    steer_noise: float = 0.002
+    steer_resolution: float = 2 * math.pi / 4096
+    motor_noise: float = 0.001
+    wheel_cpr: int = 4096
+    wheel_speed_noise: float = 0.02
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "steer_noise", "steer_resolution", "motor_noise", "wheel_speed_noise", allow_zero=True)
+        if int(self.wheel_cpr) != self.wheel_cpr or self.wheel_cpr < 0:
+            raise ValueError(f"SensorParams.wheel_cpr must be a non-negative integer, got {self.wheel_cpr!r}")
+
+    @classmethod
+    def ideal(cls) -> "SensorParams":
+        """Noise-free, unquantised sensors."""
+        return cls(0.0, 0.0, 0.0, 0, 0.0)
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """All physical parameters of one robot.
+
+    Attributes:
+        geometry: wheel layout (``RobotGeometry``; default the AZIMUT-3 stand-in).
+        chassis, steering, wheel, tire, limits, sensors: see their classes.
+        gravity: g [m/s²], used only for the static normal loads N_k.
+    """
+
+    geometry: RobotGeometry = field(default_factory=RobotGeometry.azimut3)
+    chassis: ChassisParams = field(default_factory=ChassisParams)
+    steering: SteeringParams = field(default_factory=SteeringParams)
+    wheel: WheelParams = field(default_factory=WheelParams)
+    tire: TireParams = field(default_factory=TireParams)
+    limits: ActuatorLimits = field(default_factory=ActuatorLimits)
+    sensors: SensorParams = field(default_factory=SensorParams)
+    gravity: float = 9.81
+
+    def __post_init__(self) -> None:
+        _check_positive(self, "gravity")
+        g = self.geometry
+        if not isinstance(g, RobotGeometry):
+            raise ValueError(f"RobotParams.geometry must be a RobotGeometry, got {type(g).__name__}")
+        if not (np.isclose(g.steer_max, self.limits.steer_max) and np.isclose(g.steer_min, self.limits.steer_min)):
+            raise ValueError("RobotParams: limits.steer_min/steer_max must equal the geometry's steering range")
+
+    @property
+    def n(self) -> int:
+        """Number of wheels."""
+        return self.geometry.n
+
+    @property
+    def total_mass(self) -> float:
+        """Chassis plus modules [kg]."""
+        return self.chassis.mass + self.n * self.steering.module_mass
+
+    @property
+    def max_surface_speed(self) -> float:
+        """Largest wheel surface speed r φ̇_max [m/s] (smallest wheel)."""
+        return float(np.min(self.geometry.r) * self.limits.wheel_speed_max)
+
+    def static_normal_loads(self) -> np.ndarray:
+        """N_k [N]: least-norm loads on the steering axes balancing the weight (force and moments
+        about the chassis centre, centre of mass at the origin). Equal loads for a symmetric robot."""
+        xy = self.geometry.axis_xy
+        G = np.vstack([np.ones(self.n), xy[:, 0], xy[:, 1]])
+        w = np.array([self.total_mass * self.gravity, 0.0, 0.0])
+        loads = np.linalg.lstsq(G, w, rcond=None)[0]
+        if np.any(loads <= 0):
+            raise ValueError(f"RobotParams: the static load of some wheel is not positive ({loads})")
+        return loads
