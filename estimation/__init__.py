@@ -4,7 +4,12 @@ Reference: the paper "Estimation of the Instantaneous Centre of Rotation with No
 Omnidirectional Mobile Robots" (§2–4). Equation numbers in docstrings refer to it.
 """
 
+from .datasets import dataset_d1, dataset_d2, dataset_d3
+from .estimate import IT_BEST, METHODS, ITDiagnostics, estimate_icr, estimate_icr_it
 from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
+from .it import ITParams
+from .oracle import OracleParams
+from .quality import QUALITY_F, quality
 from .hrep import (
     canonical_eta,
     canonical_lambda,
@@ -35,6 +40,18 @@ from .kinematics import (
 
 __all__ = [
     "AZIMUT3_ASSUMPTIONS",
+    "IT_BEST",
+    "ITDiagnostics",
+    "ITParams",
+    "METHODS",
+    "OracleParams",
+    "QUALITY_F",
+    "dataset_d1",
+    "dataset_d2",
+    "dataset_d3",
+    "estimate_icr",
+    "estimate_icr_it",
+    "quality",
     "RobotGeometry",
     "canonical_eta",
     "canonical_lambda",

@@ -14,6 +14,7 @@ All functions are batched first: a trailing axis of size 3 holds λ, leading axe
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 __all__ = [
     "normalize",
@@ -60,6 +61,22 @@ def _canonical_sign(lam: np.ndarray) -> np.ndarray:
     u, v, w = lam[..., 0], lam[..., 1], lam[..., 2]
     key = np.where(w != 0, w, np.where(u != 0, u, v))
     return np.where(key < 0, -1.0, 1.0)
+
+
+@njit(cache=True)
+def _canonicalize_rows(lam) -> None:
+    """In place, for (N, 3) unit rows: the sign rule of :func:`_canonical_sign` (used by the
+    estimator kernels' hot path; a test checks both agree)."""
+    for p in range(lam.shape[0]):
+        key = lam[p, 2]
+        if key == 0.0:
+            key = lam[p, 0]
+            if key == 0.0:
+                key = lam[p, 1]
+        if key < 0.0:
+            lam[p, 0] = -lam[p, 0]
+            lam[p, 1] = -lam[p, 1]
+            lam[p, 2] = -lam[p, 2]
 
 
 def canonical_lambda(lam: np.ndarray) -> np.ndarray:

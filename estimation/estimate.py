@@ -1,0 +1,124 @@
+"""One entry point for every ICR estimator: :func:`estimate_icr`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import RobotGeometry
+from .hrep import _canonicalize_rows
+from .it import ITParams, it_kernel_batch
+from .operational import ls_kernel_batch, ne_kernel_batch, ns_kernel_batch
+from .oracle import OracleParams, oracle_kernel_batch, oracle_tables
+
+__all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "IT_BEST"]
+
+#: Method names accepted by :func:`estimate_icr`. "IT+" is the improved IT (``IT_BEST``).
+METHODS = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
+
+#: The improved IT: every kept start run to convergence, the closest result kept.
+IT_BEST = ITParams(n_starts=6, race_iter=4, accept_rms=0.25)
+
+
+def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Validate q ((n,) or (N, n), finite) and return it as contiguous (N, n) in the steering
+    range, plus the batch shape. Kept lean: it is on the single-call hot path."""
+    arr = np.asarray(q, dtype=np.float64)
+    if arr.ndim not in (1, 2) or arr.shape[-1] != geom.n:
+        raise ValueError(f"q must have shape ({geom.n},) or (N, {geom.n}) for this robot, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError("q contains NaN or inf")
+    batch = arr.shape[:-1]
+    flat = arr.reshape(-1, geom.n)
+    if flat.size and (flat.max() > geom.steer_max or flat.min() <= geom.steer_min):
+        flat = geom.wrap_steering(flat)  # β and β + π are the same propulsion axis
+    elif not flat.flags.c_contiguous:
+        flat = np.ascontiguousarray(flat)
+    return flat, batch
+
+
+@dataclass(frozen=True)
+class ITDiagnostics:
+    """Per-point diagnostics of IT, arrays of shape (N,) (or 0-d for a single point).
+
+    Attributes:
+        iterations: Newton iterations, summed over the starts tried.
+        starts_tried: starting points evaluated.
+        converged: whether the returned λ comes from a converged start (or a start on the surface).
+        distance: ‖q − S(λ̂)‖ [rad], the joint-space distance to the estimate.
+    """
+
+    iterations: np.ndarray
+    starts_tried: np.ndarray
+    converged: np.ndarray
+    distance: np.ndarray
+
+
+def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = ITParams(), diagnostics: bool = False):
+    """IT, Algorithm 1 (§3.1). See :mod:`estimation.it`.
+
+    Args:
+        q: (n,) or (N, n) measured steering angles [rad]. Angles outside the steering range are
+            wrapped into it (β and β + π are the same propulsion axis).
+        geom: the robot.
+        params: thresholds; defaults reproduce the paper, ``IT_BEST`` is the improved variant.
+        diagnostics: also return an :class:`ITDiagnostics`.
+
+    Returns:
+        λ̂ (3,) or (N, 3), canonical sign (:func:`canonical_lambda`), and the diagnostics if asked.
+    """
+    flat, batch = _prepare(q, geom)
+    N = flat.shape[0]
+    lam = np.empty((N, 3))
+    d2 = np.empty(N)
+    iters = np.empty(N, dtype=np.int64)
+    starts = np.empty(N, dtype=np.int64)
+    conv = np.empty(N, dtype=np.bool_)
+    it_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, params.eps_delta, params.eps_lambda,
+                    int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
+                    params.accept_d2(geom.n),
+                    lam, d2, iters, starts, conv)
+    _canonicalize_rows(lam)
+    lam = lam.reshape(batch + (3,))
+    if not diagnostics:
+        return lam
+    diag = ITDiagnostics(iters.reshape(batch), starts.reshape(batch), conv.reshape(batch), np.sqrt(d2).reshape(batch))
+    return lam, diag
+
+
+def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
+                 oracle_params: OracleParams = OracleParams()) -> np.ndarray:
+    """Estimate the ICR λ̂ ∈ Λ from measured steering angles q.
+
+    Args:
+        q: (n,) or (N, n) steering angles [rad]; NaN or inf raise ``ValueError``.
+        geom: the robot.
+        method: "IT" (Algorithm 1, §3.1), "IT+" (IT keeping the best of all starts), "NE" (§3.2.1),
+            "LS" (§3.2.2), "NS" (§3.2.3) or "ORACLE" (exhaustive projection, the yardstick).
+        it_params: thresholds for "IT" (default :class:`ITParams`) or "IT+" (default ``IT_BEST``).
+        oracle_params: search density for "ORACLE".
+
+    Returns:
+        (3,) or (N, 3) unit vectors with the canonical sign of :func:`canonical_lambda`.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
+    if method in ("IT", "IT+"):
+        params = it_params if it_params is not None else (ITParams() if method == "IT" else IT_BEST)
+        return estimate_icr_it(q, geom, params)
+    flat, batch = _prepare(q, geom)
+    lam = np.empty((flat.shape[0], 3))
+    if method == "NE":
+        ne_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
+    elif method == "LS":
+        ls_kernel_batch(flat, geom.alpha, geom.axis_xy, lam)
+    elif method == "NS":
+        ns_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
+    else:
+        grid, grid_beta = oracle_tables(geom, oracle_params)
+        d2 = np.empty(flat.shape[0])
+        oracle_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, grid, grid_beta,
+                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2)
+    _canonicalize_rows(lam)
+    return lam.reshape(batch + (3,))

@@ -1,0 +1,340 @@
+"""IT: the iterative joint-space ICR estimator, Algorithm 1 of §3.1.
+
+Given measured steering angles q ∈ T^n, IT looks for the point S(λ) of the constraining surface,
+eq. (9), closest to q: the orthogonal projection of q onto the surface.
+
+* Starting points (§3.1.4): the intersections λ = c_i × c_j of the great circles of every pair of
+  propulsion axes (c_k = s⊥1,k(q_k), eq. (8), (27)), collinear pairs skipped, ordered by their
+  joint-space distance ‖q − S(λ)‖, the closest ``n_starts`` kept.
+* Iteration (Lines 9–12): in the chart of λ (§2.1), a Gauss–Newton step on the two chart
+  parameters, eq. (10)–(13), solved by Cramer's rule, with the chart derivatives
+  S_p = ∇F · ∂λ/∂p, eq. (19), and ∇F from :mod:`estimation.kinematics`.
+* Invalid parameters (§3.1.2): parameters outside the unit disc are multiplied by the norm of the
+  previous ones until they are inside; a step that increases the distance is halved
+  (backtracking) down to ``min_step``; below it the start fails and the next one is tried.
+* Singularities (§3.1.3): a wheel whose steering axis holds λ gets a zero row in S_u, S_v and takes
+  the input angle (zero distance term).
+* Result (Lines 22–26): the first start that converges (‖λ − λ_t‖ ≤ ε_λ, or ‖q − S(λ₀)‖ ≤ ε_δ
+  at the start itself); if none does, the closest λ found.
+
+``race_iter`` set (not ``None``) is the improved variant, IT+ (not in the paper): Algorithm 1
+read literally returns the first start that converges, even when a later start would come
+closer. IT+ keeps more starts, lets each descend ``race_iter`` iterations, and finishes the
+closest one, so a poorer local minimum found first no longer hides a better one.
+
+The kernel is numba-compiled; the same code serves one point and a batch.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _steering_dist2
+
+__all__ = ["ITParams", "it_kernel_batch"]
+
+
+@dataclass(frozen=True)
+class ITParams:
+    """Thresholds of Algorithm 1.
+
+    Attributes:
+        eps_delta: ε_δ [rad], joint-space distance ‖q − S(λ₀)‖ under which a starting point is
+            accepted without iterating (a well-defined ICR, Line 4).
+        eps_lambda: ε_λ, step ‖λ − λ_t‖ on the unit sphere under which the iteration has
+            converged (Line 17).
+        max_iter: maxIter, iterations per starting point (Line 20).
+        min_step: backtracking floor: the smallest fraction of the Newton step tried before
+            declaring a backtracking failure (§3.1.2, item 4).
+        n_starts: number of starting points kept (§3.1.4; the paper uses 3).
+        race_iter: ``None`` for the paper's Algorithm 1. An integer selects the improved variant
+            IT+: the closest start descends to convergence (even through backtracking failures,
+            which mostly stop it on a wrap of the surface, a good point); if the result is
+            farther than ``accept_rms`` per wheel, every other kept start descends ``race_iter``
+            iterations and the closest racer descends to convergence if it leads.
+        accept_rms: IT+ only: RMS per-wheel distance [rad] under which the first result is kept
+            without racing (the measured configuration is then close to the surface, in the
+            first start's basin).
+    """
+
+    eps_delta: float = 1e-6
+    eps_lambda: float = 1e-6
+    max_iter: int = 50
+    min_step: float = 1.0 / 1024
+    n_starts: int = 3
+    race_iter: int | None = None
+    accept_rms: float = 0.05
+
+    def accept_d2(self, n_wheels: int) -> float:
+        """IT+'s squared-distance acceptance threshold for n wheels."""
+        return n_wheels * self.accept_rms**2
+
+    @property
+    def race_iter_or_paper(self) -> int:
+        """``race_iter`` for the kernel: −1 means the paper's Algorithm 1."""
+        return -1 if self.race_iter is None else int(self.race_iter)
+
+    def __post_init__(self) -> None:
+        for name in ("eps_delta", "eps_lambda", "min_step"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"ITParams.{name} must be finite and > 0, got {value}")
+        if self.min_step > 1:
+            raise ValueError(f"ITParams.min_step must be <= 1, got {self.min_step}")
+        if int(self.max_iter) < 1 or int(self.n_starts) < 1:
+            raise ValueError("ITParams.max_iter and n_starts must be >= 1")
+        if self.race_iter is not None and not (0 <= int(self.race_iter) <= int(self.max_iter)):
+            raise ValueError(f"ITParams.race_iter must be None or in [0, max_iter], got {self.race_iter}")
+
+
+@njit(cache=True)
+def _starting_points(q, E, P, steer_max, starts, start_d2):
+    """Pairwise propulsion-axis intersections, sorted by joint-space distance.
+
+    Fills ``starts`` (m_max, 3) and ``start_d2`` (m_max,); returns how many are valid."""
+    n = q.shape[0]
+    c = np.empty((n, 3))
+    for k in range(n):
+        sb = math.sin(q[k])
+        cb = math.cos(q[k])
+        for i in range(3):
+            c[k, i] = sb * E[k, i] - cb * P[k, i]  # s⊥1,k(q_k), eq. (27)
+    m = 0
+    lam = np.empty(3)
+    for i in range(n):
+        for j in range(i + 1, n):
+            lam[0] = c[i, 1] * c[j, 2] - c[i, 2] * c[j, 1]
+            lam[1] = c[i, 2] * c[j, 0] - c[i, 0] * c[j, 2]
+            lam[2] = c[i, 0] * c[j, 1] - c[i, 1] * c[j, 0]
+            nrm = math.sqrt(lam[0] * lam[0] + lam[1] * lam[1] + lam[2] * lam[2])
+            if nrm <= 1e-12:
+                continue  # collinear propulsion axes: no intersection
+            lam[0] /= nrm
+            lam[1] /= nrm
+            lam[2] /= nrm
+            d2 = _steering_dist2(lam, q, E, P, steer_max)
+            # insertion sort by distance
+            pos = m
+            while pos > 0 and start_d2[pos - 1] > d2:
+                start_d2[pos] = start_d2[pos - 1]
+                starts[pos, 0] = starts[pos - 1, 0]
+                starts[pos, 1] = starts[pos - 1, 1]
+                starts[pos, 2] = starts[pos - 1, 2]
+                pos -= 1
+            start_d2[pos] = d2
+            starts[pos, 0] = lam[0]
+            starts[pos, 1] = lam[1]
+            starts[pos, 2] = lam[2]
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t):
+    """Lines 7–20 of Algorithm 1 from λ (modified in place) at squared distance d2.
+
+    Returns (d2, iterations, converged)."""
+    n = q.shape[0]
+    count = 0
+    while count < max_iter:
+        # Chart selection (§2.1): largest |λ_c|, representative with λ_c > 0.
+        c = 0
+        if abs(lam[1]) > abs(lam[c]):
+            c = 1
+        if abs(lam[2]) > abs(lam[c]):
+            c = 2
+        if lam[c] < 0:
+            lam[0] = -lam[0]
+            lam[1] = -lam[1]
+            lam[2] = -lam[2]
+        i = (c + 1) % 3
+        j = (c + 2) % 3
+        # COMPUTEDERIVATIVES (Line 9): S_u, S_v, and the residual q − S(λ).
+        a11 = 0.0
+        a12 = 0.0
+        a22 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        for k in range(n):
+            beta, singular = _beta_grad_wheel(lam, E, P, k, steer_max, grad)
+            if singular:
+                continue  # §3.1.3: zero row, wheel discarded from (13)
+            su_k = grad[i] - grad[c] * lam[i] / lam[c]  # eq. (19)
+            sv_k = grad[j] - grad[c] * lam[j] / lam[c]
+            res = q[k] - beta
+            a11 += su_k * su_k
+            a12 += su_k * sv_k
+            a22 += sv_k * sv_k
+            b1 += res * su_k
+            b2 += res * sv_k
+        # SOLVE (Line 10): eq. (13) by Cramer's rule.
+        det = a11 * a22 - a12 * a12
+        if not (det > 1e-14 * (a11 * a22 + 1e-300)):
+            return d2, count, False
+        du = (b1 * a22 - b2 * a12) / det
+        dv = (a11 * b2 - a12 * b1) / det
+        # UPDATEPARAMETERS with backtracking (Line 11, §3.1.2).
+        old_norm = math.sqrt(lam[i] * lam[i] + lam[j] * lam[j])
+        step = 1.0
+        accepted = False
+        dt = d2
+        while step >= min_step:
+            x = lam[i] + step * du
+            y = lam[j] + step * dv
+            rho2 = x * x + y * y
+            shrink = 0
+            while rho2 > 1.0 and shrink < 64:
+                x *= old_norm
+                y *= old_norm
+                rho2 = x * x + y * y
+                shrink += 1
+            if rho2 > 1.0:
+                x /= math.sqrt(rho2)
+                y /= math.sqrt(rho2)
+                rho2 = 1.0
+            lam_t[i] = x
+            lam_t[j] = y
+            lam_t[c] = math.sqrt(max(0.0, 1.0 - rho2))
+            dt = _steering_dist2(lam_t, q, E, P, steer_max)
+            if dt <= d2:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            return d2, count, False  # backtracking failure: keep λ, try the next start
+        moved2 = 0.0
+        for m in range(3):
+            diff = lam[m] - lam_t[m]
+            moved2 += diff * diff
+            lam[m] = lam_t[m]
+        d2 = dt
+        count += 1
+        if moved2 <= eps_lambda * eps_lambda:
+            return d2, count, True
+    return d2, count, False
+
+
+@njit(cache=True)
+def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter,
+              accept_d2, starts, start_d2, grad, lam, lam_t, out, race_lam, race_d2, race_it, race_done):
+    """One point: fills out[0:3] with λ. Returns (d2, iterations, starts tried, converged).
+
+    ``race_iter`` < 0 runs the paper's Algorithm 1. ``race_iter`` >= 0 runs the improved variant:
+    the closest start descends to convergence; if it ends farther than sqrt(accept_d2) from q,
+    every other kept start descends ``race_iter`` iterations and the closest racer is finished."""
+    m = _starting_points(q, E, P, steer_max, starts, start_d2)
+    if m == 0:
+        # No pair of propulsion axes intersects (cannot happen with non-collinear steering axes
+        # and finite input); fall back to the rotation about the chassis centre.
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 1.0
+        return _steering_dist2(out, q, E, P, steer_max), 0, 0, False
+    if m > n_starts:
+        m = n_starts
+    if math.sqrt(start_d2[0]) <= eps_delta:
+        # Line 4: the closest intersection lies on the surface: a well-defined ICR.
+        out[0] = starts[0, 0]
+        out[1] = starts[0, 1]
+        out[2] = starts[0, 2]
+        return start_d2[0], 0, 1, True
+    total_iter = 0
+    if race_iter < 0:
+        best_d2 = np.inf
+        best_conv = False
+        tried = 0
+        for s in range(m):
+            tried += 1
+            lam[0] = starts[s, 0]
+            lam[1] = starts[s, 1]
+            lam[2] = starts[s, 2]
+            d2 = start_d2[s]
+            if math.sqrt(d2) <= eps_delta:
+                conv = True
+                it = 0
+            else:
+                d2, it, conv = _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t)
+            total_iter += it
+            if conv or d2 < best_d2:
+                # Line 23 returns the first start that converges; Line 26 the closest otherwise.
+                best_d2 = d2
+                best_conv = conv
+                out[0] = lam[0]
+                out[1] = lam[1]
+                out[2] = lam[2]
+            if conv:
+                break
+        return best_d2, total_iter, tried, best_conv
+    # Improved variant. First the closest start descends to convergence, as in Algorithm 1.
+    for i in range(3):
+        out[i] = starts[0, i]
+    best_d2, it, best_conv = _descend(q, E, P, steer_max, out, start_d2[0], eps_lambda, max_iter, min_step,
+                                      grad, lam_t)
+    total_iter += it
+    if best_d2 <= accept_d2 or m == 1:
+        return best_d2, total_iter, 1, best_conv
+    # Far from the surface, other basins may hold closer points: a short race between the other
+    # starts, then the closest racer, if it beats the first result, descends to convergence.
+    lead = -1
+    lead_d2 = best_d2
+    for s in range(1, m):
+        for i in range(3):
+            race_lam[s, i] = starts[s, i]
+        d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], start_d2[s], eps_lambda, race_iter,
+                                min_step, grad, lam_t)
+        total_iter += it
+        race_d2[s] = d2
+        race_it[s] = it
+        race_done[s] = conv or it < race_iter  # converged, or stopped by a backtracking failure
+        if d2 < lead_d2:
+            lead = s
+            lead_d2 = d2
+    if lead < 0:
+        return best_d2, total_iter, m, best_conv
+    for i in range(3):
+        lam[i] = race_lam[lead, i]
+    conv = race_done[lead]
+    d2 = lead_d2
+    if not conv:
+        d2, it, conv = _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter - race_it[lead], min_step,
+                                grad, lam_t)
+        total_iter += it
+    if d2 < best_d2:
+        best_d2 = d2
+        best_conv = conv
+        for i in range(3):
+            out[i] = lam[i]
+    return best_d2, total_iter, m, best_conv
+
+
+@njit(cache=True)
+def it_kernel_batch(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts,
+                    race_iter, accept_d2, lam_out, d2_out, iters_out, starts_out, conv_out):
+    """Algorithm 1 over a batch q (N, n). Writes λ (N, 3) and diagnostics."""
+    n = q.shape[1]
+    m_max = n * (n - 1) // 2
+    starts = np.empty((m_max, 3))
+    start_d2 = np.empty(m_max)
+    grad = np.empty(3)
+    lam = np.empty(3)
+    lam_t = np.empty(3)
+    out = np.empty(3)
+    race_lam = np.empty((m_max, 3))
+    race_d2 = np.empty(m_max)
+    race_it = np.empty(m_max, dtype=np.int64)
+    race_done = np.empty(m_max, dtype=np.bool_)
+    for p in range(q.shape[0]):
+        d2, it, tried, conv = _it_point(q[p], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step,
+                                        n_starts, race_iter, accept_d2, starts, start_d2, grad, lam, lam_t, out,
+                                        race_lam, race_d2, race_it, race_done)
+        lam_out[p, 0] = out[0]
+        lam_out[p, 1] = out[1]
+        lam_out[p, 2] = out[2]
+        d2_out[p] = d2
+        iters_out[p] = it
+        starts_out[p] = tried
+        conv_out[p] = conv
