@@ -1,0 +1,16 @@
+"""azimut_env: a pymunk AZIMUT-3 with compliant steering, as the Gymnasium env ``Azimut-v0``.
+
+Importing this package only registers the environment (by entry-point string); the physics,
+pymunk and numba load when the env is made. Modules: ``params`` (physical parameters, actuator
+limits, action <-> set-point map), ``physics`` (N robots in one pymunk Space), ``tire``,
+``actuators``, ``sensors``, ``tracks``, ``env`` (the task), ``rendering``, ``bench``, ``paper_run``.
+"""
+
+from gymnasium.envs.registration import register, registry
+
+__all__ = ["ENV_ID"]
+
+ENV_ID = "Azimut-v0"
+
+if ENV_ID not in registry:
+    register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv", max_episode_steps=3000)
