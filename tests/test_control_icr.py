@@ -1,0 +1,274 @@
+"""ICR controller: the note's algebra against finite differences, limits, singular targets and the
+RUNNING -> STOPPING -> RECONFIGURING state machine (on the kinematic test bench)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from control.icr_controller import (
+    ICRController,
+    ICRControllerConfig,
+    Mode,
+    arc_blocked,
+    clamp_mu,
+    initial_state,
+    icr_control_step,
+    nearer_target,
+    project_off_axes,
+)
+from control.kinematic_model import KinematicRobot, twist_from_wheels
+from control.limits import ActuatorLimits, limit_violations
+from estimation import RobotGeometry, eta_from_twist, lambda_distance, steering_from_lambda, twist_from_eta
+from estimation.kinematics import s_perp, steering_path_derivatives, wheel_speeds
+
+GEOM = RobotGeometry.azimut3()
+LIM = ActuatorLimits()
+DT = 0.02
+
+
+def _unit(x):
+    x = np.asarray(x, dtype=float)
+    return x / np.linalg.norm(x)
+
+
+def _path(lam0, axis, s):
+    """λ(s) on a great circle: rotation of λ0 about ``axis`` by angle s."""
+    axis = _unit(axis)
+    return (np.cos(s) * lam0 + np.sin(s) * np.cross(axis, lam0) + (1 - np.cos(s)) * np.dot(axis, lam0) * axis)
+
+
+# ------------------------------------------------------------------ algebra vs finite differences
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_beta_path_derivatives_match_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    lam0 = _unit(rng.normal(size=3))
+    axis = rng.normal(size=3)
+    h = 1e-5
+    lams = np.array([_path(lam0, axis, s) for s in (-h, 0.0, h)])
+    dlam = (lams[2] - lams[0]) / (2 * h)
+    ddlam = (lams[2] - 2 * lams[1] + lams[0]) / h**2
+    b = steering_from_lambda(lams, GEOM)
+    d1, d2 = steering_path_derivatives(lams[1], dlam, ddlam, GEOM)
+    fd1 = np.mod((b[2] - b[0]) + np.pi / 2, np.pi) - np.pi / 2
+    ok = np.abs(fd1) < 0.1  # skip wheels that wrap across the stop inside the stencil
+    np.testing.assert_allclose(d1[ok], fd1[ok] / (2 * h), rtol=1e-4, atol=1e-4)
+    fd2 = (b[2] - 2 * b[1] + b[0]) / h**2
+    np.testing.assert_allclose(d2[ok], fd2[ok], rtol=1e-3, atol=1e-2)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_wheel_speed_formula_is_rolling_without_slip(seed):
+    """r φ̇ = μ(s⊥2 − b ẑ)·λ − b β̇ makes the kinematic robot's least-squares slip vanish and
+    reproduces the twist ξ̇ = μ (v, −u, w), with the steering moving at β̇."""
+    rng = np.random.default_rng(seed)
+    lam = _unit(rng.normal(size=3))
+    mu = rng.uniform(-1, 1)
+    beta = steering_from_lambda(lam, GEOM)
+    beta_rate = rng.uniform(-2, 2, size=GEOM.n)
+    phidot = wheel_speeds(lam, mu, GEOM, beta_rate=beta_rate)
+    twist, slip = twist_from_wheels(beta, beta_rate, phidot, GEOM)
+    assert slip < 1e-9
+    np.testing.assert_allclose(twist, twist_from_eta(lam, mu), atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_wheel_acceleration_formula_matches_finite_differences(seed):
+    """d/dt of r φ̇ along λ(t), μ(t): (s⊥2 − b ẑ)·(μ λ̇ + μ̇ λ) − b β̈ (the s⊥2′ term vanishes)."""
+    rng = np.random.default_rng(seed)
+    lam0 = _unit(rng.normal(size=3))
+    axis = rng.normal(size=3)
+    w, mu0, mudot = 0.3, rng.uniform(-1, 1), rng.uniform(-1, 1)
+    h = 1e-5
+
+    def rphi(t):
+        lam = _path(lam0, axis, w * t)
+        lamd = _path(lam0, axis, w * (t + 1e-6))
+        lamm = _path(lam0, axis, w * (t - 1e-6))
+        bd = (steering_from_lambda(lamd, GEOM) - steering_from_lambda(lamm, GEOM)) / 2e-6
+        return GEOM.r * wheel_speeds(lam, mu0 + mudot * t, GEOM, beta_rate=bd)
+
+    fd = (rphi(h) - rphi(-h)) / (2 * h)
+    lam = lam0
+    dlam = (_path(lam0, axis, w * h) - _path(lam0, axis, -w * h)) / (2 * h)
+    ddlam = (_path(lam0, axis, w * h) - 2 * lam0 + _path(lam0, axis, -w * h)) / h**2
+    _, bdd = steering_path_derivatives(lam, dlam, ddlam, GEOM)
+    _, s2 = s_perp(steering_from_lambda(lam, GEOM), GEOM)
+    s2b = s2.copy()
+    s2b[:, 2] -= GEOM.b
+    analytic = s2b @ (mu0 * dlam + mudot * lam) - GEOM.b * bdd
+    np.testing.assert_allclose(analytic, fd, rtol=1e-3, atol=1e-3)
+
+
+# ------------------------------------------------------------------ building blocks
+
+
+def test_nearer_target_flips_both():
+    lam, mu = nearer_target([0, 0, 1], [0, 0.1, -1], 0.5)
+    np.testing.assert_allclose(lam, [0, -0.1, 1])
+    assert mu == -0.5
+
+
+def test_clamp_mu_respects_every_wheel():
+    lam = _unit([0.2, 1.0, 0.3])
+    mu = clamp_mu(lam, 100.0, GEOM, LIM)
+    assert np.max(np.abs(wheel_speeds(lam, mu, GEOM))) == pytest.approx(LIM.wheel_speed)
+    assert clamp_mu(lam, -100.0, GEOM, LIM) == pytest.approx(-mu)
+    assert clamp_mu(lam, 0.1, GEOM, LIM) == 0.1
+
+
+@pytest.mark.parametrize("k", range(4))
+def test_project_off_axes_keeps_wheel_k_still(k):
+    lam = _unit([0.3, 1.0, 0.1])
+    for target in (GEOM.s_unit[k], -GEOM.s_unit[k]):
+        out, hit = project_off_axes(target, lam, GEOM, np.deg2rad(3))
+        assert hit == k
+        assert lambda_distance(out, GEOM.s_unit[k]) == pytest.approx(np.deg2rad(3), abs=1e-9)
+    # along the great circle through s_k, β_k does not change
+    out, _ = project_off_axes(GEOM.s_unit[k], lam, GEOM, np.deg2rad(3))
+    d = steering_from_lambda(out, GEOM)[k] - steering_from_lambda(lam, GEOM)[k]
+    assert abs(np.mod(d + np.pi / 2, np.pi) - np.pi / 2) < 1e-9
+
+
+def test_arc_blocked_detects_stop_crossing():
+    x, y = eta_from_twist(np.array([1.0, 0, 0]))[0], eta_from_twist(np.array([0, 1.0, 0]))[0]
+    assert arc_blocked(x, y, GEOM, np.deg2rad(3), np.deg2rad(0.5)) == "stop"
+    small = eta_from_twist(np.array([1.0, 0.2, 0]))[0]
+    assert arc_blocked(x, small, GEOM, np.deg2rad(3), np.deg2rad(0.5)) is None
+
+
+# ------------------------------------------------------------------ closed loop on the bench
+
+
+def _run(targets, ctl=None, robot=None, kick=None):
+    """Drive the kinematic robot through [(λ_d, μ_d, steps)], checking every command."""
+    ctl = ctl or ICRController(GEOM, LIM, DT)
+    robot = robot or KinematicRobot.at_rest(GEOM)
+    log = []
+    i = 0
+    for lam_d, mu_d, steps in targets:
+        for _ in range(steps):
+            lam_hat = ctl.state.lam if ctl.state is not None else np.array([0, 0, 1.0])
+            mu_hat = ctl.state.mu if ctl.state is not None else 0.0
+            beta_meas = robot.beta.copy()
+            if kick is not None and i == kick[0]:
+                beta_meas = kick[1](beta_meas)
+            cmd = ctl.step(lam_hat, mu_hat, beta_meas, robot.phidot, lam_d, mu_d)
+            assert all(np.all(np.isfinite(x)) for x in (cmd.beta, cmd.phidot, cmd.beta_rate, cmd.phiddot))
+            assert not limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, LIM).any(), i
+            assert np.all(cmd.beta > GEOM.steer_min) and np.all(cmd.beta <= GEOM.steer_max)
+            twist, slip = robot.step(cmd.beta, cmd.phidot, DT)
+            log.append((cmd.info["mode"], slip, twist, cmd))
+            i += 1
+    return ctl, robot, log
+
+
+def test_straight_then_turn_no_slip_and_reaches_target():
+    x = eta_from_twist(np.array([1.0, 0, 0]))[0]
+    turn = eta_from_twist(np.array([0.8, 0.1, 0.5]))[0]
+    ctl, robot, log = _run([(x, 0.8, 150), (turn, 0.7, 150)])
+    assert ctl.mode == Mode.RUNNING
+    assert lambda_distance(ctl.state.lam, turn) < 1e-6
+    assert ctl.state.mu == pytest.approx(0.7, abs=1e-9)
+    # coordinated: wheels never fight while running
+    assert max(s for m, s, *_ in log if m == Mode.RUNNING) < 1e-6
+
+
+@pytest.mark.parametrize("k", range(4))
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_icr_exactly_on_each_steering_axis(k, sign):
+    start = eta_from_twist(np.array([0.5, 0.2, 0.4]))[0]
+    ctl, robot, log = _run([(start, 0.5, 100), (sign * GEOM.s_unit[k], sign * 0.5, 150)])
+    assert lambda_distance(ctl.state.lam, GEOM.s_unit[k]) == pytest.approx(np.deg2rad(3), abs=1e-6)
+    assert ctl.mode == Mode.RUNNING
+
+
+def test_lambda_sign_swap_is_the_same_motion():
+    lam = eta_from_twist(np.array([0.6, 0.3, 0.2]))[0]
+    ctl, robot, log = _run([(lam, 0.6, 100)] + [(s * lam, s * 0.6, 1) for s in (-1, 1) * 20])
+    assert all(m == Mode.RUNNING for m, *_ in log[90:])
+    betas = np.array([c.beta for *_, c in log[100:]])
+    assert np.ptp(betas, axis=0).max() < 1e-9  # wheels do not move
+    assert ctl.state.mu * np.sign(np.dot(ctl.state.lam, lam)) == pytest.approx(0.6)
+
+
+def test_mu_beyond_limits_is_clamped():
+    lam = eta_from_twist(np.array([0.3, 0.0, 1.0]))[0]
+    ctl, robot, log = _run([(lam, 1e6, 300), (lam, -1e6, 300)])
+    phid = np.array([c.phidot for *_, c in log])
+    assert np.max(np.abs(phid)) <= LIM.wheel_speed
+    assert np.max(np.abs(phid)) == pytest.approx(LIM.wheel_speed * ICRControllerConfig().mu_headroom, rel=1e-3)
+
+
+def test_zero_command_does_not_swing_wheels():
+    lam = eta_from_twist(np.array([0.6, 0.3, 0.2]))[0]
+    ctl, robot, log = _run([(lam, 0.6, 100), (lam, 0.0, 100)])
+    beta_stop = log[100][3].beta
+    for target in ([0, 0, 1.0], [1.0, 0, 0], GEOM.s_unit[0]):
+        ctl, robot, log2 = _run([(target, 0.0, 50)], ctl, robot)
+        np.testing.assert_allclose([c.beta for *_, c in log2], np.broadcast_to(beta_stop, (50, 4)), atol=1e-12)
+        assert all(m == Mode.RUNNING for m, *_ in log2)
+    assert abs(ctl.state.mu) == 0.0
+
+
+def test_state_machine_on_stop_crossing():
+    x = eta_from_twist(np.array([1.0, 0, 0]))[0]
+    y = eta_from_twist(np.array([0, 1.0, 0]))[0]
+    ctl, robot, log = _run([(x, 1.0, 150), (y, 1.0, 250)])
+    modes = [m for m, *_ in log[150:]]
+    seq = [modes[0]] + [b for a, b in zip(modes, modes[1:]) if a != b]
+    assert seq == [Mode.STOPPING, Mode.RECONFIGURING, Mode.RUNNING]
+    assert ctl.state.events == 2  # the start (rotation -> translation crosses a stop) and the corner
+    # stopped before reconfiguring: no motion while the wheels turn in place
+    speeds = [np.linalg.norm(t) for m, s, t, c in log if m == Mode.RECONFIGURING]
+    assert max(speeds) < 1e-9
+    assert lambda_distance(ctl.state.lam, y) < 1e-9
+
+
+def test_kicked_wheel_triggers_stop_and_reconfigure():
+    x = eta_from_twist(np.array([1.0, 0.1, 0]))[0]
+
+    def kick(beta):
+        beta = beta.copy()
+        beta[2] = GEOM.wrap_steering(beta[2] + 1.0)
+        return beta
+
+    ctl, robot, log = _run([(x, 1.0, 300)], kick=(150, kick))
+    assert log[150][0] == Mode.STOPPING
+    assert log[150][3].info["event"] == "kick"
+    assert ctl.mode == Mode.RUNNING
+
+
+def test_random_start_reconfigures_first():
+    rng = np.random.default_rng(3)
+    beta0 = rng.uniform(-1.5, 1.5, size=4)
+    st0 = initial_state([0, 0, 1.0], beta0, np.zeros(4), GEOM)
+    assert st0.mode == Mode.RECONFIGURING
+
+
+def test_bad_input_raises():
+    ctl = ICRController(GEOM, LIM, DT)
+    with pytest.raises(ValueError):
+        ctl.step([0, 0, 1.0], 0.0, np.zeros(4), np.zeros(4), [0, 0, 0.0], 1.0)
+    with pytest.raises(ValueError):
+        ctl.step([0, 0, 1.0], 0.0, np.zeros(4), np.zeros(4), [0, 0, 1.0], np.nan)
+    with pytest.raises(ValueError):
+        ctl.step([0, 0, 1.0], 0.0, np.zeros(3), np.zeros(4), [0, 0, 1.0], 1.0)
+    with pytest.raises(ValueError):
+        ActuatorLimits(steer_rate=-1.0)
+    with pytest.raises(ValueError):
+        ICRController(GEOM, LIM, 0.0)
+
+
+lam_strategy = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.tuples(st.one_of(lam_strategy, st.sampled_from([tuple(s) for s in GEOM.s_unit])),
+                          st.floats(-5, 5), st.integers(1, 30)), min_size=1, max_size=5))
+def test_limits_never_exceeded_on_random_target_sequences(seq):
+    _run([(np.array(lam), mu, n) for lam, mu, n in seq])
