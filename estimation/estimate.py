@@ -18,7 +18,7 @@ __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "IT_BE
 METHODS = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
 
 #: The improved IT: every kept start run to convergence, the closest result kept.
-IT_BEST = ITParams(n_starts=6, race_iter=4, accept_rms=0.25)
+IT_BEST = ITParams(n_starts=6, race_iter=2, accept_rms=0.25)
 
 
 def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:

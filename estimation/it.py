@@ -17,10 +17,16 @@ eq. (9), closest to q: the orthogonal projection of q onto the surface.
 * Result (Lines 22–26): the first start that converges (‖λ − λ_t‖ ≤ ε_λ, or ‖q − S(λ₀)‖ ≤ ε_δ
   at the start itself); if none does, the closest λ found.
 
-``race_iter`` set (not ``None``) is the improved variant, IT+ (not in the paper): Algorithm 1
-read literally returns the first start that converges, even when a later start would come
-closer. IT+ keeps more starts, lets each descend ``race_iter`` iterations, and finishes the
-closest one, so a poorer local minimum found first no longer hides a better one.
+``race_iter`` set (not ``None``) is the improved variant, IT+ (not in the paper). Algorithm 1
+read literally returns the first start that converges, even when another start would come
+closer, and its backtracking stops a descent wherever a step crosses a steering stop, where the
+surface jumps by π, although the distance may still decrease along that stop. IT+
+
+* slides along the stop's boundary (the great circle s⊥1,k(β_max)·λ = 0) instead of stopping
+  there (:func:`_slide`); the minima of D3 often lie on such boundaries;
+* finishes the closest start, and only if the result is still far from the surface
+  (``accept_rms``), races every pairwise intersection for ``race_iter`` iterations and finishes
+  the leader.
 
 The kernel is numba-compiled; the same code serves one point and a batch.
 """
@@ -33,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _steering_dist2
+from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _steering_dist2
 
 __all__ = ["ITParams", "it_kernel_batch"]
 
@@ -134,12 +140,121 @@ def _starting_points(q, E, P, steer_max, starts, start_d2):
 
 
 @njit(cache=True)
-def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t):
+def _boundary_d2(x, q, E, P, steer_max, k, fixed):
+    """Squared distance with wheel k's term held at ``fixed`` (wheel k at its stop)."""
+    tot = fixed
+    for w in range(q.shape[0]):
+        if w == k:
+            continue
+        b, r2 = _beta_wheel(x[0], x[1], x[2], E, P, w, steer_max)
+        if r2 >= SINGULAR_TOL * SINGULAR_TOL:
+            tot += (q[w] - b) * (q[w] - b)
+    return tot
+
+
+@njit(cache=True)
+def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, lam_t):
+    """IT+ only: descend along the wrap boundary of wheel k, where β_k reaches a stop.
+
+    The surface S(λ) jumps by π where a wheel's β crosses its stop; the boundary is the great
+    circle of normal n_k = s⊥1,k(β_max), eq. (27). A Gauss–Newton step that keeps crossing it fails
+    by backtracking although the distance still decreases along the boundary. Here λ is projected
+    on that circle and moved along it (wheel k held at its stop ``beta_lim``, the limit on λ's
+    side), with the same Gauss–Newton step and backtracking in one parameter. The result is
+    nudged back inside λ's side. Returns the new squared distance (λ updated) or d2 unchanged."""
+    n = q.shape[0]
+    sm = math.sin(steer_max)
+    cm = math.cos(steer_max)
+    nk0 = sm * E[k, 0] - cm * P[k, 0]
+    nk1 = sm * E[k, 1] - cm * P[k, 1]
+    nk2 = sm * E[k, 2] - cm * P[k, 2]
+    nn = nk0 * nk0 + nk1 * nk1 + nk2 * nk2
+    dot = nk0 * lam[0] + nk1 * lam[1] + nk2 * lam[2]
+    base = np.empty(3)
+    base[0] = lam[0] - dot * nk0 / nn
+    base[1] = lam[1] - dot * nk1 / nn
+    base[2] = lam[2] - dot * nk2 / nn
+    nb = math.sqrt(base[0] * base[0] + base[1] * base[1] + base[2] * base[2])
+    if nb < 1e-12:
+        return d2
+    for m in range(3):
+        base[m] /= nb
+    fixed = (q[k] - beta_lim) * (q[k] - beta_lim)
+    cur = np.empty(3)
+    for m in range(3):
+        cur[m] = base[m]
+
+    f = _boundary_d2(cur, q, E, P, steer_max, k, fixed)
+    t = np.empty(3)
+    for _ in range(max_iter):
+        # unit tangent of the boundary circle at cur
+        t[0] = nk1 * cur[2] - nk2 * cur[1]
+        t[1] = nk2 * cur[0] - nk0 * cur[2]
+        t[2] = nk0 * cur[1] - nk1 * cur[0]
+        tn = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
+        if tn < 1e-12:
+            break
+        for m in range(3):
+            t[m] /= tn
+        jj = 0.0
+        jr = 0.0
+        for w in range(n):
+            if w == k:
+                continue
+            b, singular = _beta_grad_wheel(cur, E, P, w, steer_max, grad)
+            if singular:
+                continue
+            g = grad[0] * t[0] + grad[1] * t[1] + grad[2] * t[2]
+            jj += g * g
+            jr += g * (q[w] - b)
+        if jj <= 1e-300:
+            break
+        ds = jr / jj
+        step = 1.0
+        accepted = False
+        ft = f
+        while step >= min_step:
+            a = step * ds
+            ca = math.cos(a)
+            sa = math.sin(a)
+            for m in range(3):
+                lam_t[m] = ca * cur[m] + sa * t[m]
+            ft = _boundary_d2(lam_t, q, E, P, steer_max, k, fixed)
+            if ft <= f:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            break
+        for m in range(3):
+            cur[m] = lam_t[m]
+        moved = abs(step * ds)
+        f = ft
+        if moved <= 1e-10:
+            break
+    # nudge off the boundary to λ's side of it (the side where wheel k sits at beta_lim)
+    best = d2
+    for sgn in (-1.0, 1.0):
+        for m in range(3):
+            lam_t[m] = cur[m] + sgn * 1e-9 * (nk0 if m == 0 else (nk1 if m == 1 else nk2)) / math.sqrt(nn)
+        dt = _steering_dist2(lam_t, q, E, P, steer_max)
+        if dt < best:
+            best = dt
+            nrm = math.sqrt(lam_t[0] * lam_t[0] + lam_t[1] * lam_t[1] + lam_t[2] * lam_t[2])
+            for m in range(3):
+                lam[m] = lam_t[m] / nrm
+    return best
+
+
+@njit(cache=True)
+def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t, slide=False):
     """Lines 7–20 of Algorithm 1 from λ (modified in place) at squared distance d2.
 
-    Returns (d2, iterations, converged)."""
+    With ``slide`` (IT+), a backtracking failure next to a stop continues along the stop's
+    boundary (:func:`_slide`) instead of ending the descent. Returns (d2, iterations, converged)."""
     n = q.shape[0]
     count = 0
+    kmax = -1
     while count < max_iter:
         # Chart selection (§2.1): largest |λ_c|, representative with λ_c > 0.
         c = 0
@@ -159,10 +274,16 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
         a22 = 0.0
         b1 = 0.0
         b2 = 0.0
+        kmax = -1
+        beta_near = 0.0
         for k in range(n):
             beta, singular = _beta_grad_wheel(lam, E, P, k, steer_max, grad)
             if singular:
                 continue  # §3.1.3: zero row, wheel discarded from (13)
+            edge = min(steer_max - beta, beta - (steer_max - math.pi))
+            if kmax < 0 or edge < beta_near:
+                kmax = k
+                beta_near = edge
             su_k = grad[i] - grad[c] * lam[i] / lam[c]  # eq. (19)
             sv_k = grad[j] - grad[c] * lam[j] / lam[c]
             res = q[k] - beta
@@ -205,6 +326,15 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
                 break
             step *= 0.5
         if not accepted:
+            if slide and kmax >= 0 and beta_near < 0.3:
+                beta_k, _ = _beta_wheel(lam[0], lam[1], lam[2], E, P, kmax, steer_max)
+                lim = steer_max if steer_max - beta_k < beta_k - (steer_max - math.pi) else steer_max - math.pi
+                ds2 = _slide(q, E, P, steer_max, lam, d2, kmax, lim, max_iter, min_step, grad, lam_t)
+                if ds2 < d2 * (1.0 - 1e-12):
+                    d2 = ds2
+                    count += 1
+                    continue
+                return d2, count, True  # a minimum on the stop's boundary
             return d2, count, False  # backtracking failure: keep λ, try the next start
         moved2 = 0.0
         for m in range(3):
@@ -273,7 +403,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     for i in range(3):
         out[i] = starts[0, i]
     best_d2, it, best_conv = _descend(q, E, P, steer_max, out, start_d2[0], eps_lambda, max_iter, min_step,
-                                      grad, lam_t)
+                                      grad, lam_t, True)
     total_iter += it
     if best_d2 <= accept_d2 or m == 1:
         return best_d2, total_iter, 1, best_conv
@@ -285,7 +415,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
         for i in range(3):
             race_lam[s, i] = starts[s, i]
         d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], start_d2[s], eps_lambda, race_iter,
-                                min_step, grad, lam_t)
+                                min_step, grad, lam_t, True)
         total_iter += it
         race_d2[s] = d2
         race_it[s] = it
@@ -301,7 +431,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     d2 = lead_d2
     if not conv:
         d2, it, conv = _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter - race_it[lead], min_step,
-                                grad, lam_t)
+                                grad, lam_t, True)
         total_iter += it
     if d2 < best_d2:
         best_d2 = d2

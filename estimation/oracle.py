@@ -105,7 +105,7 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
                 for i in range(3):
                     lam[i] = starts[c - cnt - n, i]
             d2 = _steering_dist2(lam, qp, E, P, steer_max)
-            d2, _, _ = _descend(qp, E, P, steer_max, lam, d2, 1e-12, 200, 1.0 / 2**20, grad, lam_t)
+            d2, _, _ = _descend(qp, E, P, steer_max, lam, d2, 1e-12, 200, 1.0 / 2**20, grad, lam_t, True)
             if d2 < best:
                 best = d2
                 lam_out[p, 0] = lam[0]
