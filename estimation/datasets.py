@@ -62,8 +62,8 @@ def _paper_path_twists(dt: float, speed: float) -> np.ndarray:
 
 
 def d2_standin(geom: RobotGeometry, n_points: int = 2450, seed: int = 2, dt: float = 0.01,
-               speed: float = 0.5, steer_tau: float = 0.08, deflection_deg: float = 3.0,
-               noise_deg: float = 0.5, quantum_deg: float = 0.05) -> np.ndarray:
+               speed: float = 0.5, steer_tau: float = 0.12, deflection_deg: float = 4.0,
+               noise_deg: float = 1.0, quantum_deg: float = 0.05) -> np.ndarray:
     """Synthetic stand-in for the paper's D2: the Fig. 9 path with compliant deviations.
 
     The commanded steering β_c = F(λ(t)) goes through a first-order lag of time constant

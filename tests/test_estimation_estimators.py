@@ -221,3 +221,15 @@ def test_cli_bad_arguments_exit_2(capsys):
     from azimut_env.cli import main
     assert main(["bench-estimators", "--methods", "IT,FOO"]) == 2
     assert main(["no-such-command"]) == 2
+
+
+def test_it_plus_closes_the_gap_to_oracle():
+    """IT+ (beyond the paper): mean within 0.1 point of ORACLE on D3, min >= 35%."""
+    q = dataset_d3(G, 1500, seed=21)
+    q_or = 100 * qua(estimate_icr(q, G, "ORACLE"), q)
+    q_it = 100 * qua(estimate_icr(q, G, "IT"), q)
+    q_plus = 100 * qua(estimate_icr(q, G, "IT+"), q)
+    assert q_or.mean() - q_plus.mean() < 0.1
+    assert q_plus.min() >= 35.0
+    assert q_plus.mean() > q_it.mean() + 0.5
+    assert np.all(q_or >= q_plus - 1e-6)
