@@ -14,15 +14,75 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from estimation import canonical_eta, estimate_icr, eta_from_twist, mu_from_wheel_speeds, quality, \
-    steering_from_lambda, wheel_speeds
+from numba import njit
+
+from estimation import eta_from_twist, estimate_icr, quality, steering_from_lambda
+from estimation.it import ITParams
+from estimation.kinematics import SINGULAR_TOL
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import measure_all
 from .tracks import Track, make_track
 
-__all__ = ["AzimutEnv", "observation_layout"]
+__all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements"]
+
+
+@njit(cache=True)
+def _h_state_kernel(lam, phidot, E, P, b, r, steer_max, q, mu_tol, beta_out):
+    """μ̂ and S(λ̂) for an estimated λ̂; returns (μ, sign) with sign making (sign·λ, sign·μ) canonical.
+
+    Same maths as ``estimation``: β_k = F_k(λ) (eq. 16–17; the measured q_k where wheel k is
+    singular), c_k = (s⊥2,k − b_k ẑ)·λ with F_k(λ) (0 where singular, as
+    ``wheel_speed_coefficients``), μ = Σ c_k r_k φ̇_k / Σ c_k² (``mu_from_wheel_speeds``), and the
+    sign of ``canonical_eta``. Tested equal to those functions.
+    """
+    n = E.shape[0]
+    num_c = 0.0
+    den_c = 0.0
+    for k in range(n):
+        nu = P[k, 0] * lam[0] + P[k, 1] * lam[1] + P[k, 2] * lam[2]
+        de = E[k, 0] * lam[0] + E[k, 1] * lam[1] + E[k, 2] * lam[2]
+        if nu * nu + de * de < SINGULAR_TOL * SINGULAR_TOL:
+            beta = q[k]
+            bc = 0.0
+        else:
+            beta = math.atan2(nu, de)
+            while beta > steer_max:
+                beta -= math.pi
+            while beta <= steer_max - math.pi:
+                beta += math.pi
+            bc = beta
+        beta_out[k] = beta
+        cb, sb = math.cos(bc), math.sin(bc)
+        c = cb * de + sb * nu - b[k] * lam[2]
+        num_c += c * r[k] * phidot[k]
+        den_c += c * c
+    mu = num_c / den_c if den_c > 0 else 0.0
+    if abs(mu) > mu_tol:
+        sign = -1.0 if mu < 0 else 1.0
+    else:
+        key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
+        sign = -1.0 if key < 0 else 1.0
+    return mu, sign
+
+
+_IT_PARAMS = ITParams()  # the paper's IT thresholds (estimate_icr's default), built once
+
+
+def h_state_from_measurements(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """The observed H state from measured steering angles q (n,) and wheel speeds φ̇ (n,):
+    ``(λ̂, μ̂, S(λ̂), qua)``. λ̂ is ``estimation.estimate_icr(q, geom, "IT")``; μ̂ the least-squares
+    wheel-speed fit given λ̂; (λ̂, μ̂) takes the sign of ``canonical_eta`` (μ̂ ≥ 0 when moving);
+    qua is ``estimation.quality(S(λ̂), q)`` (eq. 28–29)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = geom.wrap_steering(q)
+    lam = estimate_icr(q, geom, method="IT", it_params=_IT_PARAMS)
+    beta_est = np.empty(geom.n)
+    mu, sign = _h_state_kernel(lam, np.asarray(phidot, dtype=np.float64), geom.a_minus_l, geom.a_perp, geom.b,
+                               geom.r, geom.steer_max, q, mu_tol, beta_est)
+    qua = float(quality(beta_est, q))
+    return lam * sign, mu * sign, beta_est, qua
 
 
 def observation_layout(n: int, lookahead_count: int) -> dict[str, slice]:
@@ -275,7 +335,10 @@ class AzimutEnv(gym.Env):
         self._lam_hat = np.array([0.0, 0.0, 1.0])
         self._mu_hat = 0.0
         self._qua = 1.0
+        self._beta_est = np.zeros(n)
         self._s = 0.0
+        self._lat = self._head = self._v_ref = self._v_along = 0.0
+        self._look = np.zeros((self.lookahead_count, 3))
         self._prev_action = np.zeros(2 * n, dtype=np.float32)
         self._obs = np.zeros(self.observation_space.shape, dtype=np.float32)
         self._steps = 0
@@ -316,11 +379,11 @@ class AzimutEnv(gym.Env):
         beta = np.clip(beta, self.geometry.steer_min + 1e-6, self.geometry.steer_max)
         self.physics.reset_robot(0, pose, beta)
         self._phi_prev = self.physics.wheel_angles()[0]
-        self._s = self.track.project(pose, s_hint=s0)
         self._prev_action = self.action_from_setpoints(beta, np.zeros(self.n))
         self._measure()
+        self._track_state(s0)
         self._trail = [(float(pose[0]), float(pose[1]))]
-        obs = self._get_obs(pose, self.physics.chassis_twist_world()[0])
+        obs = self._get_obs()
         self._obs = obs
         info = self._get_info(reward_terms={})
         if self.render_mode == "human":
@@ -351,39 +414,40 @@ class AzimutEnv(gym.Env):
         a = np.asarray(action, dtype=np.float32)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action contains NaN or inf: {a}")
-        a = np.clip(a, -1.0, 1.0)
         if self._done_error is not None:
             raise RuntimeError(f"step() after the physics failed ({self._done_error}); call reset()")
-        beta_cmd, phidot_cmd = setpoints_from_action(a, self.params.limits, self.n)
-        phys = self.physics
+        a = np.minimum(np.maximum(a, -1.0), 1.0)
+        n, lim, phys = self.n, self.params.limits, self.physics
         if self._kick is not None and self._steps == self._kick["step"]:
             phys.kick(0, self._kick["wheels"], self._kick["impulse"])
-        phys.set_commands(beta_cmd[None], phidot_cmd[None])
+        # the map of params.setpoints_from_action, written in place (the action is already checked)
+        cmd = phys.commands[0]
+        cmd[:, 0] = np.maximum(a[:n] * lim.steer_max, lim.steer_min)
+        cmd[:, 1] = a[n:] * lim.wheel_speed_max
         phys.step()
         self._steps += 1
-        ok, reasons = phys.check()
-        if not ok[0]:
-            self._done_error = reasons[0]
-            info = {"error": reasons[0], "reward_terms": {}}
+        code = phys.summary[0, 10]
+        if code != 0:
+            self._done_error = phys.check()[1][0]
+            info = {"error": self._done_error, "reward_terms": {}}
             return self._obs.copy(), -self.weights["off_track"], True, False, info
-        pose = phys.chassis_pose()[0]
-        twist_w = phys.chassis_twist_world()[0]
         self._measure()
         s_prev = self._s
-        self._s = self.track.project(pose, s_hint=s_prev)
-        lat, head = self.track.errors(pose, self._s)
+        self._track_state(s_prev)
+        lat, head = self._lat, self._head
         off_track = abs(lat) > self.max_lateral_error
         finished = self.track.finished(self._s)
         reward, terms = self._get_rew(self._s - s_prev, lat, head, a, off_track)
         self._prev_action = a
-        obs = self._get_obs(pose, twist_w, lat, head)
+        obs = self._get_obs()
         self._obs = obs
-        self._trail.append((float(pose[0]), float(pose[1])))
+        summ = phys.summary[0]
+        self._trail.append((float(summ[0]), float(summ[1])))
         if len(self._trail) > 2000:
             del self._trail[:1000]
-        info = self._get_info(terms, lat, head)
+        info = self._get_info(terms)
         info["off_track"] = bool(off_track)
         info["finished"] = bool(finished)
         if self.render_mode == "human":
@@ -394,69 +458,68 @@ class AzimutEnv(gym.Env):
 
     def _measure(self) -> None:
         phys = self.physics
-        phi = phys.wheel_angles()[0]
-        beta_m, motor_m, phidot_m = measure_all(phys.steering_angles()[0], phys.motor_angles()[0], phi,
-                                                self._phi_prev, phys.wheel_speeds()[0], self.control_period,
+        phi = phys.motor_state[0, :, 4].copy()
+        beta_m, motor_m, phidot_m = measure_all(phys.wheel_summary[0, :, 0], phys.motor_state[0, :, 0], phi,
+                                                self._phi_prev, phys.motor_state[0, :, 3], self.control_period,
                                                 self.params.sensors, self.np_random)
         self._phi_prev = phi
         self._beta_m, self._motor_m, self._phidot_m = beta_m, motor_m, phidot_m
-        q = np.clip(beta_m, self.geometry.steer_min + 1e-9, self.geometry.steer_max)
-        lam = estimate_icr(q, self.geometry, method="IT")
-        mu = mu_from_wheel_speeds(lam, phidot_m, self.geometry)
-        lam, mu = canonical_eta(lam, mu, mu_tol=1e-3)
-        self._lam_hat, self._mu_hat = lam, float(mu)
-        beta_est = steering_from_lambda(lam, self.geometry, singular_fill=q)
-        self._qua = float(quality(beta_est[None], q[None])[0])
+        self._lam_hat, self._mu_hat, self._beta_est, self._qua = h_state_from_measurements(
+            beta_m, phidot_m, self.geometry)
 
-    def _get_obs(self, pose, twist_w, lat: float | None = None, head: float | None = None) -> np.ndarray:
-        tr = self.track
-        if lat is None:
-            lat, head = tr.errors(pose, self._s)
-        psi = float(tr.tangent_at(self._s))
-        v_along = twist_w[0] * math.cos(psi) + twist_w[1] * math.sin(psi)
-        v_ref = float(tr.sample(self._s)[3])
-        look = tr.lookahead(pose, self._s, self.lookahead_count, self.lookahead_spacing)
+    def _track_state(self, s_hint: float) -> None:
+        """Project the true pose on the track (windowed at ``s_hint``) and cache the errors."""
+        summ = self.physics.summary[0]
+        s, lat, head, v_ref, psi, look = self.track.query(summ[:3], s_hint, self.lookahead_count,
+                                                          self.lookahead_spacing)
+        self._s, self._lat, self._head, self._v_ref, self._look = s, lat, head, v_ref, look
+        self._v_along = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
+
+    def _get_obs(self) -> np.ndarray:
         obs = np.concatenate([self._lam_hat, [self._mu_hat], self._beta_m, self._phidot_m, self._motor_m,
-                              [lat, head, v_along, v_ref], look.ravel(), self._prev_action])
-        obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
-        return np.clip(obs, self._obs_lo, self._obs_hi)
+                              [self._lat, self._head, self._v_along, self._v_ref], self._look.ravel(),
+                              self._prev_action]).astype(np.float32)
+        if not np.isfinite(obs).all():
+            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+        return np.clip(obs, self._obs_lo, self._obs_hi, out=obs)
 
     def _get_rew(self, ds: float, lat: float, head: float, action: np.ndarray, off_track: bool):
         w = self.weights
         dt = self.control_period
-        v_ref = float(self.track.sample(self._s)[3])
         v_max = max(self.track.max_speed, 1e-3)
-        progress = w["progress"] * min(ds, v_ref * dt + 1e-3 * dt) / (v_max * dt)
+        progress = w["progress"] * min(ds, self._v_ref * dt + 1e-3 * dt) / (v_max * dt)
+        da = action - self._prev_action
         terms = {
             "progress": float(progress),
             "lateral": -w["lateral"] * lat * lat,
             "heading": -w["heading"] * head * head,
-            "slip": -w["slip"] * float(self.physics.slip_power()[0]),
-            "action_rate": -w["action_rate"] * float(np.sum((action - self._prev_action) ** 2)),
+            "slip": -w["slip"] * float(self.physics.summary[0, 8]),
+            "action_rate": -w["action_rate"] * float(da @ da),
             "off_track": -w["off_track"] if off_track else 0.0,
         }
         return float(sum(terms.values())), terms
 
-    def _get_info(self, reward_terms: dict, lat: float | None = None, head: float | None = None) -> dict:
+    def _get_info(self, reward_terms: dict) -> dict:
         phys = self.physics
-        twist = phys.chassis_twist()[0]
-        lam, mu = eta_from_twist(twist)
-        lam, mu = canonical_eta(lam, mu, mu_tol=1e-3)
-        if lat is None:
-            lat, head = self.track.errors(phys.chassis_pose()[0], self._s)
+        summ = phys.summary[0]
+        twist = summ[[6, 7, 5]]
+        # true η from the twist, ξ̇ = μ (v, −u, w): λ ∝ (−ẏ, ẋ, θ̇), μ = ‖ξ̇‖ ≥ 0
+        mu = math.sqrt(float(twist @ twist))
+        lam = np.array([-twist[1], twist[0], twist[2]]) / mu if mu > 0 else np.array([0.0, 0.0, 1.0])
         return {
-            "pose": phys.chassis_pose()[0],
+            "pose": summ[0:3].copy(),
             "twist": twist,
-            "eta_true": (lam, float(mu)),
+            "eta_true": (lam, mu),
             "eta_hat": (self._lam_hat.copy(), self._mu_hat),
-            "beta_true": phys.steering_angles()[0],
-            "tire_forces": phys.tire_forces_body()[0],
-            "slip_power": float(phys.slip_power()[0]),
-            "internal_force": float(phys.internal_force()[0]),
+            "beta_true": phys.wheel_summary[0, :, 0].copy(),
+            "beta_est": self._beta_est.copy(),
+            "tire_forces": phys.wheel_summary[0, :, 2:4].copy(),
+            "slip_power": float(summ[8]),
+            "internal_force": float(summ[9]),
             "qua": self._qua,
             "progress": self._s,
-            "lateral_error": float(lat),
-            "heading_error": float(head),
+            "lateral_error": float(self._lat),
+            "heading_error": float(self._head),
             "reward_terms": reward_terms,
         }
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from .params import SensorParams
 
@@ -50,10 +51,38 @@ def measure_wheel_speeds(phi: np.ndarray, phi_prev: np.ndarray, true_phidot: np.
     return x
 
 
+@njit(cache=True)
+def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
+                    wheel_noise, normals, out):
+    n = beta.shape[0]
+    two_pi = 2 * math.pi
+    for k in range(n):
+        b = beta[k] + steer_noise * normals[0, k]
+        m = motor[k] + motor_noise * normals[1, k]
+        if resolution > 0:
+            b = np.round(b / resolution) * resolution
+            m = np.round(m / resolution) * resolution
+        if cpr > 0:
+            counts = math.floor(phi[k] * (cpr / two_pi)) - math.floor(phi_prev[k] * (cpr / two_pi))
+            w = counts * (two_pi / cpr) / dt
+        else:
+            w = phidot[k]
+        out[0, k] = b
+        out[1, k] = m
+        out[2, k] = w + wheel_noise * normals[2, k]
+
+
 def measure_all(beta, motor, phi, phi_prev, phidot, dt: float, params: SensorParams,
                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(β, motor angles, φ̇) as measured, each (..., n); draws in a fixed order for determinism."""
-    beta_m = measure_angles(beta, params.steer_noise, params.steer_resolution, rng)
-    motor_m = measure_angles(motor, params.motor_noise, params.steer_resolution, rng)
-    phidot_m = measure_wheel_speeds(phi, phi_prev, phidot, dt, params, rng)
-    return beta_m, motor_m, phidot_m
+    """(β, motor angles, φ̇) of one robot as measured, each (n,): the same models as
+    :func:`measure_angles` and :func:`measure_wheel_speeds` in one compiled call, with one draw of
+    (3, n) standard normals from ``rng`` per call (deterministic for a seeded rng)."""
+    beta = np.ascontiguousarray(beta, dtype=np.float64)
+    n = beta.shape[0]
+    normals = rng.standard_normal((3, n))
+    out = np.empty((3, n))
+    _measure_kernel(beta, np.ascontiguousarray(motor, dtype=np.float64), np.ascontiguousarray(phi, dtype=np.float64),
+                    np.ascontiguousarray(phi_prev, dtype=np.float64), np.ascontiguousarray(phidot, dtype=np.float64),
+                    float(dt), params.steer_noise, params.motor_noise, params.steer_resolution, int(params.wheel_cpr),
+                    params.wheel_speed_noise, normals, out)
+    return out[0], out[1], out[2]

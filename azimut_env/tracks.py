@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 __all__ = ["Track", "make_track", "TRACK_NAMES", "wrap_angle"]
 
@@ -29,6 +30,94 @@ def wrap_angle(a):
     """Wrap angles to ]−π, π]."""
     a = np.asarray(a, dtype=np.float64)
     return np.pi - np.mod(np.pi - a, 2 * np.pi)
+
+
+@njit(cache=True)
+def _interp1(S, col, s):
+    """np.interp for a scalar on sorted S."""
+    m = S.shape[0]
+    if s <= S[0]:
+        return col[0]
+    if s >= S[m - 1]:
+        return col[m - 1]
+    j = np.searchsorted(S, s, side="right") - 1
+    t = (s - S[j]) / (S[j + 1] - S[j])
+    return col[j] + t * (col[j + 1] - col[j])
+
+
+@njit(cache=True)
+def _wrap_pi(a):
+    return math.pi - ((math.pi - a) % (2 * math.pi))
+
+
+@njit(cache=True)
+def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s_hint, back, ahead,
+                        spacing, look):
+    """Windowed projection, errors, reference speed and look-ahead in one call (see Track.query)."""
+    m = S.shape[0]
+    mu = m - 1
+    if closed:
+        lap = math.floor(s_hint / length)
+        base = lap * length
+        s_loc = s_hint - base
+        lo_s = s_loc - back
+        hi_s = s_loc + ahead
+        j0 = int(math.floor(lo_s / length)) * mu + np.searchsorted(S, lo_s % length) - 1
+        j1 = int(math.floor(hi_s / length)) * mu + np.searchsorted(S, hi_s % length) + 1
+    else:
+        base = 0.0
+        j0 = max(np.searchsorted(S, s_hint - back) - 1, 0)
+        j1 = min(np.searchsorted(S, s_hint + ahead, side="right") + 1, m)
+    best = 1e300
+    bi = 0
+    boff = 0.0
+    for j in range(j0, j1):
+        if closed:
+            i = j % mu
+            off = math.floor(j / mu) * length
+        else:
+            i = j
+            off = 0.0
+        dx = X[i] - px
+        dy = Y[i] - py
+        dth = _wrap_pi(TH[i] - pth)
+        c = dx * dx + dy * dy + (rho * dth) ** 2
+        if c < best:
+            best = c
+            bi = i
+            boff = off
+    s = S[bi] + boff + base
+    i2 = min(bi, m - 2)
+    sx = X[i2 + 1] - X[i2]
+    sy = Y[i2 + 1] - Y[i2]
+    st = rho * (TH[i2 + 1] - TH[i2])
+    seg = math.sqrt(sx * sx + sy * sy + st * st)
+    if seg > 0:
+        rx = px - X[bi]
+        ry = py - Y[bi]
+        rt = rho * _wrap_pi(pth - TH[bi])
+        step = (rx * sx + ry * sy + rt * st) / seg
+        s += min(max(step, -seg), seg)
+    if not closed:
+        s = min(max(s, 0.0), length)
+    sw = s % length if closed else s
+    xr = _interp1(S, X, sw)
+    yr = _interp1(S, Y, sw)
+    thr = _interp1(S, TH, sw)
+    vr = _interp1(S, V, sw)
+    psi = _interp1(S, PSI, sw)
+    lat = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
+    head = _wrap_pi(pth - thr)
+    c, sn = math.cos(pth), math.sin(pth)
+    for k in range(look.shape[0]):
+        sk = s + spacing * (k + 1)
+        sk = sk % length if closed else min(max(sk, 0.0), length)
+        dx = _interp1(S, X, sk) - px
+        dy = _interp1(S, Y, sk) - py
+        look[k, 0] = c * dx + sn * dy
+        look[k, 1] = -sn * dx + c * dy
+        look[k, 2] = _wrap_pi(_interp1(S, TH, sk) - pth)
+    return s, lat, head, vr, psi
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,6 +213,8 @@ class Track:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "length", float(s[-1]))
+        object.__setattr__(self, "_x", np.ascontiguousarray(xy[:, 0]))
+        object.__setattr__(self, "_y", np.ascontiguousarray(xy[:, 1]))
 
     # ------------------------------------------------------------------ construction
 
@@ -303,6 +394,18 @@ class Track:
         c, sn = math.cos(pose[2]), math.sin(pose[2])
         dx, dy = ref[:, 0] - pose[0], ref[:, 1] - pose[1]
         return np.stack([c * dx + sn * dy, -sn * dx + c * dy, wrap_angle(ref[:, 2] - pose[2])], axis=1)
+
+    def query(self, pose, s_hint: float, lookahead_count: int, spacing: float, back: float = 0.5,
+              ahead: float = 1.0) -> tuple[float, float, float, float, float, np.ndarray]:
+        """Everything the env needs per step, in one compiled call: ``(s, lateral error, heading
+        error, v_ref, ψ, lookahead (K, 3))``, the same as :meth:`project` (windowed at ``s_hint``),
+        :meth:`errors`, :meth:`sample`, :meth:`tangent_at` and :meth:`lookahead`."""
+        look = np.empty((int(lookahead_count), 3))
+        s, lat, head, v, psi = _track_query_kernel(
+            self.s, self._x, self._y, self.heading, self.speed,
+            self.tangent, self.closed, self.length, self.progress_radius, float(pose[0]), float(pose[1]),
+            float(pose[2]), float(s_hint), back, ahead, spacing, look)
+        return s, lat, head, v, psi, look
 
     def finished(self, s: float) -> bool:
         """Whether progress s has reached the end (one lap on a closed track)."""
