@@ -358,10 +358,11 @@ class AzimutEnv(gym.Env):
             self.track = spec
         elif spec == "random" or spec != getattr(self.track, "name", None):
             self.track = make_track(spec, rng=rng)
+        obstacles = self._default_obstacles
         if "obstacles" in options:
-            self.physics.set_obstacles(options["obstacles"])
-        elif self.physics.obstacles != self._default_obstacles:
-            self.physics.set_obstacles(self._default_obstacles)
+            obstacles = tuple(Obstacle.coerce(o) for o in options["obstacles"])
+        self.physics.obstacles = obstacles
+        self.physics.rebuild()  # a fresh Space: bit-for-bit replay of a seeded episode
         if "kick" in options:
             kick = dict(options["kick"])
             if set(kick) - {"step", "wheels", "impulse"}:

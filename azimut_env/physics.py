@@ -481,6 +481,14 @@ class AzimutPhysics:
         self.space.add(shape)
         self._obstacle_shapes.append(shape)
 
+    def rebuild(self) -> None:
+        """Recreate the pymunk Space (same robots and obstacles, bodies at the origin).
+
+        pymunk keeps solver state between steps (constraint impulses for warm starting, contact
+        caches), so two episodes reset to the same state only replay bit-for-bit from a fresh Space.
+        The single env rebuilds on every reset (about 0.2 ms); call :meth:`reset_robot` after."""
+        self._build_space()
+
     def set_obstacles(self, obstacles: Sequence = ()) -> None:
         """Replace the static obstacles (Obstacle, (x, y, radius) or vertex lists)."""
         obs = tuple(Obstacle.coerce(o) for o in obstacles)
