@@ -25,7 +25,7 @@ Per control step (RUNNING):
    The step is *time-scaled* [35–36] in discrete form: a common factor κ ∈ [0, 1] blends the
    previous motion (λ̇, μ̇ carried over) with the desired one, and the largest κ for which every
    wheel's β̇, β̈, φ̇ and φ̈ (finite differences of the commands over one period) stay within
-   :class:`~control.limits.ActuatorLimits` is taken. Should no κ be feasible (not observed in
+   :class:`azimut_env.params.ActuatorLimits` is taken. Should no κ be feasible (not observed in
    practice), the commands are saturated wheel by wheel and ``info["saturated"]`` is set, so
    commanded limits are never exceeded.
 
@@ -220,7 +220,7 @@ def mu_bounds(lam, geom: RobotGeometry, limits: ActuatorLimits, headroom: float 
     the wheels (the interval at ±φ̇_max is symmetric, so sorting is not needed). Batched over λ.
     """
     c = np.abs(wheel_speed_coefficients(lam, geom))
-    bound = headroom * limits.wheel_speed * geom.r / np.where(c > 0, c, np.inf)
+    bound = headroom * limits.wheel_speed_max * geom.r / np.where(c > 0, c, np.inf)
     return np.min(bound, axis=-1)
 
 
@@ -334,12 +334,12 @@ def _exp_map(lam: np.ndarray, v: np.ndarray) -> np.ndarray:
 def _saturate(beta_prev, beta_rate_prev, phidot_prev, beta_want, phidot_want, geom, limits, dt):
     """Per-wheel saturation of a command (fallback): rate, accel, range, then φ̇ and φ̈."""
     rate = (beta_want - beta_prev) / dt
-    rate = np.clip(rate, beta_rate_prev - limits.steer_accel * dt, beta_rate_prev + limits.steer_accel * dt)
-    rate = np.clip(rate, -limits.steer_rate, limits.steer_rate)
+    rate = np.clip(rate, beta_rate_prev - limits.steer_accel_max * dt, beta_rate_prev + limits.steer_accel_max * dt)
+    rate = np.clip(rate, -limits.steer_rate_max, limits.steer_rate_max)
     beta = np.clip(beta_prev + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - beta_prev) / dt
-    phidot = np.clip(phidot_want, phidot_prev - limits.wheel_accel * dt, phidot_prev + limits.wheel_accel * dt)
-    phidot = np.clip(phidot, -limits.wheel_speed, limits.wheel_speed)
+    phidot = np.clip(phidot_want, phidot_prev - limits.wheel_accel_max * dt, phidot_prev + limits.wheel_accel_max * dt)
+    phidot = np.clip(phidot, -limits.wheel_speed_max, limits.wheel_speed_max)
     return beta, rate, phidot
 
 
@@ -354,7 +354,7 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     theta = _angle(lam, lam_d)
     grad = steering_gradient(lam, geom)  # (n, 3)
     gmax = float(np.max(np.linalg.norm(grad, axis=-1)))
-    accel_lam = 0.8 * limits.steer_accel / max(gmax, 1e-6)  # λ angular accel every wheel can follow
+    accel_lam = 0.8 * limits.steer_accel_max / max(gmax, 1e-6)  # λ angular accel every wheel can follow
     speed = min(config.k_lambda * theta, np.sqrt(2.0 * accel_lam * theta), theta / dt)
     tang = lam_d - np.dot(lam, lam_d) * lam
     tn = np.linalg.norm(tang)
@@ -362,7 +362,7 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     v_prev = state.lam_rate - np.dot(state.lam_rate, lam) * lam  # carried over, in the tangent plane
     # desired μ: a ramp toward μ_d at the acceleration every wheel can follow at λ
     c_now = np.abs(wheel_speed_coefficients(lam, geom))
-    accel_mu = config.mu_accel_fraction * limits.wheel_accel * float(
+    accel_mu = config.mu_accel_fraction * limits.wheel_accel_max * float(
         np.min(geom.r / np.where(c_now > 0, c_now, np.inf)))
     mu_des = state.mu + float(np.clip(mu_d - state.mu, -accel_mu * dt, accel_mu * dt))
 
@@ -380,10 +380,10 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     phidot = (mu_new[:, None] * c - geom.b[None, :] * beta_rate) / geom.r[None, :]
     phiddot = (phidot - state.phidot[None, :]) / dt
     ratio = np.max(np.stack([
-        np.abs(beta_rate) / limits.steer_rate,
-        np.abs(beta_acc) / limits.steer_accel,
-        np.abs(phidot) / limits.wheel_speed,
-        np.abs(phiddot) / limits.wheel_accel,
+        np.abs(beta_rate) / limits.steer_rate_max,
+        np.abs(beta_acc) / limits.steer_accel_max,
+        np.abs(phidot) / limits.wheel_speed_max,
+        np.abs(phiddot) / limits.wheel_accel_max,
     ]), axis=(0, 2))
     ratio = np.where(flipped, np.inf, ratio)
     feasible = ratio <= 1.0 - 1e-9
@@ -415,7 +415,7 @@ def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: 
     instead of scrubbing, and the chassis stays put.
     """
     err = beta_target - state.beta  # both inside the range: the direct way never crosses a stop
-    a, vmax = limits.steer_accel * 0.95, limits.steer_rate * 0.95
+    a, vmax = limits.steer_accel_max * 0.95, limits.steer_rate_max * 0.95
     if exact:  # ``beta_target`` is already a feasible next set-point
         rate = err / dt
     else:
@@ -506,7 +506,7 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
         if zero_cmd:
             # hold: brake the steering to rest where it is (at full deceleration, so it stops
             # short of where the reconfiguration was heading, inside the range); do not swing
-            rate = np.sign(state.beta_rate) * np.maximum(np.abs(state.beta_rate) - limits.steer_accel * dt, 0.0)
+            rate = np.sign(state.beta_rate) * np.maximum(np.abs(state.beta_rate) - limits.steer_accel_max * dt, 0.0)
             beta_target = state.beta + rate * dt
         beta_c, rate_c, phidot_c = _reconfigure_step(state, beta_target, geom, limits, dt,
                                                      exact=zero_cmd)

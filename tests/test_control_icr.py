@@ -116,7 +116,7 @@ def test_nearer_target_flips_both():
 def test_clamp_mu_respects_every_wheel():
     lam = _unit([0.2, 1.0, 0.3])
     mu = clamp_mu(lam, 100.0, GEOM, LIM)
-    assert np.max(np.abs(wheel_speeds(lam, mu, GEOM))) == pytest.approx(LIM.wheel_speed)
+    assert np.max(np.abs(wheel_speeds(lam, mu, GEOM))) == pytest.approx(LIM.wheel_speed_max)
     assert clamp_mu(lam, -100.0, GEOM, LIM) == pytest.approx(-mu)
     assert clamp_mu(lam, 0.1, GEOM, LIM) == 0.1
 
@@ -200,8 +200,8 @@ def test_mu_beyond_limits_is_clamped():
     lam = eta_from_twist(np.array([0.3, 0.0, 1.0]))[0]
     ctl, robot, log = _run([(lam, 1e6, 300), (lam, -1e6, 300)])
     phid = np.array([c.phidot for *_, c in log])
-    assert np.max(np.abs(phid)) <= LIM.wheel_speed
-    assert np.max(np.abs(phid)) == pytest.approx(LIM.wheel_speed * ICRControllerConfig().mu_headroom, rel=1e-3)
+    assert np.max(np.abs(phid)) <= LIM.wheel_speed_max
+    assert np.max(np.abs(phid)) == pytest.approx(LIM.wheel_speed_max * ICRControllerConfig().mu_headroom, rel=1e-3)
 
 
 def test_zero_command_does_not_swing_wheels():
@@ -259,7 +259,7 @@ def test_bad_input_raises():
     with pytest.raises(ValueError):
         ctl.step([0, 0, 1.0], 0.0, np.zeros(3), np.zeros(4), [0, 0, 1.0], 1.0)
     with pytest.raises(ValueError):
-        ActuatorLimits(steer_rate=-1.0)
+        ActuatorLimits(steer_rate_max=-1.0)
     with pytest.raises(ValueError):
         ICRController(GEOM, LIM, 0.0)
 
