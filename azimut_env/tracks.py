@@ -436,9 +436,10 @@ def _line(p0, p1, spacing):
 def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
     """Spiral, then circle, then square with rounded corners (after the paper's Fig. 9).
 
-    The spiral is driven at a fixed heading (pure translation: the ICR runs along the horizon), the
-    circle car-like with the heading along the path (ICR at the circle's centre), the rounded square
-    again at a fixed heading (the ICR swings at each corner).
+    The spiral and the circle are driven with the robot's X axis pointing away from the centre
+    (the ICR is near the centre, moving during the spiral), the rounded square at a fixed heading
+    (pure translation: the ICR is on the horizon and swings by 90° at each corner, and the wheels
+    must flip at their steering stops as the direction of travel turns).
     """
     R = 1.5
     # spiral: r from 0.5 to R over 1.5 turns, ending at angle 0 (point (R, 0))
@@ -446,7 +447,7 @@ def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
     a = np.linspace(-2 * np.pi * turns, 0.0, int(2 * np.pi * turns * 1.0 / spacing), endpoint=False)
     rad = R - (R - 0.5) * (-a) / (2 * np.pi * turns)
     spiral = np.stack([rad * np.cos(a), rad * np.sin(a)], axis=1)
-    h_sp = np.zeros(len(a))
+    h_sp = a.copy()  # car-like as on the circle: the ICR is the spiral's centre
     # circle: one turn from angle 0, heading along the tangent (tangent = angle + π/2, minus π/2 offset)
     circ, ac = _arc((0.0, 0.0), R, 0.0, 2 * np.pi, spacing)
     h_c = ac  # heading = tangent − π/2: ICR at the circle's centre, robot's X axis pointing outward
