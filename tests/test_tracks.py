@@ -1,0 +1,96 @@
+"""Tracks: built-ins, waypoints, progress with rotation in place, the compiled query against the
+numpy reference."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from azimut_env.tracks import TRACK_NAMES, Track, make_track, wrap_angle
+
+
+@pytest.mark.parametrize("name", TRACK_NAMES)
+def test_builtin_tracks_are_well_formed(name):
+    t = make_track(name, rng=np.random.default_rng(0))
+    assert t.length > 1.0
+    assert np.all(np.diff(t.s) > 0)
+    assert np.all(t.speed >= 0) and t.max_speed > 0
+    assert np.all(np.isfinite(t.curvature)) and np.all(np.isfinite(t.dxy_ds))
+    tw = t.reference_twist(np.linspace(0, t.length, 50))
+    assert tw.shape == (50, 3) and np.all(np.isfinite(tw))
+
+
+@pytest.mark.parametrize("name", TRACK_NAMES)
+def test_query_matches_numpy_reference(name):
+    t = make_track(name, rng=np.random.default_rng(1))
+    rng = np.random.default_rng(2)
+    for _ in range(100):
+        s0 = rng.uniform(0, 1.5 * t.length if t.closed else t.length)
+        pose = t.sample(s0)[:3] + rng.normal(0, 0.05, 3)
+        hint = s0 + rng.uniform(-0.2, 0.2)
+        s = t.project(pose, s_hint=hint)
+        lat, head = t.errors(pose, s)
+        q = t.query(pose, hint, 5, 0.3)
+        assert q[0] == pytest.approx(s, abs=1e-9)
+        assert q[1] == pytest.approx(lat, abs=1e-9) and q[2] == pytest.approx(head, abs=1e-9)
+        assert np.allclose(q[5], t.lookahead(pose, s, 5, 0.3), atol=1e-9)
+
+
+def test_projection_recovers_progress_and_counts_laps():
+    t = make_track("circle")
+    for s in np.linspace(0.1, t.length - 0.1, 20):
+        assert t.project(t.sample(s)[:3], s_hint=s - 0.05) == pytest.approx(s, abs=1e-3)
+    # crossing the start of a closed track continues the progress into the next lap
+    s_next = t.project(t.sample(0.05)[:3], s_hint=t.length - 0.05)
+    assert s_next == pytest.approx(t.length + 0.05, abs=1e-3)
+
+
+def test_rotation_in_place_has_progress():
+    t = make_track("crab")
+    # the rotation segment: position fixed, heading turns, progress grows by ρ·Δθ
+    still = np.all(np.abs(np.diff(t.xy, axis=0)) < 1e-12, axis=1)
+    assert still.sum() > 5
+    ds = np.diff(t.s)[still]
+    assert np.allclose(ds, t.progress_radius * np.abs(np.diff(t.heading)[still]))
+    s_mid = t.s[np.argmax(still) + 3]
+    tw = t.reference_twist(s_mid, speed=0.3)
+    assert np.hypot(tw[0], tw[1]) < 1e-9 and abs(tw[2]) == pytest.approx(0.3 / t.progress_radius)
+
+
+def test_square_stops_at_corners():
+    t = make_track("square")
+    corners = [np.argmin(np.hypot(t.xy[:, 0] - cx, t.xy[:, 1] - cy)) for cx, cy in ((3, 0), (3, 3), (0, 3))]
+    assert np.all(t.speed[corners] < 0.05)
+
+
+def test_errors_sign_convention():
+    t = Track.from_waypoints([(0, 0), (5, 0)], heading=0.3, speed=0.5, ramp=0)
+    lat, head = t.errors((2.0, 0.2, 0.5), 2.0)
+    assert lat == pytest.approx(0.2) and head == pytest.approx(0.2)
+    look = t.lookahead((0.0, 0.0, np.pi / 2), 0.0, 2, 1.0)
+    assert np.allclose(look[:, :2], [[0, -1], [0, -2]], atol=1e-9)
+
+
+def test_from_waypoints_options_and_validation():
+    t = Track.from_waypoints([(0, 0), (1, 0), (1, 1)], heading="tangent", speed=[0.2, 0.4, 0.4])
+    assert t.heading[0] == pytest.approx(0.0) and t.heading[-1] == pytest.approx(np.pi / 2)
+    assert t.speed[-1] == 0.0  # ramped down at the end of an open track
+    c = Track.from_waypoints(np.array([(0, 0, 0), (2, 0, 1), (2, 2, 2)]), closed=True)
+    assert c.closed and c.length > 6
+    with pytest.raises(ValueError):
+        Track.from_waypoints([(0, 0)])
+    with pytest.raises(ValueError):
+        Track.from_waypoints([(0, 0), (np.nan, 1)])
+    with pytest.raises(ValueError):
+        make_track("nope")
+
+
+def test_random_tracks_are_seeded():
+    a = make_track("random", rng=np.random.default_rng(5))
+    b = make_track("random", rng=np.random.default_rng(5))
+    c = make_track("random", rng=np.random.default_rng(6))
+    assert np.array_equal(a.xy, b.xy) and not np.array_equal(a.xy, c.xy)
+
+
+def test_wrap_angle():
+    assert np.allclose(wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.1]), [np.pi, np.pi, np.pi, 0.1])
