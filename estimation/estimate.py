@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import RobotGeometry
 from .hrep import _canonicalize_rows
 from .it import ITParams, it_kernel_batch
-from .operational import ls_kernel_batch, ne_kernel_batch, ns_kernel_batch
+from .operational import ls_kernel_batch, ne_kernel_batch, ns_batch
 from .oracle import OracleParams, oracle_kernel_batch, oracle_tables
 
 __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "IT_BEST"]
@@ -114,7 +114,7 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
     elif method == "LS":
         ls_kernel_batch(flat, geom.alpha, geom.axis_xy, lam)
     elif method == "NS":
-        ns_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
+        lam[:] = ns_batch(flat, geom)
     else:
         grid, grid_beta = oracle_tables(geom, oracle_params)
         d2 = np.empty(flat.shape[0])

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _steering_dist2
+from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _grad_wheel, _steering_dist2
 
 __all__ = ["ITParams", "it_kernel_batch"]
 
@@ -98,7 +98,7 @@ class ITParams:
 
 
 @njit(cache=True)
-def _starting_points(q, E, P, steer_max, starts, start_d2):
+def _starting_points(q, E, P, steer_max, starts, start_d2, scratch):
     """Pairwise propulsion-axis intersections, sorted by joint-space distance.
 
     Fills ``starts`` (m_max, 3) and ``start_d2`` (m_max,); returns how many are valid."""
@@ -122,7 +122,7 @@ def _starting_points(q, E, P, steer_max, starts, start_d2):
             lam[0] /= nrm
             lam[1] /= nrm
             lam[2] /= nrm
-            d2 = _steering_dist2(lam, q, E, P, steer_max)
+            d2 = _steering_dist2(lam, q, E, P, steer_max, scratch)
             # insertion sort by distance
             pos = m
             while pos > 0 and start_d2[pos - 1] > d2:
@@ -153,7 +153,7 @@ def _boundary_d2(x, q, E, P, steer_max, k, fixed):
 
 
 @njit(cache=True)
-def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, lam_t):
+def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, lam_t, scratch):
     """IT+ only: descend along the wrap boundary of wheel k, where β_k reaches a stop.
 
     The surface S(λ) jumps by π where a wheel's β crosses its stop; the boundary is the great
@@ -237,7 +237,7 @@ def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, l
     for sgn in (-1.0, 1.0):
         for m in range(3):
             lam_t[m] = cur[m] + sgn * 1e-9 * (nk0 if m == 0 else (nk1 if m == 1 else nk2)) / math.sqrt(nn)
-        dt = _steering_dist2(lam_t, q, E, P, steer_max)
+        dt = _steering_dist2(lam_t, q, E, P, steer_max, scratch)
         if dt < best:
             best = dt
             nrm = math.sqrt(lam_t[0] * lam_t[0] + lam_t[1] * lam_t[1] + lam_t[2] * lam_t[2])
@@ -247,14 +247,18 @@ def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, l
 
 
 @njit(cache=True)
-def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t, slide=False):
-    """Lines 7–20 of Algorithm 1 from λ (modified in place) at squared distance d2.
+def _descend(q, E, P, steer_max, lam, eps_lambda, max_iter, min_step, grad, lam_t, beta_cur, beta_t,
+             slide=False):
+    """Lines 7–20 of Algorithm 1 from λ (modified in place).
 
     With ``slide`` (IT+), a backtracking failure next to a stop continues along the stop's
-    boundary (:func:`_slide`) instead of ending the descent. Returns (d2, iterations, converged)."""
+    boundary (:func:`_slide`) instead of ending the descent. ``beta_cur`` and ``beta_t`` are work
+    arrays of n; S(λ) of each accepted point is kept so that F is evaluated once per point.
+    Returns (d2, iterations, converged)."""
     n = q.shape[0]
     count = 0
     kmax = -1
+    d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur)
     while count < max_iter:
         # Chart selection (§2.1): largest |λ_c|, representative with λ_c > 0.
         c = 0
@@ -277,9 +281,9 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
         kmax = -1
         beta_near = 0.0
         for k in range(n):
-            beta, singular = _beta_grad_wheel(lam, E, P, k, steer_max, grad)
-            if singular:
+            if _grad_wheel(lam, E, P, k, grad):
                 continue  # §3.1.3: zero row, wheel discarded from (13)
+            beta = beta_cur[k]
             edge = min(steer_max - beta, beta - (steer_max - math.pi))
             if kmax < 0 or edge < beta_near:
                 kmax = k
@@ -320,7 +324,7 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
             lam_t[i] = x
             lam_t[j] = y
             lam_t[c] = math.sqrt(max(0.0, 1.0 - rho2))
-            dt = _steering_dist2(lam_t, q, E, P, steer_max)
+            dt = _steering_dist2(lam_t, q, E, P, steer_max, beta_t)
             if dt <= d2:
                 accepted = True
                 break
@@ -329,9 +333,9 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
             if slide and kmax >= 0 and beta_near < 0.3:
                 beta_k, _ = _beta_wheel(lam[0], lam[1], lam[2], E, P, kmax, steer_max)
                 lim = steer_max if steer_max - beta_k < beta_k - (steer_max - math.pi) else steer_max - math.pi
-                ds2 = _slide(q, E, P, steer_max, lam, d2, kmax, lim, max_iter, min_step, grad, lam_t)
+                ds2 = _slide(q, E, P, steer_max, lam, d2, kmax, lim, max_iter, min_step, grad, lam_t, beta_t)
                 if ds2 < d2 * (1.0 - 1e-12):
-                    d2 = ds2
+                    d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur)
                     count += 1
                     continue
                 return d2, count, True  # a minimum on the stop's boundary
@@ -341,6 +345,8 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
             diff = lam[m] - lam_t[m]
             moved2 += diff * diff
             lam[m] = lam_t[m]
+        for k in range(n):
+            beta_cur[k] = beta_t[k]
         d2 = dt
         count += 1
         if moved2 <= eps_lambda * eps_lambda:
@@ -350,20 +356,21 @@ def _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, 
 
 @njit(cache=True)
 def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter,
-              accept_d2, starts, start_d2, grad, lam, lam_t, out, race_lam, race_d2, race_it, race_done):
+              accept_d2, starts, start_d2, grad, lam, lam_t, out, race_lam, race_d2, race_it, race_done,
+              beta_cur, beta_t):
     """One point: fills out[0:3] with λ. Returns (d2, iterations, starts tried, converged).
 
     ``race_iter`` < 0 runs the paper's Algorithm 1. ``race_iter`` >= 0 runs the improved variant:
     the closest start descends to convergence; if it ends farther than sqrt(accept_d2) from q,
     every other kept start descends ``race_iter`` iterations and the closest racer is finished."""
-    m = _starting_points(q, E, P, steer_max, starts, start_d2)
+    m = _starting_points(q, E, P, steer_max, starts, start_d2, beta_t)
     if m == 0:
         # No pair of propulsion axes intersects (cannot happen with non-collinear steering axes
         # and finite input); fall back to the rotation about the chassis centre.
         out[0] = 0.0
         out[1] = 0.0
         out[2] = 1.0
-        return _steering_dist2(out, q, E, P, steer_max), 0, 0, False
+        return _steering_dist2(out, q, E, P, steer_max, beta_t), 0, 0, False
     if m > n_starts:
         m = n_starts
     if math.sqrt(start_d2[0]) <= eps_delta:
@@ -387,7 +394,8 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
                 conv = True
                 it = 0
             else:
-                d2, it, conv = _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter, min_step, grad, lam_t)
+                d2, it, conv = _descend(q, E, P, steer_max, lam, eps_lambda, max_iter, min_step, grad, lam_t,
+                                        beta_cur, beta_t)
             total_iter += it
             if conv or d2 < best_d2:
                 # Line 23 returns the first start that converges; Line 26 the closest otherwise.
@@ -402,8 +410,8 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     # Improved variant. First the closest start descends to convergence, as in Algorithm 1.
     for i in range(3):
         out[i] = starts[0, i]
-    best_d2, it, best_conv = _descend(q, E, P, steer_max, out, start_d2[0], eps_lambda, max_iter, min_step,
-                                      grad, lam_t, True)
+    best_d2, it, best_conv = _descend(q, E, P, steer_max, out, eps_lambda, max_iter, min_step,
+                                      grad, lam_t, beta_cur, beta_t, True)
     total_iter += it
     if best_d2 <= accept_d2 or m == 1:
         return best_d2, total_iter, 1, best_conv
@@ -414,8 +422,8 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     for s in range(1, m):
         for i in range(3):
             race_lam[s, i] = starts[s, i]
-        d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], start_d2[s], eps_lambda, race_iter,
-                                min_step, grad, lam_t, True)
+        d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], eps_lambda, race_iter,
+                                min_step, grad, lam_t, beta_cur, beta_t, True)
         total_iter += it
         race_d2[s] = d2
         race_it[s] = it
@@ -430,8 +438,8 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     conv = race_done[lead]
     d2 = lead_d2
     if not conv:
-        d2, it, conv = _descend(q, E, P, steer_max, lam, d2, eps_lambda, max_iter - race_it[lead], min_step,
-                                grad, lam_t, True)
+        d2, it, conv = _descend(q, E, P, steer_max, lam, eps_lambda, max_iter - race_it[lead], min_step,
+                                grad, lam_t, beta_cur, beta_t, True)
         total_iter += it
     if d2 < best_d2:
         best_d2 = d2
@@ -457,10 +465,12 @@ def it_kernel_batch(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_ste
     race_d2 = np.empty(m_max)
     race_it = np.empty(m_max, dtype=np.int64)
     race_done = np.empty(m_max, dtype=np.bool_)
+    beta_cur = np.empty(n)
+    beta_t = np.empty(n)
     for p in range(q.shape[0]):
         d2, it, tried, conv = _it_point(q[p], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step,
                                         n_starts, race_iter, accept_d2, starts, start_d2, grad, lam, lam_t, out,
-                                        race_lam, race_d2, race_it, race_done)
+                                        race_lam, race_d2, race_it, race_done, beta_cur, beta_t)
         lam_out[p, 0] = out[0]
         lam_out[p, 1] = out[1]
         lam_out[p, 2] = out[2]

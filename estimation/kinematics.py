@@ -82,23 +82,28 @@ def _beta_wheel(lam0: float, lam1: float, lam2: float, E, P, k: int, steer_max: 
 
 
 @njit(cache=True)
-def _steering_dist2(lam, q, E, P, steer_max: float) -> float:
-    """‖q − S(λ)‖², the squared joint-space distance to the surface point of λ, eq. (9).
+def _steering_dist2(lam, q, E, P, steer_max: float, beta_out) -> float:
+    """‖q − S(λ)‖², the squared joint-space distance to the surface point of λ, eq. (9); S(λ) is
+    written to ``beta_out``.
 
-    A wheel whose steering axis holds the ICR takes any angle, so its term is zero (§3.1.3:
-    β_k is copied from the input)."""
+    A wheel whose steering axis holds the ICR takes any angle, so it takes the input angle and its
+    term is zero (§3.1.3: β_k is copied from the input)."""
     d = 0.0
     for k in range(q.shape[0]):
         beta, r2 = _beta_wheel(lam[0], lam[1], lam[2], E, P, k, steer_max)
         if r2 >= SINGULAR_TOL * SINGULAR_TOL:
             diff = q[k] - beta
             d += diff * diff
+            beta_out[k] = beta
+        else:
+            beta_out[k] = q[k]
     return d
 
 
 @njit(cache=True)
-def _beta_grad_wheel(lam, E, P, k: int, steer_max: float, grad):
-    """F_k(λ) and ∂F_k/∂λ (written into ``grad``). Returns (β_k, singular)."""
+def _grad_wheel(lam, E, P, k: int, grad) -> bool:
+    """∂F_k/∂λ = (D a⊥ − N (a − l)) / (N² + D²), written into ``grad``. Returns True (and a zero
+    gradient) where wheel k is singular, eq. (21)."""
     num = P[k, 0] * lam[0] + P[k, 1] * lam[1] + P[k, 2] * lam[2]
     den = E[k, 0] * lam[0] + E[k, 1] * lam[1] + E[k, 2] * lam[2]
     r2 = num * num + den * den
@@ -106,11 +111,20 @@ def _beta_grad_wheel(lam, E, P, k: int, steer_max: float, grad):
         grad[0] = 0.0
         grad[1] = 0.0
         grad[2] = 0.0
-        return 0.0, True
+        return True
     inv = 1.0 / r2
     for i in range(3):
         grad[i] = (den * P[k, i] - num * E[k, i]) * inv
-    return _wrap_into_range(math.atan2(num, den), steer_max), False
+    return False
+
+
+@njit(cache=True)
+def _beta_grad_wheel(lam, E, P, k: int, steer_max: float, grad):
+    """F_k(λ) and ∂F_k/∂λ (written into ``grad``). Returns (β_k, singular); β_k = 0 if singular."""
+    if _grad_wheel(lam, E, P, k, grad):
+        return 0.0, True
+    beta, _ = _beta_wheel(lam[0], lam[1], lam[2], E, P, k, steer_max)
+    return beta, False
 
 
 @njit(cache=True)

@@ -1,6 +1,7 @@
 """The three estimators of §3.2 that work in the operational space: NE, LS and NS.
 
-Each is one numba kernel over a batch q (N, n), serving single points and batches alike.
+Each is one function over a batch q (N, n), serving single points and batches alike: numba
+kernels for NE and LS, numpy's batched LAPACK SVD for NS.
 """
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["ne_kernel_batch", "ls_kernel_batch", "ns_kernel_batch"]
+from .kinematics import propulsion_circle_normals
+
+__all__ = ["ne_kernel_batch", "ls_kernel_batch", "ns_batch"]
 
 
 @njit(cache=True, inline="always")
@@ -106,20 +109,10 @@ def ls_kernel_batch(q, alpha, axis_xy, lam_out):
             lam_out[p, 2] = 0.0
 
 
-@njit(cache=True)
-def ns_kernel_batch(q, E, P, lam_out):
+def ns_batch(q: np.ndarray, geom) -> np.ndarray:
     """NS, §3.2.3: λ in the null space of S, whose rows are s⊥1,k(q_k)ᵀ, eq. (27), via the SVD
-    (LAPACK): the right singular vector of the smallest singular value."""
-    n = q.shape[1]
-    S = np.empty((n, 3))
-    c = np.empty(3)
-    for p in range(q.shape[0]):
-        for k in range(n):
-            _circle_normal(q[p, k], E, P, k, c)
-            S[k, 0] = c[0]
-            S[k, 1] = c[1]
-            S[k, 2] = c[2]
-        _, _, vt = np.linalg.svd(S, full_matrices=False)
-        lam_out[p, 0] = vt[2, 0]
-        lam_out[p, 1] = vt[2, 1]
-        lam_out[p, 2] = vt[2, 2]
+    (LAPACK, through numpy's batched ``linalg.svd``): the right singular vector of the smallest
+    singular value. q is (N, n); returns (N, 3) unit vectors (sign not normalised)."""
+    S = propulsion_circle_normals(q, geom)  # (N, n, 3)
+    _, _, vt = np.linalg.svd(S, full_matrices=False)
+    return np.ascontiguousarray(vt[:, 2, :])

@@ -16,7 +16,7 @@ from numba import njit
 
 from .geometry import RobotGeometry
 from .it import _descend, _starting_points
-from .kinematics import _steering_dist2, steering_from_lambda
+from .kinematics import steering_from_lambda
 
 __all__ = ["OracleParams", "oracle_grid", "oracle_kernel_batch"]
 
@@ -72,6 +72,8 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
     grad = np.empty(3)
     lam = np.empty(3)
     lam_t = np.empty(3)
+    beta_cur = np.empty(n)
+    beta_t = np.empty(n)
     for p in range(q.shape[0]):
         qp = q[p]
         # exhaustive search of the grid, keeping the `refine` closest points
@@ -92,7 +94,7 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
                 if cnt < refine:
                     cnt += 1
         best = np.inf
-        n_starts = _starting_points(qp, E, P, steer_max, starts, start_d2)
+        n_starts = _starting_points(qp, E, P, steer_max, starts, start_d2, beta_t)
         n_cand = cnt + n + n_starts
         for c in range(n_cand):
             if c < cnt:
@@ -104,8 +106,8 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
             else:
                 for i in range(3):
                     lam[i] = starts[c - cnt - n, i]
-            d2 = _steering_dist2(lam, qp, E, P, steer_max)
-            d2, _, _ = _descend(qp, E, P, steer_max, lam, d2, 1e-12, 200, 1.0 / 2**20, grad, lam_t, True)
+            d2, _, _ = _descend(qp, E, P, steer_max, lam, 1e-12, 200, 1.0 / 2**20, grad, lam_t, beta_cur, beta_t,
+                                True)
             if d2 < best:
                 best = d2
                 lam_out[p, 0] = lam[0]
