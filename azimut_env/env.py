@@ -161,7 +161,7 @@ class AzimutEnv(gym.Env):
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
       ``figure8``, ``square``, ``crab``, ``random``: a new seeded track per reset). Default ``paper``.
     * ``control_period``: seconds per step (default 0.02). ``substeps``: physics substeps per step
-      (default 10).
+      (default 8: a 2.5 ms substep).
     * ``params``: :class:`~azimut_env.params.RobotParams`. ``sensors``: ``SensorParams`` or
       ``"ideal"`` (overrides ``params.sensors``).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering
@@ -182,7 +182,7 @@ class AzimutEnv(gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
-    def __init__(self, track: str | Track = "paper", control_period: float = 0.02, substeps: int = 10,
+    def __init__(self, track: str | Track = "paper", control_period: float = 0.02, substeps: int = 8,
                  params: RobotParams | None = None, sensors: SensorParams | str | None = None,
                  domain_randomization: float = 0.0, progress_weight: float = 1.0, lateral_weight: float = 5.0,
                  heading_weight: float = 0.5, slip_weight: float = 0.002, action_rate_weight: float = 0.05,

@@ -314,7 +314,7 @@ class AzimutPhysics:
     """
 
     def __init__(self, params: RobotParams | None = None, n_robots: int = 1, control_period: float = 0.02,
-                 substeps: int = 10, blowup: BlowUpLimits | None = None) -> None:
+                 substeps: int = 8, blowup: BlowUpLimits | None = None) -> None:
         self.params = params if params is not None else RobotParams()
         if int(n_robots) != n_robots or n_robots < 1:
             raise ValueError(f"n_robots must be a positive integer, got {n_robots!r}")
