@@ -276,12 +276,35 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
         out_r[i, 8] = slip
         internal = 0.0
         if finite:
-            GGt = G @ G.T
-            W = G @ F
-            Fs = G.T @ np.linalg.solve(GGt, W)
-            for j in range(2 * n):
-                d = F[j] - Fs[j]
-                internal += d * d
+            # G Gᵀ = [[n, 0, −Σp_y], [0, n, Σp_x], [−Σp_y, Σp_x, Σ|p|²]], solved in closed form
+            sx = 0.0
+            sy = 0.0
+            s2 = 0.0
+            wx = 0.0
+            wy = 0.0
+            wz = 0.0
+            for k in range(n):
+                px, py = G[2, 2 * k + 1], -G[2, 2 * k]
+                sx += px
+                sy += py
+                s2 += px * px + py * py
+                wx += F[2 * k]
+                wy += F[2 * k + 1]
+                wz += px * F[2 * k + 1] - py * F[2 * k]
+            a11 = float(n)
+            a13 = -sy
+            a23 = sx
+            a33 = s2
+            # Schur complement on the third unknown
+            schur = a33 - (a13 * a13 + a23 * a23) / a11
+            x2 = (wz - (a13 * wx + a23 * wy) / a11) / schur if schur > 1e-12 else 0.0
+            x0 = (wx - a13 * x2) / a11
+            x1 = (wy - a23 * x2) / a11
+            for k in range(n):
+                px, py = G[2, 2 * k + 1], -G[2, 2 * k]
+                dx = F[2 * k] - (x0 - py * x2)
+                dy = F[2 * k + 1] - (x1 + px * x2)
+                internal += dx * dx + dy * dy
             internal = math.sqrt(internal)
         out_r[i, 9] = internal
         if not finite:
@@ -391,15 +414,20 @@ class AzimutPhysics:
         space.iterations = 20
         space.gravity = (0.0, 0.0)
         robot_filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
+        # Collision shapes only matter against obstacles; without obstacles the bodies carry their
+        # mass and inertia alone, which makes each pymunk step about twice as fast.
+        with_shapes = bool(self.obstacles)
         self.chassis: list[pymunk.Body] = []
         self.modules: list[list[pymunk.Body]] = []
         bodies: list[pymunk.Body] = []
         for _ in range(self.n_robots):
             ch = pymunk.Body(p.chassis.mass, p.chassis.inertia)
-            box = pymunk.Poly.create_box(ch, (p.chassis.length, p.chassis.width))
-            box.filter = robot_filter
-            box.friction = 0.5
-            space.add(ch, box)
+            space.add(ch)
+            if with_shapes:
+                box = pymunk.Poly.create_box(ch, (p.chassis.length, p.chassis.width))
+                box.filter = robot_filter
+                box.friction = 0.5
+                space.add(box)
             bodies.append(ch)
             mods = []
             for k in range(self.n):
@@ -407,15 +435,17 @@ class AzimutPhysics:
                 m.position = tuple(g.axis_xy[k])
                 m.angle = float(g.alpha[k])
                 r = float(g.r[k])
-                wheel = pymunk.Poly(m, [(float(g.b[k]) + dx, dy) for dx, dy in
-                                        ((-0.025, -r), (0.025, -r), (0.025, r), (-0.025, r))])
-                wheel.filter = robot_filter
-                wheel.friction = 0.5
                 pivot = pymunk.PivotJoint(ch, m, tuple(g.axis_xy[k]), (0.0, 0.0))
                 stop = pymunk.RotaryLimitJoint(ch, m, float(g.alpha[k] + g.steer_min), float(g.alpha[k] + g.steer_max))
                 pivot.collide_bodies = False
                 stop.collide_bodies = False
-                space.add(m, wheel, pivot, stop)
+                space.add(m, pivot, stop)
+                if with_shapes:
+                    wheel = pymunk.Poly(m, [(float(g.b[k]) + dx, dy) for dx, dy in
+                                            ((-0.025, -r), (0.025, -r), (0.025, r), (-0.025, r))])
+                    wheel.filter = robot_filter
+                    wheel.friction = 0.5
+                    space.add(wheel)
                 bodies.append(m)
                 mods.append(m)
             self.chassis.append(ch)
@@ -481,6 +511,17 @@ class AzimutPhysics:
         self.space.add(shape)
         self._obstacle_shapes.append(shape)
 
+    def _build_space_keep_state(self) -> None:
+        """Rebuild the Space and copy every robot body's state over."""
+        saved = [[(b.position, b.angle, b.velocity, b.angular_velocity, b.mass, b.moment)
+                  for b in [self.chassis[i], *self.modules[i]]] for i in range(self.n_robots)]
+        self._build_space()
+        for i, bodies in enumerate(saved):
+            for body, (pos, ang, vel, w, mass, moment) in zip([self.chassis[i], *self.modules[i]], bodies):
+                body.mass, body.moment = mass, moment
+                body.position, body.angle, body.velocity, body.angular_velocity = pos, ang, vel, w
+        self._read_state()
+
     def rebuild(self) -> None:
         """Recreate the pymunk Space (same robots and obstacles, bodies at the origin).
 
@@ -495,7 +536,11 @@ class AzimutPhysics:
         for shape in self._obstacle_shapes:
             self.space.remove(shape)
         self._obstacle_shapes = []
+        had_shapes = bool(self.obstacles)
         self.obstacles = obs
+        if bool(obs) != had_shapes:  # robots need (or no longer need) collision shapes
+            self._build_space_keep_state()
+            return
         for ob in obs:
             self._add_obstacle(ob)
         self._setup_buffers()

@@ -154,3 +154,43 @@ def test_blow_up_is_detected_not_returned_as_nan():
     phys.step()
     ok, why = phys.check()
     assert not ok[0] and "non-finite" in why[0]
+
+
+def test_internal_force_is_the_null_space_part_of_the_tire_forces():
+    geom = RobotParams().geometry
+    beta, phidot = _kinematic_setpoints(geom, (0.3, 0.1, 0.5))
+    beta[1] += 0.3
+    phys = AzimutPhysics()
+    _drive(phys, beta, phidot, 0.5)
+    f = phys.tire_forces_body()[0].ravel()
+    p = phys.wheel_summary[0, :, 4:6]
+    G = np.zeros((3, 8))
+    G[0, 0::2] = 1
+    G[1, 1::2] = 1
+    G[2, 0::2] = -p[:, 1]
+    G[2, 1::2] = p[:, 0]
+    internal = np.linalg.norm(f - np.linalg.pinv(G) @ (G @ f))
+    assert internal > 1.0
+    assert phys.internal_force()[0] == pytest.approx(internal, rel=1e-9)
+    # the contact points are A_k + b_k (cos γ_k, sin γ_k)
+    gam = geom.alpha + phys.steering_angles()[0]
+    assert np.allclose(p, geom.axis_xy + geom.b[:, None] * np.stack([np.cos(gam), np.sin(gam)], 1))
+
+
+def test_obstacles_add_and_remove_collision_shapes():
+    phys = AzimutPhysics()
+    phys.reset_robot(0, (0.0, 0.0, 0.0))
+    assert len(phys.space.shapes) == 0
+    phys.set_obstacles([(3.0, 0.0, 0.5)])
+    assert len(phys.space.shapes) == 1 + 1 + phys.n  # obstacle, chassis, wheels
+    phys.set_obstacles([])
+    assert len(phys.space.shapes) == 0
+
+
+def test_chassis_collides_with_an_obstacle():
+    phys = AzimutPhysics()
+    geom = phys.params.geometry
+    phys.set_obstacles([(1.0, 0.0, 0.2)])
+    beta, phidot = _kinematic_setpoints(geom, (0.5, 0.0, 0.0))
+    _drive(phys, beta, phidot, 4.0)
+    assert phys.chassis_pose()[0, 0] < 1.0 - 0.2 - 0.29  # stopped by the obstacle (half-width 0.3)
