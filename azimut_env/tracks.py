@@ -202,12 +202,17 @@ class Track:
         curv = np.zeros(xy.shape[0])
         dpsi = np.diff(tangent)
         curv[1:] = np.where(dl > 1e-6, dpsi / np.maximum(dl, 1e-6), 0.0)
-        dxy_ds = np.zeros_like(xy)
-        dxy_ds[:-1] = np.diff(xy, axis=0) / ds[:, None]
-        dxy_ds[-1] = dxy_ds[-2]
-        dth_ds = np.zeros(xy.shape[0])
-        dth_ds[:-1] = dth / ds
-        dth_ds[-1] = dth_ds[-2]
+        # derivatives at the samples: central differences (one-sided at the ends; across the
+        # closing sample of a loop), interpolated linearly in between by reference_twist
+        if self.closed and xy.shape[0] > 3:
+            ext_s = np.concatenate([[-(s[-1] - s[-2])], s, [s[-1] + s[1]]])
+            ext_xy = np.vstack([xy[-2:-1], xy, xy[1:2]])
+            ext_th = np.concatenate([[th[-2] - (th[-1] - th[0])], th, [th[1] + (th[-1] - th[0])]])
+            dxy_ds = np.gradient(ext_xy, ext_s, axis=0)[1:-1]
+            dth_ds = np.gradient(ext_th, ext_s)[1:-1]
+        else:
+            dxy_ds = np.gradient(xy, s, axis=0)
+            dth_ds = np.gradient(th, s)
         for name, value in dict(xy=xy, heading=th, speed=v, s=s, path_length=path, tangent=tangent,
                                 curvature=curv, dxy_ds=dxy_ds, dth_ds=dth_ds).items():
             value.setflags(write=False)
@@ -310,9 +315,9 @@ class Track:
         """Reference world velocity (v_x, v_y, θ̇) [m/s, m/s, rad/s] at progress s, moving at the
         track's speed profile (or at ``speed`` [m/s of progress])."""
         s = self._wrap_s(s)
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 1)
         v = np.interp(s, self.s, self.speed) if speed is None else np.asarray(speed, dtype=np.float64)
-        return np.stack([self.dxy_ds[i, 0] * v, self.dxy_ds[i, 1] * v, self.dth_ds[i] * v], axis=-1)
+        return np.stack([np.interp(s, self.s, self.dxy_ds[:, 0]) * v, np.interp(s, self.s, self.dxy_ds[:, 1]) * v,
+                         np.interp(s, self.s, self.dth_ds) * v], axis=-1)
 
     def reference_twist_body(self, s, theta: float, speed=None) -> np.ndarray:
         """The reference twist rotated into a chassis frame of heading ``theta`` [rad]: (ẋ, ẏ, θ̇)."""
