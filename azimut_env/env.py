@@ -3,6 +3,21 @@
 The physics lives in :mod:`azimut_env.physics`; this module holds the task (observation, reward,
 termination) and the interface that controllers use (limits, set-point mapping, measurements,
 estimated H state, track).
+
+Controller interface (stable names, on ``env.unwrapped``):
+
+* ``limits`` -> :class:`~azimut_env.params.ActuatorLimits` (steer_rate_max [rad/s],
+  steer_accel_max [rad/s²], steer_torque_max [N·m], wheel_speed_max [rad/s], wheel_accel_max
+  [rad/s²], wheel_torque_max [N·m], steer_min/steer_max [rad]); ``geometry`` -> ``RobotGeometry``;
+  ``params`` -> ``RobotParams``; ``control_period`` [s].
+* ``action_from_setpoints(beta_cmd, phidot_cmd)`` -> normalised action, and
+  ``setpoints_from_action(action)`` -> (β_cmd [rad], φ̇_cmd [rad/s]) (also module-level functions in
+  :mod:`azimut_env.params`, batched).
+* measurements of the last step: ``measured_beta``, ``measured_phidot``, ``measured_motor_angles``
+  ((n,) arrays); ``estimated_eta`` -> (λ̂, μ̂), the IT estimate with the canonical sign.
+* ``track`` (:class:`~azimut_env.tracks.Track`: ``sample``, ``reference_twist``,
+  ``reference_twist_body``, ``query``...) and ``progress`` (s along it [m]).
+* ground truth for evaluation only: ``true_pose``, ``true_twist``, and ``info`` of each step.
 """
 
 from __future__ import annotations

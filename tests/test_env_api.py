@@ -175,13 +175,14 @@ def test_record_video(tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(gym.make("Azimut-v0", render_mode="rgb_array"), str(tmp_path), episode_trigger=lambda e: True,
+    env = RecordVideo(gym.make("Azimut-v0", render_mode="rgb_array"), str(tmp_path / "videos"),
+                      episode_trigger=lambda e: True,
                       disable_logger=True)
     env.reset(seed=0)
     for _ in range(20):
         env.step(env.action_space.sample())
     env.close()
-    assert list(tmp_path.glob("*.mp4"))
+    assert list((tmp_path / "videos").glob("*.mp4"))
 
 
 def test_obstacles_and_kick_options():
