@@ -441,10 +441,11 @@ def _line(p0, p1, spacing):
 def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
     """Spiral, then circle, then square with rounded corners (after the paper's Fig. 9).
 
-    The spiral and the circle are driven with the robot's X axis pointing away from the centre
-    (the ICR is near the centre, moving during the spiral), the rounded square at a fixed heading
-    (pure translation: the ICR is on the horizon and swings by 90° at each corner, and the wheels
-    must flip at their steering stops as the direction of travel turns).
+    As in the paper (§4): the spiral is a continuously moving ICR with concurrent axes, the circle a
+    constant ICR, and the rounded square switches between parallel propulsion axes (straight
+    sides: a translation) and concurrent ones (corners: a rotation about the corner's centre), with
+    sharp transitions in between. The robot's X axis points away from the centre throughout (the
+    heading follows the path direction minus π/2).
     """
     R = 1.5
     # spiral: r from 0.5 to R over 1.5 turns, ending at angle 0 (point (R, 0))
@@ -471,7 +472,11 @@ def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
         start = np.array([c[0] + rc * math.cos(a0 + np.pi / 2), c[1] + rc * math.sin(a0 + np.pi / 2)])
         pieces.append(_line(start, e, spacing))
     square = np.vstack(pieces + [np.array([[R, 0.0]])])
-    h_sq = np.full(len(square), h_end)
+    d = np.diff(square, axis=0)
+    tang = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    tang = np.append(tang, tang[-1])
+    h_sq = tang - np.pi / 2
+    h_sq += h_end - h_sq[0]  # continuous with the end of the circle
     xy = np.vstack([spiral, circ, square])
     th = np.concatenate([h_sp, h_c, h_sq])
     v = np.full(len(xy), speed)
