@@ -40,7 +40,7 @@ from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import measure_all
 from .tracks import Track, make_track
 
-__all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements"]
+__all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_state_batch"]
 
 
 @njit(cache=True)
@@ -80,6 +80,28 @@ def _h_state_kernel(lam, phidot, E, P, b, r, steer_max, q, mu_tol, beta_out):
         key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
         sign = -1.0 if key < 0 else 1.0
     return mu, sign
+
+
+@njit(cache=True)
+def _h_state_batch_kernel(lam, phidot, E, P, b, r, steer_max, q, mu_tol, beta_out, mu_out):
+    for i in range(lam.shape[0]):
+        mu, sign = _h_state_kernel(lam[i], phidot[i], E, P, b, r, steer_max, q[i], mu_tol, beta_out[i])
+        mu_out[i] = mu * sign
+        for j in range(3):
+            lam[i, j] *= sign
+
+
+def h_state_batch(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`h_state_from_measurements` for N robots at once: q, φ̇ (N, n) ->
+    (λ̂ (N, 3), μ̂ (N,), S(λ̂) (N, n), qua (N,)), with one batched IT call (for the vector env)."""
+    q = geom.wrap_steering(np.asarray(q, dtype=np.float64).reshape(-1, geom.n))
+    phidot = np.ascontiguousarray(np.asarray(phidot, dtype=np.float64).reshape(-1, geom.n))
+    lam = np.ascontiguousarray(estimate_icr(q, geom, method="IT", it_params=_IT_PARAMS))
+    beta_est = np.empty_like(q)
+    mu = np.empty(q.shape[0])
+    _h_state_batch_kernel(lam, phidot, geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
+                          np.ascontiguousarray(q), mu_tol, beta_est, mu)
+    return lam, mu, beta_est, quality(beta_est, q)
 
 
 _IT_PARAMS = ITParams()  # the paper's IT thresholds (estimate_icr's default), built once

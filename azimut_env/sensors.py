@@ -54,35 +54,45 @@ def measure_wheel_speeds(phi: np.ndarray, phi_prev: np.ndarray, true_phidot: np.
 @njit(cache=True)
 def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
                     wheel_noise, normals, out):
-    n = beta.shape[0]
+    """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured."""
     two_pi = 2 * math.pi
-    for k in range(n):
-        b = beta[k] + steer_noise * normals[0, k]
-        m = motor[k] + motor_noise * normals[1, k]
-        if resolution > 0:
-            b = np.round(b / resolution) * resolution
-            m = np.round(m / resolution) * resolution
-        if cpr > 0:
-            counts = math.floor(phi[k] * (cpr / two_pi)) - math.floor(phi_prev[k] * (cpr / two_pi))
-            w = counts * (two_pi / cpr) / dt
-        else:
-            w = phidot[k]
-        out[0, k] = b
-        out[1, k] = m
-        out[2, k] = w + wheel_noise * normals[2, k]
+    for i in range(beta.shape[0]):
+        for k in range(beta.shape[1]):
+            b = beta[i, k] + steer_noise * normals[i, 0, k]
+            m = motor[i, k] + motor_noise * normals[i, 1, k]
+            if resolution > 0:
+                b = np.round(b / resolution) * resolution
+                m = np.round(m / resolution) * resolution
+            if cpr > 0:
+                counts = math.floor(phi[i, k] * (cpr / two_pi)) - math.floor(phi_prev[i, k] * (cpr / two_pi))
+                w = counts * (two_pi / cpr) / dt
+            else:
+                w = phidot[i, k]
+            out[i, 0, k] = b
+            out[i, 1, k] = m
+            out[i, 2, k] = w + wheel_noise * normals[i, 2, k]
+
+
+def _rows(x, shape) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(shape))
 
 
 def measure_all(beta, motor, phi, phi_prev, phidot, dt: float, params: SensorParams,
                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(β, motor angles, φ̇) of one robot as measured, each (n,): the same models as
-    :func:`measure_angles` and :func:`measure_wheel_speeds` in one compiled call, with one draw of
-    (3, n) standard normals from ``rng`` per call (deterministic for a seeded rng)."""
-    beta = np.ascontiguousarray(beta, dtype=np.float64)
-    n = beta.shape[0]
-    normals = rng.standard_normal((3, n))
-    out = np.empty((3, n))
-    _measure_kernel(beta, np.ascontiguousarray(motor, dtype=np.float64), np.ascontiguousarray(phi, dtype=np.float64),
-                    np.ascontiguousarray(phi_prev, dtype=np.float64), np.ascontiguousarray(phidot, dtype=np.float64),
+    """(β, motor angles, φ̇) as measured, each shaped like ``beta``: (n,) for one robot or (N, n).
+
+    The same models as :func:`measure_angles` and :func:`measure_wheel_speeds` in one compiled
+    call, with one draw of (N, 3, n) standard normals from ``rng`` (deterministic for a seeded rng).
+    """
+    beta = np.asarray(beta, dtype=np.float64)
+    shape = beta.shape
+    n = shape[-1]
+    flat = (-1, n)
+    b2 = _rows(beta, flat)
+    rows = b2.shape[0]
+    normals = rng.standard_normal((rows, 3, n)) if rows > 1 else rng.standard_normal((3, n))[None]
+    out = np.empty((rows, 3, n))
+    _measure_kernel(b2, _rows(motor, flat), _rows(phi, flat), _rows(phi_prev, flat), _rows(phidot, flat),
                     float(dt), params.steer_noise, params.motor_noise, params.steer_resolution, int(params.wheel_cpr),
                     params.wheel_speed_noise, normals, out)
-    return out[0], out[1], out[2]
+    return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)

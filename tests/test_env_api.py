@@ -215,3 +215,17 @@ def test_constructor_validation():
     assert env.metadata["render_fps"] == 25
     env.reset(seed=3)
     env.step(env.action_space.sample())
+
+
+def test_h_state_batch_matches_single():
+    from azimut_env.env import h_state_batch
+
+    rng = np.random.default_rng(3)
+    geom = AzimutEnv().geometry
+    q = rng.uniform(-1.5, 1.5, size=(20, 4))
+    w = rng.uniform(-10, 10, size=(20, 4))
+    lam, mu, be, qua = h_state_batch(q, w, geom)
+    for i in range(20):
+        l1, m1, b1, q1 = h_state_from_measurements(q[i], w[i], geom)
+        assert np.allclose(lam[i], l1, atol=1e-12) and mu[i] == pytest.approx(m1, abs=1e-12)
+        assert np.allclose(be[i], b1, atol=1e-12) and qua[i] == pytest.approx(q1, abs=1e-12)
