@@ -17,7 +17,25 @@ state with one ``pymunk.batch.get_space_bodies`` call and writes all forces and 
 b_k from A_k, twists the module against the compliant steering.
 
 Per-robot parameters live in arrays (``wheel_params``) so that domain randomisation can vary them
-robot by robot.
+robot by robot. After each step, ``summary`` (N, 11) and ``wheel_summary`` (N, n, 6) hold the
+derived per-robot quantities (pose, twists, slip power, internal force, blow-up code; β, β̇, tire
+forces and contact points in the chassis frame), computed by one compiled call for all robots.
+
+Stability (default parameters, 8 substeps of 2.5 ms at the 20 ms control period):
+
+* the tire acts on a module's steering DOF like a damper of rate ``μ N b² / (v_knee I_mod)``:
+  439 1/s, so rate·dt = 1.1 (explicit damping is stable below 2; :meth:`_check_stability`
+  refuses substeps above 1.5);
+* the series spring: ω = sqrt(k_s / I_mod) = 55 rad/s, ω·dt = 0.14 (refused above 0.5);
+* the wheel spin on the tire (rate c r² / I_w ≈ 290 1/s) and the propulsion velocity loop are
+  integrated implicitly, so they put no bound on dt;
+* pivot joints and hard stops are pymunk constraints (solver iterations: 20).
+
+Robots have collision shapes only when there are obstacles (collisions cost about half of each
+pymunk step). pymunk keeps solver state (warm-start impulses) between steps: :meth:`rebuild`
+gives a fresh Space, which the single env does at each reset for bit-exact replay; a vector env
+resetting one robot with :meth:`reset_robot` alone is deterministic but not bit-identical to a
+fresh start.
 """
 
 from __future__ import annotations
