@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _grad_wheel, _steering_dist2
+from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _grad_wheel, _steering_dist2, _steering_dist2_upto
 
 __all__ = ["ITParams", "it_kernel_batch"]
 
@@ -98,19 +98,18 @@ class ITParams:
 
 
 @njit(cache=True)
-def _starting_points(q, E, P, steer_max, starts, start_d2, scratch):
-    """Pairwise propulsion-axis intersections, sorted by joint-space distance.
+def _starting_points(q, E, P, steer_max, keep, starts, start_d2, start_beta, c, lam, scratch):
+    """Pairwise propulsion-axis intersections, the ``keep`` closest sorted by joint-space distance.
 
-    Fills ``starts`` (m_max, 3) and ``start_d2`` (m_max,); returns how many are valid."""
+    Fills ``starts`` (≥keep, 3), ``start_d2`` and ``start_beta`` (S of each start); ``c`` (n, 3),
+    ``lam`` (3,) and ``scratch`` (n,) are work arrays. Returns how many were kept."""
     n = q.shape[0]
-    c = np.empty((n, 3))
     for k in range(n):
         sb = math.sin(q[k])
         cb = math.cos(q[k])
         for i in range(3):
             c[k, i] = sb * E[k, i] - cb * P[k, i]  # s⊥1,k(q_k), eq. (27)
     m = 0
-    lam = np.empty(3)
     for i in range(n):
         for j in range(i + 1, n):
             lam[0] = c[i, 1] * c[j, 2] - c[i, 2] * c[j, 1]
@@ -122,20 +121,26 @@ def _starting_points(q, E, P, steer_max, starts, start_d2, scratch):
             lam[0] /= nrm
             lam[1] /= nrm
             lam[2] /= nrm
-            d2 = _steering_dist2(lam, q, E, P, steer_max, scratch)
-            # insertion sort by distance
-            pos = m
+            bound = start_d2[keep - 1] if m == keep else np.inf
+            d2 = _steering_dist2_upto(lam, q, E, P, steer_max, scratch, bound)
+            if d2 > bound:
+                continue  # farther than every start kept
+            # insertion into the sorted list of kept starts
+            pos = m if m < keep else keep - 1
             while pos > 0 and start_d2[pos - 1] > d2:
                 start_d2[pos] = start_d2[pos - 1]
-                starts[pos, 0] = starts[pos - 1, 0]
-                starts[pos, 1] = starts[pos - 1, 1]
-                starts[pos, 2] = starts[pos - 1, 2]
+                for t in range(3):
+                    starts[pos, t] = starts[pos - 1, t]
+                for t in range(n):
+                    start_beta[pos, t] = start_beta[pos - 1, t]
                 pos -= 1
             start_d2[pos] = d2
-            starts[pos, 0] = lam[0]
-            starts[pos, 1] = lam[1]
-            starts[pos, 2] = lam[2]
-            m += 1
+            for t in range(3):
+                starts[pos, t] = lam[t]
+            for t in range(n):
+                start_beta[pos, t] = scratch[t]
+            if m < keep:
+                m += 1
     return m
 
 
@@ -247,18 +252,17 @@ def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, l
 
 
 @njit(cache=True)
-def _descend(q, E, P, steer_max, lam, eps_lambda, max_iter, min_step, grad, lam_t, beta_cur, beta_t,
+def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_step, grad, lam_t, beta_t,
              slide=False):
-    """Lines 7–20 of Algorithm 1 from λ (modified in place).
+    """Lines 7–20 of Algorithm 1 from λ (modified in place), given d2 = ‖q − S(λ)‖² and
+    ``beta_cur`` = S(λ) (updated in place, so F is evaluated once per point).
 
     With ``slide`` (IT+), a backtracking failure next to a stop continues along the stop's
-    boundary (:func:`_slide`) instead of ending the descent. ``beta_cur`` and ``beta_t`` are work
-    arrays of n; S(λ) of each accepted point is kept so that F is evaluated once per point.
+    boundary (:func:`_slide`) instead of ending the descent. ``beta_t`` is a work array of n.
     Returns (d2, iterations, converged)."""
     n = q.shape[0]
     count = 0
     kmax = -1
-    d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur)
     while count < max_iter:
         # Chart selection (§2.1): largest |λ_c|, representative with λ_c > 0.
         c = 0
@@ -355,15 +359,17 @@ def _descend(q, E, P, steer_max, lam, eps_lambda, max_iter, min_step, grad, lam_
 
 
 @njit(cache=True)
-def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter,
-              accept_d2, starts, start_d2, grad, lam, lam_t, out, race_lam, race_d2, race_it, race_done,
-              beta_cur, beta_t):
+def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter, accept_d2, ws,
+              out):
     """One point: fills out[0:3] with λ. Returns (d2, iterations, starts tried, converged).
 
     ``race_iter`` < 0 runs the paper's Algorithm 1. ``race_iter`` >= 0 runs the improved variant:
     the closest start descends to convergence; if it ends farther than sqrt(accept_d2) from q,
-    every other kept start descends ``race_iter`` iterations and the closest racer is finished."""
-    m = _starting_points(q, E, P, steer_max, starts, start_d2, beta_t)
+    every other kept start descends ``race_iter`` iterations and the closest racer is finished.
+    ``ws`` holds the work arrays (:func:`_workspace`)."""
+    starts, start_d2, start_beta, c, grad, lam, lam_t, beta_cur, beta_t, race_lam, race_it = ws
+    n = q.shape[0]
+    m = _starting_points(q, E, P, steer_max, n_starts, starts, start_d2, start_beta, c, lam, beta_t)
     if m == 0:
         # No pair of propulsion axes intersects (cannot happen with non-collinear steering axes
         # and finite input); fall back to the rotation about the chassis centre.
@@ -371,13 +377,10 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
         out[1] = 0.0
         out[2] = 1.0
         return _steering_dist2(out, q, E, P, steer_max, beta_t), 0, 0, False
-    if m > n_starts:
-        m = n_starts
     if math.sqrt(start_d2[0]) <= eps_delta:
         # Line 4: the closest intersection lies on the surface: a well-defined ICR.
-        out[0] = starts[0, 0]
-        out[1] = starts[0, 1]
-        out[2] = starts[0, 2]
+        for i in range(3):
+            out[i] = starts[0, i]
         return start_d2[0], 0, 1, True
     total_iter = 0
     if race_iter < 0:
@@ -386,32 +389,29 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
         tried = 0
         for s in range(m):
             tried += 1
-            lam[0] = starts[s, 0]
-            lam[1] = starts[s, 1]
-            lam[2] = starts[s, 2]
-            d2 = start_d2[s]
-            if math.sqrt(d2) <= eps_delta:
-                conv = True
-                it = 0
-            else:
-                d2, it, conv = _descend(q, E, P, steer_max, lam, eps_lambda, max_iter, min_step, grad, lam_t,
-                                        beta_cur, beta_t)
+            for i in range(3):
+                lam[i] = starts[s, i]
+            for k in range(n):
+                beta_cur[k] = start_beta[s, k]
+            d2, it, conv = _descend(q, E, P, steer_max, lam, start_d2[s], beta_cur, eps_lambda, max_iter, min_step,
+                                    grad, lam_t, beta_t)
             total_iter += it
             if conv or d2 < best_d2:
                 # Line 23 returns the first start that converges; Line 26 the closest otherwise.
                 best_d2 = d2
                 best_conv = conv
-                out[0] = lam[0]
-                out[1] = lam[1]
-                out[2] = lam[2]
+                for i in range(3):
+                    out[i] = lam[i]
             if conv:
                 break
         return best_d2, total_iter, tried, best_conv
     # Improved variant. First the closest start descends to convergence, as in Algorithm 1.
     for i in range(3):
         out[i] = starts[0, i]
-    best_d2, it, best_conv = _descend(q, E, P, steer_max, out, eps_lambda, max_iter, min_step,
-                                      grad, lam_t, beta_cur, beta_t, True)
+    for k in range(n):
+        beta_cur[k] = start_beta[0, k]
+    best_d2, it, best_conv = _descend(q, E, P, steer_max, out, start_d2[0], beta_cur, eps_lambda, max_iter,
+                                      min_step, grad, lam_t, beta_t, True)
     total_iter += it
     if best_d2 <= accept_d2 or m == 1:
         return best_d2, total_iter, 1, best_conv
@@ -419,27 +419,30 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     # starts, then the closest racer, if it beats the first result, descends to convergence.
     lead = -1
     lead_d2 = best_d2
+    lead_done = False
     for s in range(1, m):
         for i in range(3):
             race_lam[s, i] = starts[s, i]
-        d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], eps_lambda, race_iter,
-                                min_step, grad, lam_t, beta_cur, beta_t, True)
+        for k in range(n):
+            beta_cur[k] = start_beta[s, k]
+        d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], start_d2[s], beta_cur, eps_lambda, race_iter,
+                                min_step, grad, lam_t, beta_t, True)
         total_iter += it
-        race_d2[s] = d2
         race_it[s] = it
-        race_done[s] = conv or it < race_iter  # converged, or stopped by a backtracking failure
         if d2 < lead_d2:
             lead = s
             lead_d2 = d2
+            lead_done = conv or it < race_iter  # converged, or stopped by a backtracking failure
     if lead < 0:
         return best_d2, total_iter, m, best_conv
     for i in range(3):
         lam[i] = race_lam[lead, i]
-    conv = race_done[lead]
     d2 = lead_d2
+    conv = lead_done
     if not conv:
-        d2, it, conv = _descend(q, E, P, steer_max, lam, eps_lambda, max_iter - race_it[lead], min_step,
-                                grad, lam_t, beta_cur, beta_t, True)
+        d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur)
+        d2, it, conv = _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter - race_it[lead],
+                                min_step, grad, lam_t, beta_t, True)
         total_iter += it
     if d2 < best_d2:
         best_d2 = d2
@@ -450,27 +453,26 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
 
 
 @njit(cache=True)
+def _workspace(n):
+    """Work arrays of one IT evaluation for n wheels, allocated once per batch."""
+    m_max = n * (n - 1) // 2
+    return (np.empty((m_max, 3)), np.empty(m_max), np.empty((m_max, n)), np.empty((n, 3)), np.empty(3),
+            np.empty(3), np.empty(3), np.empty(n), np.empty(n), np.empty((m_max, 3)),
+            np.empty(m_max, dtype=np.int64))
+
+
+@njit(cache=True)
 def it_kernel_batch(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts,
                     race_iter, accept_d2, lam_out, d2_out, iters_out, starts_out, conv_out):
     """Algorithm 1 over a batch q (N, n). Writes λ (N, 3) and diagnostics."""
     n = q.shape[1]
     m_max = n * (n - 1) // 2
-    starts = np.empty((m_max, 3))
-    start_d2 = np.empty(m_max)
-    grad = np.empty(3)
-    lam = np.empty(3)
-    lam_t = np.empty(3)
+    keep = min(max(n_starts, 1), m_max)
+    ws = _workspace(n)
     out = np.empty(3)
-    race_lam = np.empty((m_max, 3))
-    race_d2 = np.empty(m_max)
-    race_it = np.empty(m_max, dtype=np.int64)
-    race_done = np.empty(m_max, dtype=np.bool_)
-    beta_cur = np.empty(n)
-    beta_t = np.empty(n)
     for p in range(q.shape[0]):
-        d2, it, tried, conv = _it_point(q[p], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step,
-                                        n_starts, race_iter, accept_d2, starts, start_d2, grad, lam, lam_t, out,
-                                        race_lam, race_d2, race_it, race_done, beta_cur, beta_t)
+        d2, it, tried, conv = _it_point(q[p], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, keep,
+                                        race_iter, accept_d2, ws, out)
         lam_out[p, 0] = out[0]
         lam_out[p, 1] = out[1]
         lam_out[p, 2] = out[2]

@@ -82,9 +82,10 @@ def _beta_wheel(lam0: float, lam1: float, lam2: float, E, P, k: int, steer_max: 
 
 
 @njit(cache=True)
-def _steering_dist2(lam, q, E, P, steer_max: float, beta_out) -> float:
+def _steering_dist2_upto(lam, q, E, P, steer_max: float, beta_out, bound: float) -> float:
     """‖q − S(λ)‖², the squared joint-space distance to the surface point of λ, eq. (9); S(λ) is
-    written to ``beta_out``.
+    written to ``beta_out``. The sum stops as soon as it exceeds ``bound`` (and then returns a
+    partial sum above it, with ``beta_out`` incomplete).
 
     A wheel whose steering axis holds the ICR takes any angle, so it takes the input angle and its
     term is zero (§3.1.3: β_k is copied from the input)."""
@@ -95,9 +96,17 @@ def _steering_dist2(lam, q, E, P, steer_max: float, beta_out) -> float:
             diff = q[k] - beta
             d += diff * diff
             beta_out[k] = beta
+            if d > bound:
+                return d
         else:
             beta_out[k] = q[k]
     return d
+
+
+@njit(cache=True)
+def _steering_dist2(lam, q, E, P, steer_max: float, beta_out) -> float:
+    """‖q − S(λ)‖² with S(λ) written to ``beta_out`` (see :func:`_steering_dist2_upto`)."""
+    return _steering_dist2_upto(lam, q, E, P, steer_max, beta_out, np.inf)
 
 
 @njit(cache=True)

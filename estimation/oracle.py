@@ -15,8 +15,8 @@ import numpy as np
 from numba import njit
 
 from .geometry import RobotGeometry
-from .it import _descend, _starting_points
-from .kinematics import steering_from_lambda
+from .it import _descend, _starting_points, _workspace
+from .kinematics import _steering_dist2, steering_from_lambda
 
 __all__ = ["OracleParams", "oracle_grid", "oracle_kernel_batch"]
 
@@ -67,13 +67,7 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
     best_idx = np.empty(refine, dtype=np.int64)
     best_val = np.empty(refine)
     m_max = n * (n - 1) // 2
-    starts = np.empty((m_max, 3))
-    start_d2 = np.empty(m_max)
-    grad = np.empty(3)
-    lam = np.empty(3)
-    lam_t = np.empty(3)
-    beta_cur = np.empty(n)
-    beta_t = np.empty(n)
+    starts, start_d2, start_beta, cw, grad, lam, lam_t, beta_cur, beta_t, _, _ = _workspace(n)
     for p in range(q.shape[0]):
         qp = q[p]
         # exhaustive search of the grid, keeping the `refine` closest points
@@ -94,7 +88,7 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
                 if cnt < refine:
                     cnt += 1
         best = np.inf
-        n_starts = _starting_points(qp, E, P, steer_max, starts, start_d2, beta_t)
+        n_starts = _starting_points(qp, E, P, steer_max, m_max, starts, start_d2, start_beta, cw, lam, beta_t)
         n_cand = cnt + n + n_starts
         for c in range(n_cand):
             if c < cnt:
@@ -106,7 +100,8 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
             else:
                 for i in range(3):
                     lam[i] = starts[c - cnt - n, i]
-            d2, _, _ = _descend(qp, E, P, steer_max, lam, 1e-12, 200, 1.0 / 2**20, grad, lam_t, beta_cur, beta_t,
+            d2 = _steering_dist2(lam, qp, E, P, steer_max, beta_cur)
+            d2, _, _ = _descend(qp, E, P, steer_max, lam, d2, beta_cur, 1e-12, 200, 1.0 / 2**20, grad, lam_t, beta_t,
                                 True)
             if d2 < best:
                 best = d2
