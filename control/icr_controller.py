@@ -96,6 +96,12 @@ class ICRControllerConfig:
             converges exactly; the RUNNING mode then takes the remaining motion).
         reconfig_timeout: time [s] after which RECONFIGURING resumes even if a measured wheel
             angle has not settled within ``reconfig_tol`` (commands have).
+        coupling_from_measurement: in RECONFIGURING, compute the steer-to-drive coupling
+            r φ̇ = −b β̇ from the measured steering rate (finite difference of the measured β)
+            instead of the commanded one: the compliant steering lags its set-point.
+        reconfig_rate_fraction, reconfig_accel_fraction: fractions of the steering rate and
+            acceleration limits used when turning the wheels in place [-] (slower turns scrub
+            less: the compliant steering lags less behind its set-point).
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -113,6 +119,9 @@ class ICRControllerConfig:
     reconfig_freeze: float = np.deg2rad(5.0)
     reconfig_timeout: float = 2.0
     stop_timeout: float = 0.5
+    coupling_from_measurement: bool = False
+    reconfig_rate_fraction: float = 0.5
+    reconfig_accel_fraction: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("k_lambda", "mu_accel_fraction", "mu_headroom", "axis_margin", "arc_step", "stop_mu_tol",
@@ -141,6 +150,8 @@ class ICRControllerState:
         mode_time: time spent in the current mode [s].
         reconfig_lam: (3,) λ the wheels are being reconfigured for (RECONFIGURING only).
         events: number of stop-and-reconfigure sequences started so far.
+        beta_meas: (n,) the previous step's measured steering angles [rad] (for the measured
+            steering rate), or None.
     """
 
     mode: Mode
@@ -153,6 +164,7 @@ class ICRControllerState:
     mode_time: float = 0.0
     reconfig_lam: np.ndarray | None = None
     events: int = 0
+    beta_meas: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -313,7 +325,7 @@ def initial_state(lam_hat, beta, phidot, geom: RobotGeometry, config: ICRControl
     phidot = _finite(phidot, "phidot", (geom.n,))
     err = _wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
     mode = Mode.RUNNING if np.max(np.abs(err)) <= config.reconfig_tol else Mode.RECONFIGURING
-    return ICRControllerState(mode=mode, lam=lam, mu=0.0, lam_rate=np.zeros(3), beta=beta.copy(),
+    return ICRControllerState(mode=mode, lam=lam, mu=0.0, lam_rate=np.zeros(3), beta=beta.copy(), beta_meas=beta.copy(),
                               beta_rate=np.zeros(geom.n), phidot=np.clip(phidot, -1e9, 1e9).copy(),
                               reconfig_lam=lam if mode == Mode.RECONFIGURING else None)
 
@@ -404,18 +416,21 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
 
 
 def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: RobotGeometry,
-                      limits: ActuatorLimits, dt: float, exact: bool = False):
+                      limits: ActuatorLimits, dt: float, exact: bool = False,
+                      measured_rate: np.ndarray | None = None, rate_fraction: float = 0.95,
+                      accel_fraction: float = 0.95):
     """Turn each wheel in place toward ``beta_target`` (μ = 0), rate- and accel-limited.
 
     With ``exact``, ``beta_target`` is taken as the next set-point as it is (the caller made it
-    feasible).
+    feasible). With ``measured_rate``, the coupling uses the wheels' measured steering rate: the
+    compliant steering lags its set-point, and it is the actual contact point that must roll.
 
     Each wheel follows a discrete trapezoidal profile. The propulsion set-point is the pure
     steer-to-drive coupling r φ̇ = −b β̇, so the contact point rolls on its circle about A_k
     instead of scrubbing, and the chassis stays put.
     """
     err = beta_target - state.beta  # both inside the range: the direct way never crosses a stop
-    a, vmax = limits.steer_accel_max * 0.95, limits.steer_rate_max * 0.95
+    a, vmax = limits.steer_accel_max * accel_fraction, limits.steer_rate_max * rate_fraction
     if exact:  # ``beta_target`` is already a feasible next set-point
         rate = err / dt
     else:
@@ -427,7 +442,7 @@ def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: 
         rate = np.clip(want, state.beta_rate - a * dt, state.beta_rate + a * dt)
     beta = np.clip(state.beta + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - state.beta) / dt
-    phidot_want = -geom.b * rate / geom.r
+    phidot_want = -geom.b * (rate if measured_rate is None else measured_rate) / geom.r
     _, _, phidot = _saturate(state.beta, state.beta_rate, state.phidot, beta, phidot_want, geom, limits, dt)
     return beta, rate, phidot
 
@@ -508,8 +523,13 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
             # short of where the reconfiguration was heading, inside the range); do not swing
             rate = np.sign(state.beta_rate) * np.maximum(np.abs(state.beta_rate) - limits.steer_accel_max * dt, 0.0)
             beta_target = state.beta + rate * dt
+        measured_rate = None
+        if config.coupling_from_measurement and state.beta_meas is not None:
+            measured_rate = _wrap_half(beta_meas - state.beta_meas) / dt
         beta_c, rate_c, phidot_c = _reconfigure_step(state, beta_target, geom, limits, dt,
-                                                     exact=zero_cmd)
+                                                     exact=zero_cmd, measured_rate=measured_rate,
+                                                     rate_fraction=config.reconfig_rate_fraction,
+                                                     accel_fraction=config.reconfig_accel_fraction)
         lam_new, mu_new, lam_rate = state.lam, 0.0, np.zeros(3)
         info["kappa"] = 0.0
     elif mode == Mode.STOPPING:
@@ -531,7 +551,7 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     new_state = ICRControllerState(mode=mode, lam=lam_new, mu=float(mu_new), lam_rate=np.asarray(lam_rate),
                                    beta=np.asarray(beta_c), beta_rate=np.asarray(rate_c),
                                    phidot=np.asarray(phidot_c), mode_time=mode_time,
-                                   reconfig_lam=reconfig_lam, events=events)
+                                   reconfig_lam=reconfig_lam, events=events, beta_meas=beta_meas.copy())
     cmd = WheelCommand(beta=new_state.beta.copy(), phidot=new_state.phidot.copy(), beta_rate=rate_c.copy(),
                        beta_accel=accel, phiddot=phiddot, info=info)
     return new_state, cmd

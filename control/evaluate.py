@@ -1,0 +1,362 @@
+"""``azimut eval``: run controllers on tracks in the simulator and write a report folder.
+
+Controllers (all fed by the same :class:`~control.path_follower.PathFollower`, with the same
+actuator limits and control period):
+
+* ``icr``: :class:`~control.icr_controller.ICRController` on the IT-estimated (λ̂, μ̂);
+* ``twist``: :class:`~control.swerve.SwerveController`, the WPILib-style baseline.
+
+Per controller and track the report has (``metrics.md`` and ``metrics.json``): RMS and max lateral
+error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean internal force, mean
+and min qua of the measured steering configuration (eq. 28–29), the number of steps where a
+commanded limit was exceeded, and the number of stop-and-reconfigure events; and PNG plots: the
+trajectory over the track (the paper's Fig. 9), pairwise β projections against the constraining
+surface (Fig. 10), qua over time (Fig. 11), the ICR's path on the sphere, and the wheel commands
+against their limits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from azimut_env.env import AzimutEnv
+from azimut_env.tracks import TRACK_NAMES, Track, make_track
+
+from .icr_controller import ICRController, ICRControllerConfig, Mode
+from .limits import limit_violations
+from .path_follower import PathFollower, PathFollowerConfig
+from .swerve import SwerveConfig, SwerveController
+
+__all__ = ["CONTROLLERS", "EpisodeLog", "run_episode", "episode_metrics", "write_report", "add_arguments", "run"]
+
+CONTROLLERS = ("icr", "twist")
+#: Default evaluation order: the paper track first.
+DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
+
+
+@dataclass
+class EpisodeLog:
+    """Per-step records of one run (arrays of length T) and its outcome."""
+
+    controller: str
+    track: Track
+    dt: float
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    lateral: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    heading: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slip_power: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    qua: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    beta_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    beta_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    phidot_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    beta_rate: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    phiddot: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    lam_hat: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    violations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    events: int = 0
+    completed: bool = False
+    error: str | None = None
+
+
+def _progress_bar(label: str, frac: float, start: float, stream=sys.stderr) -> None:
+    if not stream.isatty():
+        return
+    width = 30
+    k = int(round(frac * width))
+    stream.write(f"\r{label:<24} [{'#' * k}{'.' * (width - k)}] {100 * frac:5.1f}% {time.time() - start:6.1f}s")
+    stream.flush()
+
+
+def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, speed_scale: float = 1.0,
+                kick: dict | None = None, max_time: float | None = None, progress: bool = False,
+                icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None,
+                follower_config: PathFollowerConfig | None = None, env_kwargs: dict | None = None) -> EpisodeLog:
+    """Drive one track with one controller until the track is done (or ``max_time`` [s]).
+
+    Args:
+        controller: ``"icr"`` or ``"twist"``.
+        track: a built-in name (``random`` is drawn from ``seed``) or a Track.
+        seed: env seed (sensor noise, start noise, random track).
+        speed_scale: multiplies the track's speed profile.
+        kick: ``{"step": int, "wheels": [...], "impulse": N·m·s}`` (the env's reset option).
+        max_time: time limit [s]; default 3 × the nominal duration + 10 s.
+    """
+    if controller not in CONTROLLERS:
+        raise ValueError(f"unknown controller {controller!r}; choose from {CONTROLLERS}")
+    if isinstance(track, str):
+        if track not in TRACK_NAMES:
+            raise ValueError(f"unknown track {track!r}; choose from {TRACK_NAMES}")
+        track = make_track(track, rng=np.random.default_rng(seed))
+    env = AzimutEnv(track=track, **(env_kwargs or {}))
+    options = {"kick": kick} if kick else None
+    _, info = env.reset(seed=seed, options=options)
+    geom, limits, dt = env.geometry, env.limits, env.control_period
+    fcfg = follower_config or PathFollowerConfig(speed_scale=speed_scale)
+    follower = PathFollower(env.track, fcfg)
+    follower.reset(info["progress"])
+    if controller == "icr":
+        ctl = ICRController(geom, limits, dt, icr_config)
+    else:
+        ctl = SwerveController(geom, limits, dt, swerve_config)
+        ctl.reset(env.measured_beta, env.measured_phidot)
+    nominal = float(np.sum(np.diff(env.track.s) / np.maximum(env.track.speed[:-1] * fcfg.speed_scale, 0.05)))
+    max_time = max_time if max_time is not None else 3.0 * nominal + 10.0
+    steps = int(math.ceil(max_time / dt))
+    rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
+                                            "beta_meas", "beta_cmd", "phidot_cmd", "beta_rate", "phiddot",
+                                            "lam_hat", "mode", "violations")}
+    log = EpisodeLog(controller, env.track, dt)
+    start = time.time()
+    label = f"{controller}/{env.track.name}"
+    for k in range(steps):
+        lam_hat, mu_hat = env.estimated_eta
+        beta_m, phidot_m = env.measured_beta, env.measured_phidot
+        target = follower.step(info["pose"])
+        if controller == "icr":
+            cmd = ctl.step(lam_hat, mu_hat, beta_m, phidot_m, target.lam, target.mu)
+            mode = int(cmd.info["mode"])
+        else:
+            cmd = ctl.step(target.twist, beta_m)
+            mode = int(Mode.RUNNING)
+        viol = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, limits).any())
+        _, _, terminated, truncated, info = env.step(env.action_from_setpoints(cmd.beta, cmd.phidot))
+        if "error" in info:
+            log.error = info["error"]
+            break
+        for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
+                           ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
+                           ("internal_force", info["internal_force"]), ("qua", info["qua"]),
+                           ("beta_meas", env.measured_beta), ("beta_cmd", cmd.beta), ("phidot_cmd", cmd.phidot),
+                           ("beta_rate", cmd.beta_rate), ("phiddot", cmd.phiddot), ("lam_hat", lam_hat),
+                           ("mode", mode), ("violations", viol)):
+            rec[key].append(value)
+        done = info["progress"] >= env.track.length - 0.01 or info.get("finished", False)
+        if progress and k % 50 == 0:
+            _progress_bar(label, min(1.0, info["progress"] / env.track.length), start)
+        if done:
+            log.completed = True
+            break
+        if info.get("off_track"):
+            log.error = "off track"
+            break
+    if progress and sys.stderr.isatty():
+        sys.stderr.write("\n")
+    for key, values in rec.items():
+        setattr(log, key, np.asarray(values))
+    log.t = dt * np.arange(1, len(rec["lateral"]) + 1)
+    log.events = int(ctl.state.events) if controller == "icr" and ctl.state is not None else 0
+    env.close()
+    return log
+
+
+def episode_metrics(log: EpisodeLog) -> dict:
+    """The metrics table row of one run (see the module docstring); NaN where undefined."""
+    t_end = float(log.t[-1]) if log.t.size else float("nan")
+    lat = log.lateral if log.lateral.size else np.array([np.nan])
+    head = log.heading if log.heading.size else np.array([np.nan])
+    return {
+        "controller": log.controller,
+        "track": log.track.name,
+        "completed": bool(log.completed),
+        "error": log.error,
+        "rms_lateral_m": float(np.sqrt(np.mean(lat**2))),
+        "max_lateral_m": float(np.max(np.abs(lat))),
+        "rms_heading_rad": float(np.sqrt(np.mean(head**2))),
+        "completion_time_s": t_end if log.completed else float("nan"),
+        "slip_energy_J": float(np.sum(log.slip_power) * log.dt),
+        "mean_internal_force_N": float(np.mean(log.internal_force)) if log.internal_force.size else float("nan"),
+        "mean_qua": float(np.mean(log.qua)) if log.qua.size else float("nan"),
+        "min_qua": float(np.min(log.qua)) if log.qua.size else float("nan"),
+        "limit_violation_steps": int(np.sum(log.violations)),
+        "reconfigure_events": int(log.events),
+    }
+
+
+_COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
+            ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100), ("max_lateral_m", "max lat [cm]", "{:.2f}", 100),
+            ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180 / math.pi),
+            ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
+            ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua", "{:.4f}"),
+            ("min_qua", "min qua", "{:.4f}"), ("limit_violation_steps", "limit-exceeded steps", "{}"),
+            ("reconfigure_events", "stop+reconfig", "{}")]
+
+
+def metrics_markdown(rows: list[dict]) -> str:
+    """The metrics table in Markdown."""
+    head = "| " + " | ".join(c[1] for c in _COLUMNS) + " |"
+    sep = "|" + "|".join("---" for _ in _COLUMNS) + "|"
+    lines = [head, sep]
+    for row in rows:
+        cells = []
+        for col in _COLUMNS:
+            v = row[col[0]]
+            if len(col) > 3 and isinstance(v, float):
+                v = v * col[3]
+            cells.append(col[2].format(v) if v is not None else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _surface_samples(geom, n: int = 4000, seed: int = 0) -> np.ndarray:
+    from estimation.kinematics import steering_from_lambda
+
+    lam = np.random.default_rng(seed).normal(size=(n, 3))
+    return steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), geom)
+
+
+def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
+    """The five PNG plots of one run; returns their file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stem = f"{log.controller}_{log.track.name}"
+    files = []
+    # 1. trajectory over the track (Fig. 9)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot(log.track.xy[:, 0], log.track.xy[:, 1], "k--", lw=1, label="track")
+    if log.pose.size:
+        ax.plot(log.pose[:, 0], log.pose[:, 1], "C0", lw=1.2, label=f"{log.controller}")
+        ev = np.flatnonzero(np.diff(log.mode) != 0) + 1 if log.mode.size else []
+        ev = [i for i in ev if log.mode[i] == int(Mode.RECONFIGURING)]
+        if len(ev):
+            ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"trajectory: {stem}")
+    files.append(f"{stem}_trajectory.png")
+    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    # 2. pairwise β projections against the constraining surface (Fig. 10)
+    surf = _surface_samples(geom)
+    pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
+    fig, axes = plt.subplots(2, 3, figsize=(11, 7))
+    for ax, (i, j) in zip(axes.ravel(), pairs):
+        ax.plot(np.degrees(surf[:, i]), np.degrees(surf[:, j]), ".", color="0.75", ms=1, label="surface S(λ)")
+        if log.beta_meas.size:
+            ax.plot(np.degrees(log.beta_meas[:, i]), np.degrees(log.beta_meas[:, j]), ".", ms=1.5, color="C3",
+                    label="measured β")
+        ax.set_xlabel(f"β{i + 1} [deg]")
+        ax.set_ylabel(f"β{j + 1} [deg]")
+    axes[0, 0].legend(fontsize=7, markerscale=5)
+    fig.suptitle(f"measured steering vs constraining surface: {stem}")
+    fig.tight_layout()
+    files.append(f"{stem}_beta_pairs.png")
+    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    # 3. qua over time (Fig. 11)
+    fig, ax = plt.subplots(figsize=(8, 3))
+    ax.plot(log.t, log.qua, lw=0.8)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("qua")
+    ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
+    ax.set_title(f"quality of the measured steering configuration: {stem}")
+    files.append(f"{stem}_qua.png")
+    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    th = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(th), np.sin(th), "k", lw=0.8)
+    ax.plot(*geom.s_unit[:, :2].T, "k^", label="steering axes ŝ_k")
+    if log.lam_hat.size:
+        lam = log.lam_hat * np.where(log.lam_hat[:, 2:3] < 0, -1.0, 1.0)
+        ax.scatter(lam[:, 0], lam[:, 1], c=log.t, s=2, cmap="viridis", label="λ̂ (colour: time)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("u")
+    ax.set_ylabel("v")
+    ax.legend(fontsize=7, loc="lower left")
+    ax.set_title(f"ICR on the sphere (w ≥ 0): {stem}")
+    files.append(f"{stem}_icr_sphere.png")
+    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    # 5. wheel commands against their limits
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "β̇_c [rad/s]"),
+                                (axes[1], log.phidot_cmd, limits.wheel_speed_max, "φ̇_c [rad/s]"),
+                                (axes[2], log.phiddot, limits.wheel_accel_max, "φ̈_c [rad/s²]")):
+        if data.size:
+            ax.plot(log.t, data, lw=0.6)
+        ax.axhline(lim, color="r", ls="--", lw=0.8)
+        ax.axhline(-lim, color="r", ls="--", lw=0.8)
+        ax.set_ylim(-2 * lim, 2 * lim)
+        ax.set_ylabel(name)
+    axes[-1].set_xlabel("t [s]")
+    axes[0].set_title(f"wheel commands and limits (dashed): {stem}")
+    files.append(f"{stem}_commands.png")
+    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return files
+
+
+def write_report(rows: list[dict], out: Path, header: str = "") -> None:
+    """metrics.md and metrics.json in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(rows, indent=2, allow_nan=True))
+    (out / "metrics.md").write_text(f"# azimut eval\n\n{header}\n\n" + metrics_markdown(rows))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--controllers", default="icr,twist",
+                        help=f"comma-separated controllers among {', '.join(CONTROLLERS)} (default: icr,twist)")
+    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS),
+                        help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
+    parser.add_argument("--seed", type=int, default=0, help="env seed (noise, start, random track); default 0")
+    parser.add_argument("--speed-scale", type=float, default=1.0,
+                        help="multiply every track's speed profile (default 1: the track's nominal speed)")
+    parser.add_argument("--out", default="reports/eval", help="report folder (default reports/eval)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+
+
+def _parse_list(text: str, allowed, what: str) -> list[str]:
+    items = [x.strip() for x in text.split(",") if x.strip()]
+    bad = [x for x in items if x not in allowed]
+    if not items or bad:
+        raise ValueError(f"unknown {what} {bad or text!r}; choose from {', '.join(allowed)}")
+    return items
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        controllers = _parse_list(args.controllers, CONTROLLERS, "controller(s)")
+        tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
+        if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
+            raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
+    except ValueError as exc:
+        print(f"azimut eval: error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    env0 = AzimutEnv()
+    geom, limits = env0.geometry, env0.limits
+    for track in tracks:
+        for controller in controllers:
+            log = run_episode(controller, track, seed=args.seed, speed_scale=args.speed_scale, progress=True)
+            row = episode_metrics(log)
+            rows.append(row)
+            if not args.no_plots:
+                row["plots"] = write_plots(log, out, geom, limits)
+            print(f"{controller:>6} {track:<8} RMS lat {100 * row['rms_lateral_m']:.2f} cm, max "
+                  f"{100 * row['max_lateral_m']:.2f} cm, slip {row['slip_energy_J']:.2f} J, "
+                  f"int. force {row['mean_internal_force_N']:.2f} N, limit-exceeded steps "
+                  f"{row['limit_violation_steps']}, stop+reconfig {row['reconfigure_events']}", flush=True)
+    header = (f"seed {args.seed}, speed scale {args.speed_scale}, control period {env0.control_period} s, "
+              f"limits {limits}")
+    write_report(rows, out, header)
+    print(f"report written to {out}/metrics.md")
+    return 0

@@ -1,0 +1,72 @@
+"""Closed loop in the simulator: short runs of both controllers, the report writer and the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from azimut_env.cli import main
+from azimut_env.tracks import Track
+from control.evaluate import episode_metrics, run_episode, write_plots, write_report
+
+
+@pytest.fixture(scope="module")
+def corner_track():
+    """2 m, a sharp 90° corner (stop and reconfigure), 2 m, at a fixed heading."""
+    return Track.from_waypoints([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], heading=0.0, speed=0.5, ramp=0.3, name="corner")
+
+
+@pytest.fixture(scope="module")
+def runs(corner_track):
+    return {c: run_episode(c, corner_track, seed=1) for c in ("icr", "twist")}
+
+
+def test_icr_completes_within_limits_and_reconfigures_at_the_corner(runs):
+    m = episode_metrics(runs["icr"])
+    assert m["completed"] and m["error"] is None
+    assert m["limit_violation_steps"] == 0
+    assert m["reconfigure_events"] >= 1
+    assert m["rms_lateral_m"] < 0.01 and m["max_lateral_m"] < 0.03
+
+
+def test_icr_scrubs_less_than_the_twist_baseline(runs):
+    icr, twist = episode_metrics(runs["icr"]), episode_metrics(runs["twist"])
+    assert twist["completed"]
+    assert icr["slip_energy_J"] < 0.5 * twist["slip_energy_J"]
+    assert icr["mean_internal_force_N"] < twist["mean_internal_force_N"]
+
+
+def test_report_and_plots(runs, tmp_path):
+    from azimut_env.params import ActuatorLimits
+    from estimation import RobotGeometry
+
+    rows = [episode_metrics(log) for log in runs.values()]
+    write_report(rows, tmp_path)
+    data = json.loads((tmp_path / "metrics.json").read_text())
+    assert [r["controller"] for r in data] == ["icr", "twist"]
+    assert "| icr | corner |" in (tmp_path / "metrics.md").read_text()
+    files = write_plots(runs["icr"], tmp_path, RobotGeometry.azimut3(), ActuatorLimits())
+    assert len(files) == 5 and all((tmp_path / f).stat().st_size > 1000 for f in files)
+
+
+@pytest.mark.parametrize("argv", [["eval", "--tracks", "nope"], ["eval", "--controllers", "icr,foo"],
+                                  ["eval", "--speed-scale", "-1"]])
+def test_cli_rejects_bad_arguments(argv, capsys, tmp_path):
+    assert main(argv + ["--out", str(tmp_path)]) == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_run_episode_rejects_unknown_names():
+    with pytest.raises(ValueError):
+        run_episode("pid", "paper")
+    with pytest.raises(ValueError):
+        run_episode("icr", "nope")
+
+
+def test_cli_eval_writes_a_report(tmp_path):
+    assert main(["eval", "--tracks", "circle", "--controllers", "icr", "--no-plots", "--out", str(tmp_path)]) == 0
+    rows = json.loads((tmp_path / "metrics.json").read_text())
+    assert rows[0]["completed"] and rows[0]["limit_violation_steps"] == 0
+    assert np.isfinite(rows[0]["rms_lateral_m"])
