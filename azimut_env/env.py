@@ -374,6 +374,7 @@ class AzimutEnv(gym.Env):
         self._qua = 1.0
         self._beta_est = np.zeros(n)
         self._s = 0.0
+        self._track_max_speed = self.track.max_speed
         self._lat = self._head = self._v_ref = self._v_along = 0.0
         self._look = np.zeros((self.lookahead_count, 3))
         self._prev_action = np.zeros(2 * n, dtype=np.float32)
@@ -395,6 +396,7 @@ class AzimutEnv(gym.Env):
             self.track = spec
         elif spec == "random" or spec != getattr(self.track, "name", None):
             self.track = make_track(spec, rng=rng)
+        self._track_max_speed = self.track.max_speed
         obstacles = self._default_obstacles
         if "obstacles" in options:
             obstacles = tuple(Obstacle.coerce(o) for o in options["obstacles"])
@@ -469,7 +471,7 @@ class AzimutEnv(gym.Env):
         code = phys.summary[0, 10]
         if code != 0:
             self._done_error = phys.check()[1][0]
-            info = {"error": self._done_error, "reward_terms": {}}
+            info = {"error": self._done_error, "reward_terms": {}, "off_track": False, "finished": False}
             return self._obs.copy(), -self.weights["off_track"], True, False, info
         self._measure()
         s_prev = self._s
@@ -524,18 +526,17 @@ class AzimutEnv(gym.Env):
     def _get_rew(self, ds: float, lat: float, head: float, action: np.ndarray, off_track: bool):
         w = self.weights
         dt = self.control_period
-        v_max = max(self.track.max_speed, 1e-3)
-        progress = w["progress"] * min(ds, self._v_ref * dt + 1e-3 * dt) / (v_max * dt)
+        v_max = max(self._track_max_speed, 1e-3)
         da = action - self._prev_action
         terms = {
-            "progress": float(progress),
+            "progress": w["progress"] * min(ds, self._v_ref * dt + 1e-3 * dt) / (v_max * dt),
             "lateral": -w["lateral"] * lat * lat,
             "heading": -w["heading"] * head * head,
-            "slip": -w["slip"] * float(self.physics.summary[0, 8]),
+            "slip": -w["slip"] * self.physics.summary[0, 8].item(),
             "action_rate": -w["action_rate"] * float(da @ da),
             "off_track": -w["off_track"] if off_track else 0.0,
         }
-        return float(sum(terms.values())), terms
+        return sum(terms.values()), terms
 
     def _get_info(self, reward_terms: dict) -> dict:
         phys = self.physics
