@@ -229,3 +229,18 @@ def test_h_state_batch_matches_single():
         l1, m1, b1, q1 = h_state_from_measurements(q[i], w[i], geom)
         assert np.allclose(lam[i], l1, atol=1e-12) and mu[i] == pytest.approx(m1, abs=1e-12)
         assert np.allclose(be[i], b1, atol=1e-12) and qua[i] == pytest.approx(q1, abs=1e-12)
+
+
+def test_domain_randomization_varies_parameters_per_reset():
+    from azimut_env.physics import WP
+
+    env = AzimutEnv(domain_randomization=0.3)
+    env.reset(seed=1)
+    mu1, k1 = env.physics.wheel_params[0, 0, WP.MU], env.physics.wheel_params[0, 0, WP.K_S]
+    m1 = env.physics.chassis[0].mass
+    env.reset(seed=2)
+    assert env.physics.wheel_params[0, 0, WP.MU] != mu1 and env.physics.wheel_params[0, 0, WP.K_S] != k1
+    assert env.physics.chassis[0].mass != m1
+    plain = AzimutEnv()
+    plain.reset(seed=1)
+    assert plain.physics.wheel_params[0, 0, WP.MU] == plain.params.tire.friction

@@ -194,3 +194,17 @@ def test_chassis_collides_with_an_obstacle():
     beta, phidot = _kinematic_setpoints(geom, (0.5, 0.0, 0.0))
     _drive(phys, beta, phidot, 4.0)
     assert phys.chassis_pose()[0, 0] < 1.0 - 0.2 - 0.29  # stopped by the obstacle (half-width 0.3)
+
+
+def test_hard_stops_hold_after_a_kick():
+    phys = AzimutPhysics()
+    phys.reset_robot(0, (0.0, 0.0, 0.0), np.zeros(4))
+    phys.kick(0, [0, 1], 0.5)  # 25 rad/s on the modules
+    phys.kick(0, [2, 3], -0.5)
+    peak = 0.0
+    for _ in range(50):
+        phys.step()
+        peak = max(peak, np.max(np.abs(phys.steering_angles()[0])))
+        assert phys.check()[0][0]
+    assert peak > 0.3  # the wheels were knocked
+    assert peak < np.pi / 2 + 0.02  # but not through the stops
