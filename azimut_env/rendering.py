@@ -120,8 +120,7 @@ class Renderer:
                 pg.draw.circle(surf, (30, 170, 60), self._px(icr), 8, 2)
         if self.mode == "human":
             if self.window is None:
-                pg.init()
-                pg.display.init()
+                pg.display.init()  # display only: pygame.init() would also open audio
                 self.window = pg.display.set_mode((self.size, self.size))
                 pg.display.set_caption("Azimut-v0")
                 self.clock = pg.time.Clock()
