@@ -17,6 +17,9 @@ __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "IT_BE
 #: Method names accepted by :func:`estimate_icr`. "IT+" is the improved IT (``IT_BEST``).
 METHODS = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
 
+#: The paper's IT: Algorithm 1 with the documented default thresholds.
+IT_PAPER = ITParams()
+
 #: The improved IT: every kept start run to convergence, the closest result kept.
 IT_BEST = ITParams(n_starts=6, race_iter=2, accept_rms=0.25)
 
@@ -55,7 +58,7 @@ class ITDiagnostics:
     distance: np.ndarray
 
 
-def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = ITParams(), diagnostics: bool = False):
+def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnostics: bool = False):
     """IT, Algorithm 1 (§3.1). See :mod:`estimation.it`.
 
     Args:
@@ -105,7 +108,7 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
     if method in ("IT", "IT+"):
-        params = it_params if it_params is not None else (ITParams() if method == "IT" else IT_BEST)
+        params = it_params if it_params is not None else (IT_PAPER if method == "IT" else IT_BEST)
         return estimate_icr_it(q, geom, params)
     flat, batch = _prepare(q, geom)
     lam = np.empty((flat.shape[0], 3))
