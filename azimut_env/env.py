@@ -200,7 +200,8 @@ class AzimutEnv(gym.Env):
     * ``control_period``: seconds per step (default 0.02). ``substeps``: physics substeps per step
       (default 8: a 2.5 ms substep).
     * ``params``: :class:`~azimut_env.params.RobotParams`. ``sensors``: ``SensorParams`` or
-      ``"ideal"`` (overrides ``params.sensors``).
+      ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
+      standard deviations (0: noise-free, quantisation kept).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering
       stiffness and damping and chassis mass are scaled by factors uniform in [1 − d, 1 + d].
     * reward weights: ``progress_weight``, ``lateral_weight``, ``heading_weight``, ``slip_weight``,
@@ -221,7 +222,7 @@ class AzimutEnv(gym.Env):
 
     def __init__(self, track: str | Track = "paper", control_period: float = 0.02, substeps: int = 8,
                  params: RobotParams | None = None, sensors: SensorParams | str | None = None,
-                 domain_randomization: float = 0.0, progress_weight: float = 1.0, lateral_weight: float = 5.0,
+                 noise_scale: float = 1.0, domain_randomization: float = 0.0, progress_weight: float = 1.0, lateral_weight: float = 5.0,
                  heading_weight: float = 0.5, slip_weight: float = 0.002, action_rate_weight: float = 0.05,
                  off_track_penalty: float = 10.0, max_lateral_error: float = 0.5, lookahead_count: int = 5,
                  lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
@@ -234,6 +235,15 @@ class AzimutEnv(gym.Env):
             if not isinstance(sensors, SensorParams):
                 raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
             params = replace(params, sensors=sensors)
+        if not (math.isfinite(noise_scale) and noise_scale >= 0):
+            raise ValueError(f"noise_scale must be finite and >= 0, got {noise_scale!r}")
+        if noise_scale != 1.0:
+            from dataclasses import replace
+
+            sp = params.sensors
+            params = replace(params, sensors=replace(sp, steer_noise=sp.steer_noise * noise_scale,
+                                                     motor_noise=sp.motor_noise * noise_scale,
+                                                     wheel_speed_noise=sp.wheel_speed_noise * noise_scale))
         if not 0.0 <= domain_randomization <= 0.5:
             raise ValueError(f"domain_randomization must be in [0, 0.5], got {domain_randomization!r}")
         for name, value in dict(progress_weight=progress_weight, lateral_weight=lateral_weight,
