@@ -1,0 +1,135 @@
+"""Higher-level action spaces for ``Azimut-v0`` (for RL): ICR targets and chassis twists.
+
+Both wrappers keep the env's observation and reward; they replace the per-wheel set-point action
+with a motion target that a controller turns into coordinated wheel set-points every step:
+
+* :class:`ICRTargetAction`: ``Box(-1, 1, (4,))``: λ_d ∝ action[:3] (a point of Λ; a vector of
+  norm below ``min_norm`` means "hold": μ_d = 0) and μ_d = action[3] · ``mu_max`` [m/s]; the
+  :class:`~control.icr_controller.ICRController` does the rest (limits, singularities,
+  stop-and-reconfigure).
+* :class:`TwistAction`: ``Box(-1, 1, (3,))``: chassis-frame twist (v_x, v_y, ω) = action ·
+  (v_max, v_max, ω_max); it goes through the ICR controller (``controller="icr"``, via
+  ``eta_from_twist``) or the WPILib-style baseline (``controller="swerve"``).
+
+``info`` gains ``controller_mode`` (an ``icr_controller.Mode`` value, or −1 for the baseline),
+``limit_exceeded`` (whether the set-points exceeded a commanded limit) and ``reconfigure_events``.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from estimation.hrep import eta_from_twist
+
+from .icr_controller import ICRController, ICRControllerConfig
+from .limits import limit_violations
+from .swerve import SwerveConfig, SwerveController
+
+__all__ = ["ICRTargetAction", "TwistAction"]
+
+
+class _ControllerWrapper(gym.Wrapper):
+    """Common part: holds a controller, resets it with the env, steps it with the measurements."""
+
+    def __init__(self, env: gym.Env, controller: str, icr_config: ICRControllerConfig | None,
+                 swerve_config: SwerveConfig | None) -> None:
+        super().__init__(env)
+        if controller not in ("icr", "swerve"):
+            raise ValueError(f"controller must be 'icr' or 'swerve', got {controller!r}")
+        base = env.unwrapped
+        for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
+                     "action_from_setpoints"):
+            if not hasattr(base, attr):
+                raise ValueError(f"the wrapped env must be Azimut-v0 (missing {attr!r})")
+        self._kind = controller
+        self._icr_config, self._swerve_config = icr_config, swerve_config
+        self._ctl: ICRController | SwerveController | None = None
+
+    def _new_controller(self) -> None:
+        base = self.env.unwrapped
+        if self._kind == "icr":
+            self._ctl = ICRController(base.geometry, base.limits, base.control_period, self._icr_config)
+            lam_hat, _ = base.estimated_eta
+            self._ctl.reset(lam_hat, base.measured_beta, base.measured_phidot)
+        else:
+            self._ctl = SwerveController(base.geometry, base.limits, base.control_period, self._swerve_config)
+            self._ctl.reset(base.measured_beta, base.measured_phidot)
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._new_controller()
+        return obs, info
+
+    def _drive(self, lam_d=None, mu_d=None, twist=None):
+        base = self.env.unwrapped
+        if self._ctl is None:
+            raise RuntimeError("call reset() before step()")
+        if isinstance(self._ctl, ICRController):
+            lam_hat, mu_hat = base.estimated_eta
+            cmd = self._ctl.step(lam_hat, mu_hat, base.measured_beta, base.measured_phidot, lam_d, mu_d)
+            mode, events = int(cmd.info["mode"]), self._ctl.state.events
+        else:
+            cmd = self._ctl.step(twist, base.measured_beta)
+            mode, events = -1, 0
+        exceeded = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, base.limits).any())
+        obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(cmd.beta, cmd.phidot))
+        info = dict(info, controller_mode=mode, limit_exceeded=exceeded, reconfigure_events=events)
+        return obs, reward, terminated, truncated, info
+
+
+class ICRTargetAction(_ControllerWrapper):
+    """Action = ICR target (λ_d direction, μ_d); see the module docstring.
+
+    Args:
+        env: an ``Azimut-v0`` env. mu_max: μ_d at action[3] = ±1 [m/s]. min_norm: below this norm
+        of action[:3] the target is "hold" (μ_d = 0). icr_config: the controller's tuning.
+    """
+
+    def __init__(self, env: gym.Env, mu_max: float = 1.0, min_norm: float = 1e-3,
+                 icr_config: ICRControllerConfig | None = None) -> None:
+        super().__init__(env, "icr", icr_config, None)
+        if not (np.isfinite(mu_max) and mu_max > 0):
+            raise ValueError(f"mu_max must be finite and > 0, got {mu_max!r}")
+        self.mu_max, self.min_norm = float(mu_max), float(min_norm)
+        self.action_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
+
+    def step(self, action):
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (4,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be a finite (4,) array, got {action!r}")
+        a = np.clip(a, -1.0, 1.0)
+        norm = float(np.linalg.norm(a[:3]))
+        if norm < self.min_norm:
+            lam_d, mu_d = np.array([0.0, 0.0, 1.0]), 0.0
+        else:
+            lam_d, mu_d = a[:3] / norm, a[3] * self.mu_max
+        return self._drive(lam_d=lam_d, mu_d=mu_d)
+
+
+class TwistAction(_ControllerWrapper):
+    """Action = chassis-frame twist; see the module docstring.
+
+    Args:
+        env: an ``Azimut-v0`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
+        controller: ``"icr"`` (default) or ``"swerve"``. icr_config, swerve_config: tuning.
+    """
+
+    def __init__(self, env: gym.Env, v_max: float = 1.0, w_max: float = 2.0, controller: str = "icr",
+                 icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None) -> None:
+        super().__init__(env, controller, icr_config, swerve_config)
+        if not (np.isfinite(v_max) and v_max > 0 and np.isfinite(w_max) and w_max > 0):
+            raise ValueError(f"v_max and w_max must be finite and > 0, got {v_max!r}, {w_max!r}")
+        self.scale = np.array([v_max, v_max, w_max])
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
+
+    def step(self, action):
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be a finite (3,) array, got {action!r}")
+        twist = np.clip(a, -1.0, 1.0) * self.scale
+        if self._kind == "icr":
+            lam_d, mu_d = eta_from_twist(twist)
+            return self._drive(lam_d=lam_d, mu_d=float(mu_d))
+        return self._drive(twist=twist)
