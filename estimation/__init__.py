@@ -5,7 +5,7 @@ Omnidirectional Mobile Robots" (§2–4). Equation numbers in docstrings refer t
 """
 
 from .datasets import dataset_d1, dataset_d2, dataset_d3
-from .estimate import IT_BEST, METHODS, ITDiagnostics, estimate_icr, estimate_icr_it
+from .estimate import IT_BEST, IT_PAPER, METHODS, ITDiagnostics, estimate_eta, estimate_icr, estimate_icr_it
 from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
 from .it import ITParams
 from .oracle import OracleParams
@@ -41,6 +41,7 @@ from .kinematics import (
 __all__ = [
     "AZIMUT3_ASSUMPTIONS",
     "IT_BEST",
+    "IT_PAPER",
     "ITDiagnostics",
     "ITParams",
     "METHODS",
@@ -49,6 +50,7 @@ __all__ = [
     "dataset_d1",
     "dataset_d2",
     "dataset_d3",
+    "estimate_eta",
     "estimate_icr",
     "estimate_icr_it",
     "quality",

@@ -9,10 +9,11 @@ import numpy as np
 from .geometry import RobotGeometry
 from .hrep import _canonicalize_rows
 from .it import ITParams, it_kernel_batch
+from .kinematics import _eta_kernel
 from .operational import ls_kernel_batch, ne_kernel_batch, ns_batch
 from .oracle import OracleParams, oracle_kernel_batch, oracle_tables
 
-__all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "IT_BEST"]
+__all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "IT_BEST", "IT_PAPER"]
 
 #: Method names accepted by :func:`estimate_icr`. "IT+" is the improved IT (``IT_BEST``).
 METHODS = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
@@ -125,3 +126,34 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
                             np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2)
     _canonicalize_rows(lam)
     return lam.reshape(batch + (3,))
+
+
+def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
+                 mu_tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The H state η̂ = (λ̂, μ̂) from the sensors: steering angles q and wheel speeds φ̇.
+
+    λ̂ is :func:`estimate_icr` (default IT); μ̂ the least-squares fit of r_k φ̇_k = μ c_k(λ̂) over
+    the wheels (:func:`~estimation.kinematics.mu_from_wheel_speeds`, with S(λ̂) for the angles);
+    (λ̂, μ̂) then takes the sign of :func:`~estimation.hrep.canonical_eta` (μ̂ > 0 when
+    |μ̂| > ``mu_tol``).
+
+    Args:
+        q: (n,) or (N, n) measured steering angles [rad]; phidot: same shape, wheel speeds [rad/s].
+
+    Returns:
+        ``(λ̂, μ̂, S(λ̂))``: (3,)/(N, 3), scalar/(N,), and the steering configuration of the estimate
+        (n,)/(N, n), whose distance to q gives the quality of eq. (28)–(29).
+    """
+    lam = estimate_icr(q, geom, method, it_params=it_params)
+    flat, batch = _prepare(q, geom)
+    ph = np.array(phidot, dtype=np.float64)  # a private copy: the kernel scales it in place
+    if ph.shape != np.shape(q):
+        raise ValueError(f"phidot must have the shape of q {np.shape(q)}, got {ph.shape}")
+    if not np.isfinite(ph).all():
+        raise ValueError("phidot contains NaN or inf")
+    lam2 = np.ascontiguousarray(lam.reshape(-1, 3))
+    beta = np.empty_like(flat)
+    mu = np.empty(flat.shape[0])
+    _eta_kernel(lam2, np.ascontiguousarray(flat), ph.reshape(-1, geom.n), geom.a_minus_l, geom.a_perp, geom.b,
+                geom.r, geom.steer_max, float(mu_tol), beta, mu, np.empty(geom.n))
+    return lam2.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,))

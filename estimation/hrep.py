@@ -86,6 +86,25 @@ def canonical_lambda(lam: np.ndarray) -> np.ndarray:
     return lam * _canonical_sign(lam)[..., None]
 
 
+@njit(cache=True)
+def _canonical_eta_sign(lam0: float, lam1: float, lam2: float, mu: float, mu_tol: float) -> float:
+    """+1 or −1 so that (sign·λ, sign·μ) is canonical: μ > 0 where |μ| > mu_tol, else the
+    hemisphere rule of :func:`canonical_lambda`."""
+    if abs(mu) > mu_tol:
+        return -1.0 if mu < 0 else 1.0
+    key = lam2 if lam2 != 0.0 else (lam0 if lam0 != 0.0 else lam1)
+    return -1.0 if key < 0 else 1.0
+
+
+@njit(cache=True)
+def _canonical_eta_rows(lam, mu, mu_tol: float) -> None:
+    for p in range(lam.shape[0]):
+        sign = _canonical_eta_sign(lam[p, 0], lam[p, 1], lam[p, 2], mu[p], mu_tol)
+        mu[p] *= sign
+        for i in range(3):
+            lam[p, i] *= sign
+
+
 def canonical_eta(lam: np.ndarray, mu: np.ndarray, mu_tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Canonical representative of η = (λ, μ) ≡ (−λ, −μ).
 
@@ -95,8 +114,11 @@ def canonical_eta(lam: np.ndarray, mu: np.ndarray, mu_tol: float = 0.0) -> tuple
     """
     lam = normalize(lam)
     mu = np.asarray(mu, dtype=np.float64)
-    sign = np.where(np.abs(mu) > mu_tol, np.where(mu < 0, -1.0, 1.0), _canonical_sign(lam))
-    return lam * sign[..., None], mu * sign
+    batch = lam.shape[:-1]
+    lam2 = np.ascontiguousarray(lam.reshape(-1, 3))
+    mu2 = np.ascontiguousarray(np.broadcast_to(mu, batch).reshape(-1)).copy()
+    _canonical_eta_rows(lam2, mu2, float(mu_tol))
+    return lam2.reshape(batch + (3,)), mu2.reshape(batch)
 
 
 def lambda_distance(lam1: np.ndarray, lam2: np.ndarray) -> np.ndarray:

@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import RobotGeometry
+from .hrep import _canonical_eta_sign
 
 __all__ = [
     "SINGULAR_TOL",
@@ -158,6 +159,49 @@ def _gradient_batch(lam, E, P, steer_max: float, out):
             out[i, k, 2] = g[2]
 
 
+@njit(cache=True)
+def _speed_coef(lam, E, P, b, k: int, beta: float) -> float:
+    """c_k = (s⊥2,k(β) − b_k ẑ)·λ = cos β D_k + sin β N_k − b_k w (see :func:`wheel_speed_coefficients`).
+    At a singular wheel (N_k = D_k = 0) it is −b_k w whatever β."""
+    num = P[k, 0] * lam[0] + P[k, 1] * lam[1] + P[k, 2] * lam[2]
+    den = E[k, 0] * lam[0] + E[k, 1] * lam[1] + E[k, 2] * lam[2]
+    return math.cos(beta) * den + math.sin(beta) * num - b[k] * lam[2]
+
+
+@njit(cache=True)
+def _speed_coef_batch(lam, beta, E, P, b, out):
+    for i in range(lam.shape[0]):
+        for k in range(E.shape[0]):
+            out[i, k] = _speed_coef(lam[i], E, P, b, k, beta[i, k])
+
+
+@njit(cache=True)
+def _mu_least_squares(c, y) -> float:
+    """μ minimising Σ (y_k − μ c_k)²; 0 if every c_k vanishes."""
+    num = 0.0
+    den = 0.0
+    for k in range(c.shape[0]):
+        num += c[k] * y[k]
+        den += c[k] * c[k]
+    return num / den if den > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _eta_kernel(lam, q, phidot, E, P, b, r, steer_max, mu_tol, beta_out, mu_out, c):
+    """For each row: S(λ) (singular wheels take q_k), μ by least squares of r φ̇ = μ c given λ,
+    then the canonical sign of (λ, μ). λ and μ are written in place."""
+    for i in range(lam.shape[0]):
+        _steering_dist2(lam[i], q[i], E, P, steer_max, beta_out[i])
+        for k in range(E.shape[0]):
+            c[k] = _speed_coef(lam[i], E, P, b, k, beta_out[i, k])
+            phidot[i, k] *= r[k]  # phidot holds r φ̇ from here on (a private copy)
+        mu = _mu_least_squares(c, phidot[i])
+        sign = _canonical_eta_sign(lam[i, 0], lam[i, 1], lam[i, 2], mu, mu_tol)
+        mu_out[i] = sign * mu
+        for j in range(3):
+            lam[i, j] *= sign
+
+
 # ----------------------------------------------------------------------------------------------
 # input checking shared by the public functions
 # ----------------------------------------------------------------------------------------------
@@ -275,10 +319,10 @@ def propulsion_circle_normals(q, geom: RobotGeometry) -> np.ndarray:
 
 
 def wheel_speed_coefficients(lam, geom: RobotGeometry, beta=None) -> np.ndarray:
-    """c_k = (s⊥2,k(β_k) − b_k ẑ) · λ [m], so that r_k φ̇_k = μ c_k − b_k β̇_k.
+    """c_k = (s⊥2,k(β_k) − b_k ẑ) · λ, so that r_k φ̇_k = μ c_k − b_k β̇_k.
 
-    ``beta`` defaults to F(λ); pass measured angles to use them instead. c_k is the signed distance
-    from the ICR... scaled by μ: |μ c_k| is the contact point's rolling speed.
+    ``beta`` defaults to F(λ); pass measured angles to use them instead. μ c_k is the velocity of
+    contact point k along its rolling direction (sin γ_k, −cos γ_k) [m/s].
     Returns (n,) or (N, n).
     """
     flat, batch = _check_lambda(lam)
@@ -286,9 +330,11 @@ def wheel_speed_coefficients(lam, geom: RobotGeometry, beta=None) -> np.ndarray:
         beta = steering_from_lambda(flat, geom)
     else:
         beta = np.broadcast_to(np.asarray(beta, dtype=np.float64), batch + (geom.n,)).reshape(-1, geom.n)
-    _, s2 = s_perp(beta, geom)
-    c = np.einsum("nki,ni->nk", s2, flat) - geom.b[None, :] * flat[:, 2:3]
-    return c.reshape(batch + (geom.n,))
+        if not np.all(np.isfinite(beta)):
+            raise ValueError("beta contains NaN or inf")
+    out = np.empty((flat.shape[0], geom.n))
+    _speed_coef_batch(flat, np.ascontiguousarray(beta), geom.a_minus_l, geom.a_perp, geom.b, out)
+    return out.reshape(batch + (geom.n,))
 
 
 def wheel_speeds(lam, mu, geom: RobotGeometry, beta_rate=None, beta=None) -> np.ndarray:
@@ -309,6 +355,12 @@ def wheel_speeds(lam, mu, geom: RobotGeometry, beta_rate=None, beta=None) -> np.
     return rphi / geom.r
 
 
+@njit(cache=True)
+def _mu_batch(c, y, out):
+    for i in range(c.shape[0]):
+        out[i] = _mu_least_squares(c[i], y[i])
+
+
 def mu_from_wheel_speeds(lam, phidot, geom: RobotGeometry, beta=None, beta_rate=None) -> np.ndarray:
     """μ by least squares of r_k φ̇_k + b_k β̇_k = μ c_k over the wheels, given λ.
 
@@ -324,8 +376,12 @@ def mu_from_wheel_speeds(lam, phidot, geom: RobotGeometry, beta=None, beta_rate=
     y = geom.r * phidot
     if beta_rate is not None:
         y = y + geom.b * np.asarray(beta_rate, dtype=np.float64)
-    den = np.sum(c * c, axis=-1)
-    return np.sum(c * y, axis=-1) / np.where(den > 0, den, 1.0)
+    batch = np.broadcast_shapes(c.shape, y.shape)[:-1]
+    c2 = np.ascontiguousarray(np.broadcast_to(c, batch + (geom.n,)).reshape(-1, geom.n))
+    y2 = np.ascontiguousarray(np.broadcast_to(y, batch + (geom.n,)).reshape(-1, geom.n))
+    out = np.empty(c2.shape[0])
+    _mu_batch(c2, y2, out)
+    return out.reshape(batch)
 
 
 def steering_path_derivatives(lam, dlam, ddlam, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:

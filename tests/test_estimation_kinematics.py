@@ -192,3 +192,33 @@ def test_path_derivatives_match_finite_differences():
     fd = (rphi(s0 + h) - rphi(s0 - h)) / (2 * h)
     an = wheel_speed_path_derivative(lam, dlam, mu(s0), 1.0, d2, G)
     np.testing.assert_allclose(an, fd, rtol=1e-3, atol=1e-3)
+
+
+def test_estimate_eta_recovers_the_twist_and_matches_the_public_pieces():
+    from estimation import canonical_eta, estimate_eta, estimate_icr
+    rng = np.random.default_rng(5)
+    twists = rng.normal(size=(300, 3))
+    lam, mu = eta_from_twist(twists)
+    q = steering_from_lambda(lam, G)
+    phidot = wheel_speeds(lam, mu, G)
+    lam_hat, mu_hat, beta = estimate_eta(q, phidot, G)
+    # exact data: the twist comes back (μ > 0 convention)
+    from estimation import twist_from_eta
+    np.testing.assert_allclose(twist_from_eta(lam_hat, mu_hat), twists, atol=1e-8)
+    # noisy data: same as composing the public functions
+    qn = G.wrap_steering(q + rng.normal(scale=0.05, size=q.shape))
+    lam_hat, mu_hat, beta = estimate_eta(qn, phidot, G)
+    lam_it = estimate_icr(qn, G, "IT")
+    beta_ref = steering_from_lambda(lam_it, G, singular_fill=qn)
+    mu_ref = mu_from_wheel_speeds(lam_it, phidot, G, beta=beta_ref)
+    lam_ref, mu_ref = canonical_eta(lam_it, mu_ref, mu_tol=1e-3)
+    np.testing.assert_allclose(lam_hat, lam_ref, atol=1e-12)
+    np.testing.assert_allclose(mu_hat, mu_ref, atol=1e-12)
+    np.testing.assert_allclose(beta, beta_ref, atol=1e-12)
+    # single point and input checking
+    l1, m1, b1 = estimate_eta(qn[0], phidot[0], G)
+    assert l1.shape == (3,) and np.shape(m1) == () and b1.shape == (4,)
+    with pytest.raises(ValueError):
+        estimate_eta(qn[0], phidot[0, :3], G)
+    with pytest.raises(ValueError):
+        estimate_eta(qn[0], np.full(4, np.nan), G)
