@@ -428,6 +428,10 @@ class AzimutEnv(gym.Env):
         beta = self._reference_beta(s0, pose[2]) + rng.uniform(-noise, noise, size=self.n)
         beta = np.clip(beta, self.geometry.steer_min + 1e-6, self.geometry.steer_max)
         self.physics.reset_robot(0, pose, beta)
+        clash = self.physics.overlapping_obstacles(0)
+        if clash:
+            raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
+                             "move them off the start of the track")
         self._phi_prev = self.physics.wheel_angles()[0]
         self._prev_action = self.action_from_setpoints(beta, np.zeros(self.n))
         self._measure()

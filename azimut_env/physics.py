@@ -644,6 +644,19 @@ class AzimutPhysics:
         self.acc[robot] = 0.0
         self._read_state()
 
+    def overlapping_obstacles(self, robot: int = 0) -> list[int]:
+        """Indices of the obstacles that overlap robot ``robot``'s chassis or wheels now."""
+        if not self.obstacles:
+            return []
+        bodies = {self.chassis[robot], *self.modules[robot]}
+        hits = set()
+        for shape in self.space.shapes:
+            if shape.body in bodies:
+                for info in self.space.shape_query(shape):
+                    if info.shape in self._obstacle_shapes:
+                        hits.add(self._obstacle_shapes.index(info.shape))
+        return sorted(hits)
+
     def set_commands(self, beta_cmd, phidot_cmd) -> None:
         """Set-points for all robots: β_cmd (N, n) [rad], φ̇_cmd (N, n) [rad/s] (clipped to limits)."""
         lim = self.params.limits

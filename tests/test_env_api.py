@@ -202,6 +202,8 @@ def test_obstacles_and_kick_options():
     assert len(env.physics.obstacles) == 0
     with pytest.raises(ValueError):
         env.reset(options={"bogus": 1})
+    with pytest.raises(ValueError, match="overlap"):
+        env.reset(seed=0, options={"obstacles": [(0.1, 0.2, 0.3)]})
 
 
 def test_constructor_validation():

@@ -36,7 +36,11 @@ def fuzz(total_steps: int, seed: int = 0) -> dict:
             options["kick"] = {"step": int(rng.integers(0, 50)), "wheels": [int(rng.integers(4))],
                                "impulse": float(rng.uniform(-2, 2))}
         if rng.random() < 0.3:
-            options["obstacles"] = [(float(rng.uniform(-2, 2)), float(rng.uniform(-2, 2)), 0.3)]
+            # anywhere but on the start of the track (the env refuses that with a ValueError)
+            start = env.track.sample(0.0)[:2]
+            ang = rng.uniform(0, 2 * np.pi)
+            dist = rng.uniform(0.8, 2.5)
+            options["obstacles"] = [(float(start[0] + dist * np.cos(ang)), float(start[1] + dist * np.sin(ang)), 0.3)]
         obs, _ = env.reset(seed=int(rng.integers(1 << 31)), options=options)
         assert env.observation_space.contains(obs)
         stats["episodes"] += 1
