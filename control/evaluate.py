@@ -81,7 +81,8 @@ def _progress_bar(label: str, frac: float, start: float, stream=sys.stderr) -> N
 def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, speed_scale: float = 1.0,
                 kick: dict | None = None, max_time: float | None = None, progress: bool = False,
                 icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None,
-                follower_config: PathFollowerConfig | None = None, env_kwargs: dict | None = None) -> EpisodeLog:
+                follower_config: PathFollowerConfig | None = None, env_kwargs: dict | None = None,
+                start_progress: float | None = None) -> EpisodeLog:
     """Drive one track with one controller until the track is done (or ``max_time`` [s]).
 
     Args:
@@ -91,6 +92,7 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
         speed_scale: multiplies the track's speed profile.
         kick: ``{"step": int, "wheels": [...], "impulse": N·m·s}`` (the env's reset option).
         max_time: time limit [s]; default 3 × the nominal duration + 10 s.
+        start_progress: start at rest at this progress [m] (the env's reset option).
     """
     if controller not in CONTROLLERS:
         raise ValueError(f"unknown controller {controller!r}; choose from {CONTROLLERS}")
@@ -99,8 +101,12 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
             raise ValueError(f"unknown track {track!r}; choose from {TRACK_NAMES}")
         track = make_track(track, rng=np.random.default_rng(seed))
     env = AzimutEnv(track=track, **(env_kwargs or {}))
-    options = {"kick": kick} if kick else None
-    _, info = env.reset(seed=seed, options=options)
+    options = {}
+    if kick:
+        options["kick"] = kick
+    if start_progress is not None:
+        options["start_progress"] = float(start_progress)
+    _, info = env.reset(seed=seed, options=options or None)
     geom, limits, dt = env.geometry, env.limits, env.control_period
     fcfg = follower_config or PathFollowerConfig(speed_scale=speed_scale)
     follower = PathFollower(env.track, fcfg)
@@ -320,6 +326,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="multiply every track's speed profile (default 1: the track's nominal speed)")
     parser.add_argument("--out", default="reports/eval", help="report folder (default reports/eval)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--kick-runs", type=int, default=0,
+                        help="also run the robustness study: N trials per controller on 'paper' with random "
+                             "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
 
 
 def _parse_list(text: str, allowed, what: str) -> list[str]:
@@ -330,12 +339,39 @@ def _parse_list(text: str, allowed, what: str) -> list[str]:
     return items
 
 
+def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path) -> str:
+    """Run the robustness study per controller; write kicks_<controller>.json; return Markdown."""
+    from .robustness import kick_study, summarize_kicks
+
+    lines = ["## Robustness: random wheels kicked to random angles mid-track (paper track)", "",
+             "| controller | runs | recovered | failed | limit-exceeded steps | recovery time p50/p90/max [s] "
+             "| max lateral after kick p50/p90/max [cm] | peak β error p50/max [deg] |",
+             "|---|---|---|---|---|---|---|---|"]
+    for controller in controllers:
+        start = time.time()
+        trials = kick_study(n_runs, "icr" if controller == "icr" else "twist", seed0=1000 + 1000 * seed,
+                            progress=lambda i, n: _progress_bar(f"kicks/{controller}", i / n, start))
+        if sys.stderr.isatty():
+            sys.stderr.write("\n")
+        summ = summarize_kicks(trials)
+        (out / f"kicks_{controller}.json").write_text(json.dumps(summ, indent=2, allow_nan=True))
+        rt, lat, pb = summ["recovery_time_s"], summ["max_lateral_after_m"], summ["peak_beta_error_rad"]
+        lines.append(f"| {controller} | {summ['runs']} | {summ['recovered']} | {summ['failed_runs']} | "
+                     f"{summ['limit_violation_steps']} | {rt.get('p50', float('nan')):.2f}/{rt.get('p90', float('nan')):.2f}/"
+                     f"{rt.get('p100', float('nan')):.2f} | {100 * lat['p50']:.2f}/{100 * lat['p90']:.2f}/"
+                     f"{100 * lat['p100']:.2f} | {math.degrees(pb['p50']):.0f}/{math.degrees(pb['p100']):.0f} |")
+        print(f"kicks {controller}: {summ['recovered']}/{summ['runs']} recovered", flush=True)
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         controllers = _parse_list(args.controllers, CONTROLLERS, "controller(s)")
         tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
+        if args.kick_runs < 0:
+            raise ValueError(f"--kick-runs must be >= 0, got {args.kick_runs}")
     except ValueError as exc:
         print(f"azimut eval: error: {exc}", file=sys.stderr)
         return 2
@@ -357,6 +393,8 @@ def run(args: argparse.Namespace) -> int:
                   f"{row['limit_violation_steps']}, stop+reconfig {row['reconfigure_events']}", flush=True)
     header = (f"seed {args.seed}, speed scale {args.speed_scale}, control period {env0.control_period} s, "
               f"limits {limits}")
+    if args.kick_runs > 0:
+        header += "\n\n" + _kick_section(controllers, args.kick_runs, args.seed, out)
     write_report(rows, out, header)
     print(f"report written to {out}/metrics.md")
     return 0

@@ -70,3 +70,24 @@ def test_cli_eval_writes_a_report(tmp_path):
     rows = json.loads((tmp_path / "metrics.json").read_text())
     assert rows[0]["completed"] and rows[0]["limit_violation_steps"] == 0
     assert np.isfinite(rows[0]["rms_lateral_m"])
+
+
+def test_kick_trials_recover():
+    from control.robustness import kick_trial, summarize_kicks
+
+    trials = [kick_trial(seed) for seed in (1003, 1005)]  # 3 and 4 wheels kicked by 45-70°
+    summ = summarize_kicks(trials)
+    assert summ["recovered"] == 2 and summ["limit_violation_steps"] == 0
+    assert summ["peak_beta_error_rad"]["p100"] > 0.5
+
+
+@pytest.mark.slow
+def test_robustness_study_200_kicks(tmp_path):
+    """The issue's bar: 200 kicked runs, all recover (no failure, no limit exceeded, < 5 cm in 3 s)."""
+    from control.robustness import kick_study, summarize_kicks
+
+    summ = summarize_kicks(kick_study(200))
+    (tmp_path / "kicks.json").write_text(json.dumps(summ, allow_nan=True))
+    assert summ["failed_runs"] == 0
+    assert summ["limit_violation_steps"] == 0
+    assert summ["recovered"] == 200
