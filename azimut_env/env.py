@@ -559,6 +559,10 @@ class AzimutEnv(gym.Env):
         # true η from the twist, ξ̇ = μ (v, −u, w): λ ∝ (−ẏ, ẋ, θ̇), μ = ‖ξ̇‖ ≥ 0
         mu = math.sqrt(float(twist @ twist))
         lam = np.array([-twist[1], twist[0], twist[2]]) / mu if mu > 0 else np.array([0.0, 0.0, 1.0])
+        if mu <= 1e-3:  # the sign rule of canonical_eta(mu_tol=1e-3), as for the estimate
+            key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
+            if key < 0:
+                lam, mu = -lam, -mu
         return {
             "pose": summ[0:3].copy(),
             "twist": twist,
