@@ -59,6 +59,41 @@ class ITDiagnostics:
     distance: np.ndarray
 
 
+def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams):
+    """IT's kernel on validated (N, n) angles: λ (N, 3), not yet canonical, and diagnostics."""
+    N = flat.shape[0]
+    lam = np.empty((N, 3))
+    d2 = np.empty(N)
+    iters = np.empty(N, dtype=np.int64)
+    starts = np.empty(N, dtype=np.int64)
+    conv = np.empty(N, dtype=np.bool_)
+    it_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, params.eps_delta, params.eps_lambda,
+                    int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
+                    params.accept_d2(geom.n), lam, d2, iters, starts, conv)
+    return lam, d2, iters, starts, conv
+
+
+def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params: ITParams | None,
+                   oracle_params: OracleParams) -> np.ndarray:
+    """Every method on validated (N, n) angles: λ (N, 3), not yet canonical."""
+    if method in ("IT", "IT+"):
+        params = it_params if it_params is not None else (IT_PAPER if method == "IT" else IT_BEST)
+        return _it_flat(flat, geom, params)[0]
+    lam = np.empty((flat.shape[0], 3))
+    if method == "NE":
+        ne_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
+    elif method == "LS":
+        ls_kernel_batch(flat, geom.alpha, geom.axis_xy, lam)
+    elif method == "NS":
+        lam[:] = ns_batch(flat, geom)
+    else:
+        grid, grid_beta = oracle_tables(geom, oracle_params)
+        d2 = np.empty(flat.shape[0])
+        oracle_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, grid, grid_beta,
+                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2)
+    return lam
+
+
 def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnostics: bool = False):
     """IT, Algorithm 1 (§3.1). See :mod:`estimation.it`.
 
@@ -73,22 +108,18 @@ def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnos
         λ̂ (3,) or (N, 3), canonical sign (:func:`canonical_lambda`), and the diagnostics if asked.
     """
     flat, batch = _prepare(q, geom)
-    N = flat.shape[0]
-    lam = np.empty((N, 3))
-    d2 = np.empty(N)
-    iters = np.empty(N, dtype=np.int64)
-    starts = np.empty(N, dtype=np.int64)
-    conv = np.empty(N, dtype=np.bool_)
-    it_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, params.eps_delta, params.eps_lambda,
-                    int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
-                    params.accept_d2(geom.n),
-                    lam, d2, iters, starts, conv)
+    lam, d2, iters, starts, conv = _it_flat(flat, geom, params)
     _canonicalize_rows(lam)
     lam = lam.reshape(batch + (3,))
     if not diagnostics:
         return lam
     diag = ITDiagnostics(iters.reshape(batch), starts.reshape(batch), conv.reshape(batch), np.sqrt(d2).reshape(batch))
     return lam, diag
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
 
 
 def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
@@ -98,38 +129,24 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
     Args:
         q: (n,) or (N, n) steering angles [rad]; NaN or inf raise ``ValueError``.
         geom: the robot.
-        method: "IT" (Algorithm 1, §3.1), "IT+" (IT keeping the best of all starts), "NE" (§3.2.1),
-            "LS" (§3.2.2), "NS" (§3.2.3) or "ORACLE" (exhaustive projection, the yardstick).
-        it_params: thresholds for "IT" (default :class:`ITParams`) or "IT+" (default ``IT_BEST``).
+        method: "IT" (Algorithm 1, §3.1), "IT+" (improved IT, see :mod:`estimation.it`), "NE"
+            (§3.2.1), "LS" (§3.2.2), "NS" (§3.2.3) or "ORACLE" (exhaustive projection, the yardstick).
+        it_params: thresholds for "IT" (default ``IT_PAPER``) or "IT+" (default ``IT_BEST``).
         oracle_params: search density for "ORACLE".
 
     Returns:
         (3,) or (N, 3) unit vectors with the canonical sign of :func:`canonical_lambda`.
     """
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
-    if method in ("IT", "IT+"):
-        params = it_params if it_params is not None else (IT_PAPER if method == "IT" else IT_BEST)
-        return estimate_icr_it(q, geom, params)
+    _check_method(method)
     flat, batch = _prepare(q, geom)
-    lam = np.empty((flat.shape[0], 3))
-    if method == "NE":
-        ne_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
-    elif method == "LS":
-        ls_kernel_batch(flat, geom.alpha, geom.axis_xy, lam)
-    elif method == "NS":
-        lam[:] = ns_batch(flat, geom)
-    else:
-        grid, grid_beta = oracle_tables(geom, oracle_params)
-        d2 = np.empty(flat.shape[0])
-        oracle_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, grid, grid_beta,
-                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2)
+    lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
     _canonicalize_rows(lam)
     return lam.reshape(batch + (3,))
 
 
 def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
-                 mu_tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 mu_tol: float = 1e-3, oracle_params: OracleParams = OracleParams()
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The H state η̂ = (λ̂, μ̂) from the sensors: steering angles q and wheel speeds φ̇.
 
     λ̂ is :func:`estimate_icr` (default IT); μ̂ the least-squares fit of r_k φ̇_k = μ c_k(λ̂) over
@@ -144,16 +161,16 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         ``(λ̂, μ̂, S(λ̂))``: (3,)/(N, 3), scalar/(N,), and the steering configuration of the estimate
         (n,)/(N, n), whose distance to q gives the quality of eq. (28)–(29).
     """
-    lam = estimate_icr(q, geom, method, it_params=it_params)
+    _check_method(method)
     flat, batch = _prepare(q, geom)
     ph = np.array(phidot, dtype=np.float64)  # a private copy: the kernel scales it in place
     if ph.shape != np.shape(q):
         raise ValueError(f"phidot must have the shape of q {np.shape(q)}, got {ph.shape}")
     if not np.isfinite(ph).all():
         raise ValueError("phidot contains NaN or inf")
-    lam2 = np.ascontiguousarray(lam.reshape(-1, 3))
+    lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
     beta = np.empty_like(flat)
     mu = np.empty(flat.shape[0])
-    _eta_kernel(lam2, np.ascontiguousarray(flat), ph.reshape(-1, geom.n), geom.a_minus_l, geom.a_perp, geom.b,
-                geom.r, geom.steer_max, float(mu_tol), beta, mu, np.empty(geom.n))
-    return lam2.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,))
+    _eta_kernel(lam, flat, ph.reshape(-1, geom.n), geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
+                float(mu_tol), beta, mu, np.empty(geom.n))
+    return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,))
