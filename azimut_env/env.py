@@ -37,10 +37,26 @@ from estimation.kinematics import SINGULAR_TOL
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
-from .sensors import measure_all
+from .sensors import _measure_kernel
 from .tracks import Track, make_track
 
 __all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_state_batch"]
+
+
+@njit(cache=True)
+def _apply_action(a, cmd, steer_min, steer_max, wheel_speed_max) -> bool:
+    """Check a (2n,) action for NaN/inf, clip it to [−1, 1] in place and write the set-points of
+    ``params.setpoints_from_action`` into cmd (n, 2). Returns False (writing nothing) if not finite."""
+    n = cmd.shape[0]
+    for j in range(a.shape[0]):
+        if not math.isfinite(a[j]):
+            return False
+    for j in range(a.shape[0]):
+        a[j] = min(max(a[j], -1.0), 1.0)
+    for k in range(n):
+        cmd[k, 0] = max(a[k] * steer_max, steer_min)
+        cmd[k, 1] = a[n + k] * wheel_speed_max
+    return True
 
 
 @njit(cache=True)
@@ -432,7 +448,7 @@ class AzimutEnv(gym.Env):
         if clash:
             raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
                              "move them off the start of the track")
-        self._phi_prev = self.physics.wheel_angles()[0]
+        self._phi_prev = self.physics.motor_state[:1, :, 4].copy()
         self._prev_action = self.action_from_setpoints(beta, np.zeros(self.n))
         self._measure()
         self._track_state(s0)
@@ -468,18 +484,15 @@ class AzimutEnv(gym.Env):
         a = np.asarray(action, dtype=np.float32)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"action contains NaN or inf: {a}")
         if self._done_error is not None:
             raise RuntimeError(f"step() after the physics failed ({self._done_error}); call reset()")
-        a = np.minimum(np.maximum(a, -1.0), 1.0)
-        n, lim, phys = self.n, self.params.limits, self.physics
+        lim, phys = self.params.limits, self.physics
+        a = a.copy()
+        # checks, clips (in the copy) and writes the set-points of params.setpoints_from_action
+        if not _apply_action(a, phys.commands[0], lim.steer_min, lim.steer_max, lim.wheel_speed_max):
+            raise ValueError(f"action contains NaN or inf: {np.asarray(action)}")
         if self._kick is not None and self._steps == self._kick["step"]:
             phys.kick(0, self._kick["wheels"], self._kick["impulse"])
-        # the map of params.setpoints_from_action, written in place (the action is already checked)
-        cmd = phys.commands[0]
-        cmd[:, 0] = np.maximum(a[:n] * lim.steer_max, lim.steer_min)
-        cmd[:, 1] = a[n:] * lim.wheel_speed_max
         phys.step()
         self._steps += 1
         code = phys.summary[0, 10]
@@ -511,12 +524,15 @@ class AzimutEnv(gym.Env):
     # ------------------------------------------------------------------ steps of step()
 
     def _measure(self) -> None:
-        phys = self.physics
-        phi = phys.motor_state[0, :, 4].copy()
-        beta_m, motor_m, phidot_m = measure_all(phys.wheel_summary[0, :, 0], phys.motor_state[0, :, 0], phi,
-                                                self._phi_prev, phys.motor_state[0, :, 3], self.control_period,
-                                                self.params.sensors, self.np_random)
-        self._phi_prev = phi
+        phys, sp = self.physics, self.params.sensors
+        ms = phys.motor_state
+        out = np.empty((1, 3, self.n))
+        # sensors.measure_all on strided views of the physics arrays (no copies)
+        _measure_kernel(phys.wheel_summary[:1, :, 0], ms[:1, :, 0], ms[:1, :, 4], self._phi_prev, ms[:1, :, 3],
+                        self.control_period, sp.steer_noise, sp.motor_noise, sp.steer_resolution, sp.wheel_cpr,
+                        sp.wheel_speed_noise, self.np_random.standard_normal((1, 3, self.n)), out)
+        self._phi_prev = ms[:1, :, 4].copy()
+        beta_m, motor_m, phidot_m = out[0]
         self._beta_m, self._motor_m, self._phidot_m = beta_m, motor_m, phidot_m
         self._lam_hat, self._mu_hat, self._beta_est, self._qua = h_state_from_measurements(
             beta_m, phidot_m, self.geometry)
