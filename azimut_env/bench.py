@@ -91,11 +91,30 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     }
 
 
+def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: int = 0) -> float:
+    """Steps/s of a Gymnasium reference env measured in the same run (a yardstick for the
+    machine's speed at that moment: compare ratios, not absolute figures, on a shared machine)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id).unwrapped
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    t0 = time.perf_counter()
+    for a in actions:
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    return steps / (time.perf_counter() - t0)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=5000, help="env steps in the end-to-end loop")
     parser.add_argument("--track", default="paper")
     parser.add_argument("--substeps", type=int, default=8, help="physics substeps per control step")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--reference", default="Pendulum-v1",
+                        help="a Gymnasium env timed in the same run as a yardstick ('' to skip)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -109,6 +128,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'total':<14}{per:>10.1f}")
     print(f"steps/s: {r['steps_per_s']:.0f} overall, {r['best_chunk_steps_per_s']:.0f} in the best chunk "
           f"({int(r['resets'])} resets, not timed)  (bar 1500, goal 5000)")
+    if args.reference:
+        ref = reference_steps_per_s(args.reference)
+        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v0 at "
+              f"{r['steps_per_s'] / ref:.2f}x of it)")
     return 0
 
 
