@@ -18,7 +18,7 @@ from estimation import canonical_eta, estimate_icr, mu_from_wheel_speeds, qualit
 
 def test_registered_with_time_limit():
     env = gym.make("Azimut-v0")
-    assert env.spec.max_episode_steps == 3000
+    assert env.spec.max_episode_steps == 6000
     assert isinstance(env.unwrapped, AzimutEnv)
     assert env.metadata["render_fps"] == 50
     env.close()
