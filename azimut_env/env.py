@@ -208,8 +208,8 @@ class AzimutEnv(gym.Env):
     Terminated when the lateral error exceeds ``max_lateral_error`` (``info["off_track"]``), when
     the track is finished (``info["finished"]``; one lap of a closed track), or when the physics
     blows up (non-finite or absurd state, ``info["error"]``; the last finite observation is
-    returned). Truncation comes from ``max_episode_steps`` (registration: 6000 steps, 120 s; the paper track takes about 82 s
-    at its reference speed).
+    returned). Truncation comes from ``max_episode_steps`` (registration: 6000 steps, 120 s; the
+    paper track takes about 82 s at its reference speed).
 
     ## Arguments
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
