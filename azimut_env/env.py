@@ -228,8 +228,11 @@ class AzimutEnv(gym.Env):
       ``reset(options={"obstacles": ...})``).
     * ``start_noise``: starting pose noise. ``render_mode``: ``None``, ``"human"``, ``"rgb_array"``.
 
-    ``reset(options=...)`` also accepts ``"kick": {"step": int, "wheels": [...], "impulse": N·m·s}``,
-    an angular impulse on chosen modules at a given step; :meth:`kick` does it immediately.
+    ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode
+    only), ``"start_progress"`` [m], ``"obstacles"`` (for this episode; one that overlaps the
+    robot at its start raises ``ValueError``) and ``"kick": {"step": int, "wheels": [...],
+    "impulse": N·m·s}``, an angular impulse on chosen modules at a given step; :meth:`kick` does it
+    immediately. A physics blow-up gives the reward ``−off_track_penalty``.
 
     ## Version History
     * v0: initial version.
