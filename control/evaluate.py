@@ -18,6 +18,7 @@ against their limits.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -30,7 +31,7 @@ import numpy as np
 from azimut_env.env import AzimutEnv
 from azimut_env.tracks import TRACK_NAMES, Track, make_track
 
-from .icr_controller import ICRController, ICRControllerConfig, Mode
+from .icr_controller import ICRController, ICRControllerConfig, Mode, reference_stop_mask
 from .limits import limit_violations
 from .path_follower import PathFollower, PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
@@ -109,7 +110,11 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     _, info = env.reset(seed=seed, options=options or None)
     geom, limits, dt = env.geometry, env.limits, env.control_period
     fcfg = follower_config or PathFollowerConfig(speed_scale=speed_scale)
-    follower = PathFollower(env.track, fcfg)
+    stop_mask = None
+    if controller == "icr":
+        axis_margin = (icr_config or ICRControllerConfig()).axis_margin
+        stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=axis_margin)
+    follower = PathFollower(env.track, fcfg, stop_mask=stop_mask, dt=dt)
     follower.reset(info["progress"])
     if controller == "icr":
         ctl = ICRController(geom, limits, dt, icr_config)

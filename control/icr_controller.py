@@ -57,6 +57,8 @@ __all__ = [
     "clamp_mu",
     "project_off_axes",
     "arc_blocked",
+    "arc_check",
+    "reference_stop_mask",
     "slerp",
     "initial_state",
     "icr_control_step",
@@ -102,6 +104,8 @@ class ICRControllerConfig:
         reconfig_rate_fraction, reconfig_accel_fraction: fractions of the steering rate and
             acceleration limits used when turning the wheels in place [-] (slower turns scrub
             less: the compliant steering lags less behind its set-point).
+        stop_hysteresis: a target less than this arc [rad] past a steering stop is held at the
+            stop (the robot goes on with λ at the stop) instead of triggering a reconfiguration.
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -119,6 +123,7 @@ class ICRControllerConfig:
     reconfig_freeze: float = np.deg2rad(5.0)
     reconfig_timeout: float = 2.0
     stop_timeout: float = 0.5
+    stop_hysteresis: float = np.deg2rad(4.0)
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
@@ -286,26 +291,56 @@ def project_off_axes(lam_d, lam, geom: RobotGeometry, margin: float) -> tuple[np
     return lam_d, -1
 
 
-def arc_blocked(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) -> str | None:
-    """Why the great-circle arc λ -> λ_d cannot be driven continuously, or None if it can.
+def arc_check(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) -> tuple[str | None, float, float]:
+    """Whether the great-circle arc λ -> λ_d can be driven continuously.
 
-    Returns ``"stop"`` if some wheel's β = F_k would wrap across the steering stops along the arc
-    (a jump of more than π/2 between samples ``step`` apart), ``"axis"`` if the arc passes
-    closer than ``axis_margin``/2 to a steering axis (eq. (21)).
+    Returns ``(reason, free, theta)``: ``reason`` is None, ``"stop"`` if some wheel's β = F_k
+    would wrap across the steering stops along the arc (a jump of more than π/2 between samples
+    ``step`` apart), or ``"axis"`` if the arc passes closer than ``axis_margin``/2 to a steering
+    axis (eq. (21)); ``free`` is the arc angle [rad] from λ that can be driven before the first
+    such point, ``theta`` the whole arc's angle [rad].
     """
     lam = _unit3(lam, "lam")
     lam_d = _unit3(lam_d, "lam_d")
     theta = _angle(lam, lam_d)
     m = max(2, int(np.ceil(theta / step)) + 1)
-    pts = slerp(lam, lam_d, np.linspace(0.0, theta, m))
+    angles = np.linspace(0.0, theta, m)
+    pts = slerp(lam, lam_d, angles)
     sin_to_axis = np.linalg.norm(np.cross(pts[:, None, :], geom.s_unit[None, :, :]), axis=-1)
     # the endpoints may sit on a cap rim (projected target, or λ itself): only the interior counts
-    if m > 2 and np.any(sin_to_axis[1:-1] < np.sin(0.5 * axis_margin)):
-        return "axis"
+    near = np.any(sin_to_axis < np.sin(0.5 * axis_margin), axis=1)
+    near[0] = near[-1] = False
     beta = steering_from_lambda(pts, geom)
-    if np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2):
-        return "stop"
-    return None
+    wraps = np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2, axis=1)
+    first_axis = int(np.argmax(near)) if near.any() else m
+    first_wrap = int(np.argmax(wraps)) + 1 if wraps.any() else m
+    if first_axis == m and first_wrap == m:
+        return None, theta, theta
+    if first_axis <= first_wrap - 1:
+        return "axis", float(angles[max(first_axis - 1, 0)]), theta
+    return "stop", float(angles[first_wrap - 1]), theta
+
+
+def arc_blocked(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) -> str | None:
+    """The reason of :func:`arc_check` alone: None, ``"stop"`` or ``"axis"``."""
+    return arc_check(lam, lam_d, geom, axis_margin, step)[0]
+
+
+def reference_stop_mask(lams, geom: RobotGeometry, axis_margin: float = np.deg2rad(3.0)) -> np.ndarray:
+    """For a densely sampled reference ICR path λ_0..λ_M (M+1, 3): (M,) bool, True where the
+    controller will have to stop and reconfigure between λ_i and λ_{i+1}: some β_k = F_k wraps
+    across the steering stops, or λ passes within ``axis_margin``/2 of a steering axis
+    (eq. (21)). The same tests as :func:`arc_blocked`, for a path planner (the path follower
+    slows down to arrive at these points slowly)."""
+    lams = np.asarray(lams, dtype=np.float64)
+    if lams.ndim != 2 or lams.shape[1] != 3 or lams.shape[0] < 2:
+        raise ValueError(f"lams must have shape (M + 1 >= 2, 3), got {lams.shape}")
+    beta = steering_from_lambda(lams, geom)
+    wrap = np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2, axis=1)
+    unit = lams / np.linalg.norm(lams, axis=1, keepdims=True)
+    near = np.any(np.linalg.norm(np.cross(unit[:, None, :], geom.s_unit[None, :, :]), axis=-1)
+                  < np.sin(0.5 * axis_margin), axis=1)
+    return wrap | near[1:] | near[:-1]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -493,7 +528,15 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     # a wheel knocked out of place (measured far from commanded) -> stop and reconfigure
     kicked = bool(np.max(np.abs(_wrap_half(beta_meas - state.beta))) > config.kick_tol)
     if mode == Mode.RUNNING:
-        blocked = None if zero_cmd else arc_blocked(state.lam, lam_d, geom, config.axis_margin, config.arc_step)
+        blocked = None
+        if not zero_cmd:
+            blocked, free, theta = arc_check(state.lam, lam_d, geom, config.axis_margin, config.arc_step)
+            if blocked == "stop" and theta - free < config.stop_hysteresis:
+                # only just past a steering stop: wait at the stop instead of turning wheels by π;
+                # a target that keeps going reconfigures once, a jittering one never does
+                lam_d = slerp(state.lam, lam_d, free)
+                blocked = None
+                info["held_at_stop"] = True
         if kicked or blocked is not None:
             info["event"] = "kick" if kicked else blocked
             events += 1

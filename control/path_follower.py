@@ -12,7 +12,8 @@ Per step, with the pose (x, y, θ) in the world:
    short preview that compensates the controllers' lag);
 3. feedback on the pose error, position and heading separately (the robot is omnidirectional, so
    the heading follows its own profile, independent of the path direction):
-   v = v_ref + k_p (p_ref − p) and ω = θ̇_ref + k_θ wrap(θ_ref − θ), with |k_p e| capped;
+   v = v_ref + k_p (p_ref − p) + k_i n ∫ e_n dt and ω = θ̇_ref + k_θ wrap(θ_ref − θ), with the
+   corrections capped (n: the path normal, e_n the cross-track error, integrated while moving);
 4. the world twist is rotated into the chassis frame; ``eta_from_twist`` gives (λ_d, μ_d), using
    ξ̇ = μ (v, −u, w) (§2).
 """
@@ -20,6 +21,7 @@ Per step, with the pose (x, y, θ) in the world:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +39,10 @@ class PathFollowerConfig:
     Attributes:
         k_pos: position error gain [1/s].
         k_heading: heading error gain [1/s].
+        k_int: integral gain on the cross-track error [1/s²] (removes the steady offset that tire
+            slip and steering compliance leave in curves); integrated only while the robot moves.
+        max_integral: cap on the integral correction speed [m/s].
+        moving_speed: robot speed [m/s] above which it counts as moving (for the integral).
         max_correction: cap on the position correction speed [m/s].
         max_heading_correction: cap on the heading correction rate [rad/s].
         preview: feed-forward preview time τ [s].
@@ -59,6 +65,9 @@ class PathFollowerConfig:
 
     k_pos: float = 3.0
     k_heading: float = 3.0
+    k_int: float = 2.0
+    max_integral: float = 0.1
+    moving_speed: float = 0.02
     max_correction: float = 0.3
     max_heading_correction: float = 0.6
     preview: float = 0.1
@@ -70,7 +79,11 @@ class PathFollowerConfig:
     speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("k_pos", "k_heading", "max_correction", "max_heading_correction", "speed_scale",
+        for name in ("k_int", "moving_speed"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"PathFollowerConfig.{name} must be finite and >= 0, got {value!r}")
+        for name in ("k_pos", "k_heading", "max_correction", "max_integral", "max_heading_correction", "speed_scale",
                      "corner_angle", "corner_decel", "corner_window", "corner_speed"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -99,30 +112,72 @@ class FollowerOutput:
 
 
 class PathFollower:
-    """Stateful (only the progress hint) path follower; see the module docstring."""
+    """Stateful (only the progress hint) path follower; see the module docstring.
 
-    def __init__(self, track: Track, config: PathFollowerConfig | None = None) -> None:
+    Args:
+        track: the reference.
+        config: gains.
+        stop_mask: optional ``f(λ (M, 3)) -> (M − 1,) bool``: whether the controller must stop
+            between consecutive reference ICRs (for the ICR controller:
+            :func:`control.icr_controller.reference_stop_mask`, a steering stop or axis on the
+            way). The follower then slows down to reach those points at ``corner_speed``, as for
+            sharp corners. None: only sharp corners of the path count.
+    """
+
+    def __init__(self, track: Track, config: PathFollowerConfig | None = None,
+                 stop_mask: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 0.02) -> None:
         if not isinstance(track, Track):
             raise ValueError(f"track must be an azimut_env.tracks.Track, got {type(track).__name__}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
         self.track = track
         self.config = config or PathFollowerConfig()
+        self.dt = float(dt)
         self.progress: float | None = None
+        self._integral = 0.0
+        self._last_pose: np.ndarray | None = None
+        self.stops = self._find_stops(stop_mask)
 
     def reset(self, progress: float | None = None) -> None:
-        """Forget the progress (the next step searches the whole track unless given)."""
+        """Forget the progress (the next step searches the whole track unless given) and the
+        integral of the cross-track error."""
         self.progress = progress
+        self._integral = 0.0
+        self._last_pose = None
 
-    def _distance_to_corner(self, s: float) -> float | None:
-        """Progress [m] from s to the first sharp turn of the path direction within the window."""
+    def _find_stops(self, stop_mask) -> np.ndarray:
+        """Sorted progress values [m] where the robot should arrive slowly: sharp path corners
+        (the direction turns by more than ``corner_angle``/2 within 1 cm) and, with ``stop_mask``,
+        the points where the reference ICR needs a stop and reconfiguration."""
         tr, cfg = self.track, self.config
-        ahead = s + np.linspace(0.0, cfg.corner_window, max(2, int(cfg.corner_window / 0.01) + 1))
-        if not tr.closed:
-            ahead = ahead[ahead <= tr.length]
-        psi = np.asarray(tr.tangent_at(ahead))
-        turned = np.abs(wrap_angle(np.diff(psi))) > 0.5 * cfg.corner_angle  # a jump within 1 cm: a corner
-        if not np.any(turned):
+        grid = np.arange(0.0, tr.length, 0.01)
+        psi = np.asarray(tr.tangent_at(grid))
+        mask = np.abs(wrap_angle(np.diff(psi))) > 0.5 * cfg.corner_angle
+        if stop_mask is not None:
+            tw = tr.reference_twist(grid, speed=np.ones_like(grid))
+            th = tr.sample(grid)[:, 2]
+            c, sn = np.cos(th), np.sin(th)
+            body = np.stack([c * tw[:, 0] + sn * tw[:, 1], -sn * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)
+            moving = np.linalg.norm(body, axis=1) > 1e-9
+            lam, _ = eta_from_twist(body[moving])
+            sub = np.asarray(stop_mask(lam), dtype=bool)
+            idx = np.flatnonzero(moving)
+            extra = np.zeros(grid.size - 1, dtype=bool)
+            extra[idx[:-1][sub]] = True
+            mask |= extra
+        return grid[1:][mask]
+
+    def _distance_to_stop(self, s: float) -> float | None:
+        """Progress [m] from s to the next stop point within ``corner_window``, or None."""
+        tr, cfg = self.track, self.config
+        if self.stops.size == 0:
             return None
-        return float(ahead[int(np.argmax(turned))] - s)
+        stops = np.concatenate([self.stops, self.stops + tr.length]) if tr.closed else self.stops
+        s_loc = s % tr.length if tr.closed else s
+        ahead = stops[stops > s_loc]
+        if ahead.size == 0 or ahead[0] - s_loc > cfg.corner_window:
+            return None
+        return float(ahead[0] - s_loc)
 
     def step(self, pose) -> FollowerOutput:
         """The twist target for the robot at ``pose`` = (x, y, θ) [m, m, rad] in the world."""
@@ -138,17 +193,24 @@ class PathFollower:
         s_ff = s + max(v_r * cfg.preview, cfg.preview_min)
         if not tr.closed:
             s_ff = min(s_ff, tr.length)
-        if abs(float(tr.tangent_at(s_ff) - tr.tangent_at(s))) > cfg.corner_angle:
+        if abs(float(wrap_angle(tr.tangent_at(s_ff) - tr.tangent_at(s)))) > cfg.corner_angle:
             s_ff = min(s + cfg.preview_min, tr.length) if not tr.closed else s + cfg.preview_min
         v_ff = float(tr.sample(s_ff)[3]) * cfg.speed_scale
-        d_corner = self._distance_to_corner(s)
+        d_corner = self._distance_to_stop(s)
         if d_corner is not None:
             v_ff = min(v_ff, math.sqrt(2.0 * cfg.corner_decel * d_corner) + cfg.corner_speed)
         tw_ref = tr.reference_twist(s_ff, speed=v_ff)
         if finished:
             tw_ref = np.zeros(3)
         err = np.array([x_r - pose[0], y_r - pose[1]])
-        corr = cfg.k_pos * err
+        psi = float(tr.tangent_at(s))
+        normal = np.array([-math.sin(psi), math.cos(psi)])
+        moved = self._last_pose is not None and np.hypot(*(pose[:2] - self._last_pose[:2])) > cfg.moving_speed * self.dt
+        self._last_pose = pose.copy()
+        if moved and not finished:  # integrate the cross-track error only while moving (anti-windup)
+            lim = cfg.max_integral / cfg.k_int if cfg.k_int > 0 else 0.0
+            self._integral = float(np.clip(self._integral + float(err @ normal) * self.dt, -lim, lim))
+        corr = cfg.k_pos * err + cfg.k_int * self._integral * normal
         norm = float(np.linalg.norm(corr))
         if norm > cfg.max_correction:
             corr *= cfg.max_correction / norm
