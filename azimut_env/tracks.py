@@ -444,8 +444,8 @@ def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
     As in the paper (§4): the spiral is a continuously moving ICR with concurrent axes, the circle a
     constant ICR, and the rounded square switches between parallel propulsion axes (straight
     sides: a translation) and concurrent ones (corners: a rotation about the corner's centre), with
-    sharp transitions in between. The robot's X axis points away from the centre throughout (the
-    heading follows the path direction minus π/2).
+    sharp transitions in between. The robot's X axis points away from the centre of the spiral and
+    circle, and away from the square's side (path direction minus π/2) on the square.
     """
     R = 1.5
     # spiral: r from 0.5 to R over 1.5 turns, ending at angle 0 (point (R, 0))
@@ -457,7 +457,6 @@ def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
     # circle: one turn from angle 0, heading along the tangent (tangent = angle + π/2, minus π/2 offset)
     circ, ac = _arc((0.0, 0.0), R, 0.0, 2 * np.pi, spacing)
     h_c = ac  # heading = tangent − π/2: ICR at the circle's centre, robot's X axis pointing outward
-    # blend heading from 0 (end of spiral) to the circle's: the circle starts at ac=0 -> heading 0.
     # rounded square, side 2R centred at the origin, entered at (R, 0) going up (tangent continuous)
     rc = 0.4
     h_end = 2 * np.pi
@@ -510,12 +509,10 @@ def square_track(side: float = 3.0, speed: float = 0.5, heading: float = 0.0, sp
     h = side / 2
     corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
     pts = np.vstack([_line(corners[j], corners[(j + 1) % 4], spacing) for j in range(4)])
-    d = np.hypot(pts[:, 0] - np.round(pts[:, 0] / h) * h, pts[:, 1] - np.round(pts[:, 1] / h) * h)
-    # distance to the nearest corner along the side
+    # distance to the nearest corner
     dist = np.min(np.hypot(pts[:, None, 0] - corners[None, :, 0], pts[:, None, 1] - corners[None, :, 1]), axis=1)
     v = speed * np.sqrt(np.clip(dist / stop_ramp, 0.0, 1.0))
     v = np.maximum(v, 0.02)
-    del d
     return Track("square", pts + np.array([h, h]), heading, v, closed=True)
 
 
