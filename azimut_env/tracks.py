@@ -120,6 +120,20 @@ def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s
     return s, lat, head, vr, psi
 
 
+@njit(cache=True)
+def _track_query_many_kernel(S, X, Y, TH, V, PSI, closed, length, rho, poses, hints, back, ahead, spacing, out,
+                             look):
+    for i in range(poses.shape[0]):
+        s, lat, head, vr, psi = _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, poses[i, 0],
+                                                    poses[i, 1], poses[i, 2], hints[i], back, ahead, spacing,
+                                                    look[i])
+        out[i, 0] = s
+        out[i, 1] = lat
+        out[i, 2] = head
+        out[i, 3] = vr
+        out[i, 4] = psi
+
+
 @dataclass(frozen=True, eq=False)
 class Track:
     """A reference track (see the module docstring).
@@ -411,6 +425,21 @@ class Track:
             self.tangent, self.closed, self.length, self.progress_radius, float(pose[0]), float(pose[1]),
             float(pose[2]), float(s_hint), back, ahead, spacing, look)
         return s, lat, head, v, psi, look
+
+    def query_many(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
+                   ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`query` for N robots on this track in one compiled call.
+
+        Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``."""
+        poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
+        hints = np.ascontiguousarray(np.asarray(s_hints, dtype=np.float64).reshape(-1))
+        if hints.shape[0] != poses.shape[0]:
+            raise ValueError("query_many needs one s_hint per pose")
+        out = np.empty((poses.shape[0], 5))
+        look = np.empty((poses.shape[0], int(lookahead_count), 3))
+        _track_query_many_kernel(self.s, self._x, self._y, self.heading, self.speed, self.tangent, self.closed,
+                                 self.length, self.progress_radius, poses, hints, back, ahead, spacing, out, look)
+        return out, look
 
     def finished(self, s: float) -> bool:
         """Whether progress s has reached the end (one lap on a closed track)."""

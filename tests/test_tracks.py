@@ -94,3 +94,14 @@ def test_random_tracks_are_seeded():
 
 def test_wrap_angle():
     assert np.allclose(wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.1]), [np.pi, np.pi, np.pi, 0.1])
+
+
+def test_query_many_matches_query():
+    t = make_track("figure8")
+    rng = np.random.default_rng(4)
+    s0 = rng.uniform(0, t.length, 16)
+    poses = t.sample(s0)[:, :3] + rng.normal(0, 0.05, (16, 3))
+    scal, look = t.query_many(poses, s0, 4, 0.3)
+    for i in range(16):
+        q = t.query(poses[i], s0[i], 4, 0.3)
+        assert np.allclose(scal[i], q[:5]) and np.allclose(look[i], q[5])
