@@ -412,6 +412,7 @@ class AzimutEnv(gym.Env):
         self._steps = 0
         self._done_error: str | None = None
         self._kick: dict | None = None
+        self._steer_bias: np.ndarray | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -439,6 +440,8 @@ class AzimutEnv(gym.Env):
             self._kick = dict(step=int(kick.get("step", 0)), wheels=list(kick.get("wheels", range(self.n))),
                               impulse=float(kick.get("impulse", 0.5)))
         self._randomize(rng)
+        sb = self.params.sensors.steer_bias
+        self._steer_bias = rng.normal(0.0, sb, size=self.n) if sb > 0 else None
         s0 = float(options.get("start_progress", 0.0))
         if not math.isfinite(s0):
             raise ValueError("start_progress must be finite")
@@ -532,7 +535,10 @@ class AzimutEnv(gym.Env):
         ms = phys.motor_state
         out = np.empty((1, 3, self.n))
         # sensors.measure_all on strided views of the physics arrays (no copies)
-        _measure_kernel(phys.wheel_summary[:1, :, 0], ms[:1, :, 0], ms[:1, :, 4], self._phi_prev, ms[:1, :, 3],
+        beta_true = phys.wheel_summary[:1, :, 0]
+        if self._steer_bias is not None:
+            beta_true = beta_true + self._steer_bias
+        _measure_kernel(beta_true, ms[:1, :, 0], ms[:1, :, 4], self._phi_prev, ms[:1, :, 3],
                         self.control_period, sp.steer_noise, sp.motor_noise, sp.steer_resolution, sp.wheel_cpr,
                         sp.wheel_speed_noise, self.np_random.standard_normal((1, 3, self.n)), out)
         self._phi_prev = ms[:1, :, 4].copy()

@@ -210,6 +210,9 @@ class SensorParams:
         motor_noise: standard deviation of measured motor angles [rad].
         wheel_cpr: wheel encoder counts per revolution; φ̇ is counts per control period (0: exact).
         wheel_speed_noise: standard deviation added to measured φ̇ [rad/s].
+        steer_bias: standard deviation of a constant per-wheel offset of the steering encoders,
+            drawn at each reset [rad] (calibration error, one of the paper's "geometric
+            imperfections"; 0 by default).
     """
 
     steer_noise: float = 0.002
@@ -217,16 +220,18 @@ class SensorParams:
     motor_noise: float = 0.001
     wheel_cpr: int = 4096
     wheel_speed_noise: float = 0.02
+    steer_bias: float = 0.0
 
     def __post_init__(self) -> None:
-        _check_positive(self, "steer_noise", "steer_resolution", "motor_noise", "wheel_speed_noise", allow_zero=True)
+        _check_positive(self, "steer_noise", "steer_resolution", "motor_noise", "wheel_speed_noise", "steer_bias",
+                        allow_zero=True)
         if int(self.wheel_cpr) != self.wheel_cpr or self.wheel_cpr < 0:
             raise ValueError(f"SensorParams.wheel_cpr must be a non-negative integer, got {self.wheel_cpr!r}")
 
     @classmethod
     def ideal(cls) -> "SensorParams":
         """Noise-free, unquantised sensors."""
-        return cls(0.0, 0.0, 0.0, 0, 0.0)
+        return cls(0.0, 0.0, 0.0, 0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)

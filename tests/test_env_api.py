@@ -246,3 +246,17 @@ def test_domain_randomization_varies_parameters_per_reset():
     plain = AzimutEnv()
     plain.reset(seed=1)
     assert plain.physics.wheel_params[0, 0, WP.MU] == plain.params.tire.friction
+
+
+def test_steering_encoder_bias_is_constant_per_episode():
+    from azimut_env.params import SensorParams
+
+    env = AzimutEnv(sensors=SensorParams(0.0, 0.0, 0.0, 0, 0.0, steer_bias=0.05))
+    _, info = env.reset(seed=0)
+    d0 = env.measured_beta - info["beta_true"]
+    assert np.all(np.abs(d0) > 0)
+    for _ in range(5):
+        _, _, _, _, info = env.step(np.zeros(8, dtype=np.float32))
+    assert np.allclose(env.measured_beta - info["beta_true"], d0, atol=1e-12)
+    env.reset(seed=1)
+    assert not np.allclose(env.measured_beta - env.physics.steering_angles()[0], d0)
