@@ -59,7 +59,10 @@ class PathFollowerConfig:
             the corner. Both controllers get it; it is what lets any of them take a corner that
             needs the wheels turned in place.
         corner_window: how far ahead corners are looked for [m].
-        corner_speed: speed floor at the corner itself [m/s].
+        corner_speed: speed floor at a corner, and everywhere before the end of the track [m/s].
+        max_lateral_accel: cap on the path's centripetal acceleration [m/s²]: the feed-forward
+            speed is at most sqrt(a / κ) where the path curvature κ is high (a speed profile that
+            ignores curvature is scaled down in tight curves).
         speed_scale: multiplies the track's speed profile [-] (1: the track's nominal speed).
     """
 
@@ -76,6 +79,7 @@ class PathFollowerConfig:
     corner_decel: float = 1.0
     corner_window: float = 1.0
     corner_speed: float = 0.02
+    max_lateral_accel: float = 1.0
     speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
@@ -84,7 +88,7 @@ class PathFollowerConfig:
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"PathFollowerConfig.{name} must be finite and >= 0, got {value!r}")
         for name in ("k_pos", "k_heading", "max_correction", "max_integral", "max_heading_correction", "speed_scale",
-                     "corner_angle", "corner_decel", "corner_window", "corner_speed"):
+                     "corner_angle", "corner_decel", "corner_window", "corner_speed", "max_lateral_accel"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"PathFollowerConfig.{name} must be finite and > 0, got {value!r}")
@@ -196,9 +200,15 @@ class PathFollower:
         if abs(float(wrap_angle(tr.tangent_at(s_ff) - tr.tangent_at(s)))) > cfg.corner_angle:
             s_ff = min(s + cfg.preview_min, tr.length) if not tr.closed else s + cfg.preview_min
         v_ff = float(tr.sample(s_ff)[3]) * cfg.speed_scale
+        kappa = float(np.max(np.abs(np.interp(np.linspace(s, s_ff + 0.05, 6) % tr.length if tr.closed else
+                                              np.clip(np.linspace(s, s_ff + 0.05, 6), 0, tr.length),
+                                              tr.s, tr.curvature))))
+        if 1e-6 < kappa < 20.0:  # sharper turns (radius < 5 cm) are corners, handled as stops
+            v_ff = min(v_ff, math.sqrt(cfg.max_lateral_accel / kappa))
         d_corner = self._distance_to_stop(s)
         if d_corner is not None:
             v_ff = min(v_ff, math.sqrt(2.0 * cfg.corner_decel * d_corner) + cfg.corner_speed)
+        v_ff = max(v_ff, cfg.corner_speed)  # never stall short of the end (speed ramps reach 0)
         tw_ref = tr.reference_twist(s_ff, speed=v_ff)
         if finished:
             tw_ref = np.zeros(3)
