@@ -272,3 +272,56 @@ lam_strategy = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.nor
                           st.floats(-5, 5), st.integers(1, 30)), min_size=1, max_size=5))
 def test_limits_never_exceeded_on_random_target_sequences(seq):
     _run([(np.array(lam), mu, n) for lam, mu, n in seq])
+
+
+def test_great_circle_second_derivative_corrects_the_note():
+    """λ′ = k(λ_d − (λ·λ_d)λ) gives λ″ = k²((2c² − 1)λ − c λ_d), c = λ·λ_d, by finite differences
+    of the integrated flow; the note's k²(c λ_d − λ) is not it."""
+    rng = np.random.default_rng(0)
+    lam, lam_d, k = _unit(rng.normal(size=3)), _unit(rng.normal(size=3)), 0.7
+
+    def flow(x, h):
+        f = lambda y: k * (lam_d - np.dot(y, lam_d) * y)  # noqa: E731
+        k1 = f(x)
+        k2 = f(x + h / 2 * k1)
+        k3 = f(x + h / 2 * k2)
+        k4 = f(x + h * k3)
+        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    h = 1e-4
+    fd = (flow(lam, h) - 2 * lam + flow(lam, -h)) / h**2
+    c = np.dot(lam, lam_d)
+    np.testing.assert_allclose(fd, k * k * ((2 * c * c - 1) * lam - c * lam_d), atol=1e-5)
+    assert np.linalg.norm(fd - k * k * (c * lam_d - lam)) > 0.1
+
+
+def test_time_scaled_wheel_acceleration_includes_the_coupling_terms():
+    """With s(t), r φ̇ = μ(s) c(λ(s)) − b β′ ṡ, so r φ̈ = (s⊥2 − b ẑ)·(μλ′ + μ′λ) ṡ − b(β″ṡ² + β′s̈):
+    the note's φ̈ = φ̇′ ṡ holds only for ṡ = 1, s̈ = 0 (checked by finite differences)."""
+    rng = np.random.default_rng(1)
+    lam0, axis = _unit(rng.normal(size=3)), rng.normal(size=3)
+    mu0, dmu = 0.4, -0.3
+    s_of_t = lambda t: 0.3 * t + 0.4 * t * t  # noqa: E731
+
+    def rphi(t, h=1e-6):
+        s = s_of_t(t)
+        sdot = 0.3 + 0.8 * t
+        bp = (steering_from_lambda(_path(lam0, axis, s + h), GEOM) - steering_from_lambda(_path(lam0, axis, s - h), GEOM)) / (2 * h)
+        return GEOM.r * wheel_speeds(_path(lam0, axis, s), mu0 + dmu * s, GEOM, beta_rate=bp * sdot)
+
+    t, h = 0.5, 1e-4
+    fd = (rphi(t + h) - rphi(t - h)) / (2 * h)
+    s, sdot, sddot = s_of_t(t), 0.3 + 0.8 * t, 0.8
+    e = 1e-4
+    lam = _path(lam0, axis, s)
+    dlam = (_path(lam0, axis, s + e) - _path(lam0, axis, s - e)) / (2 * e)
+    ddlam = (_path(lam0, axis, s + e) - 2 * lam + _path(lam0, axis, s - e)) / e**2
+    bp, bpp = steering_path_derivatives(lam, dlam, ddlam, GEOM)
+    _, s2 = s_perp(steering_from_lambda(lam, GEOM), GEOM)
+    s2b = s2.copy()
+    s2b[:, 2] -= GEOM.b
+    mu = mu0 + dmu * s
+    analytic = (s2b @ (mu * dlam + dmu * lam)) * sdot - GEOM.b * (bpp * sdot**2 + bp * sddot)
+    np.testing.assert_allclose(analytic, fd, rtol=2e-3, atol=2e-3)
+    note = ((s2b @ (mu * dlam + dmu * lam)) - GEOM.b * bpp) * sdot
+    assert np.max(np.abs(note - fd)) > 1e-2

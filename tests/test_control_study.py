@@ -1,0 +1,39 @@
+"""The issue's bars, measured in the simulator (slow: about 3 minutes; run with ``-m slow``).
+
+* ICR controller on ``paper`` at its nominal speed and at 1 m/s (speed scale 2.5): RMS lateral
+  error <= 2 cm, max <= 5 cm, zero commanded-limit violations.
+* Against the WPILib-style twist baseline with the same follower and limits, on every built-in
+  track: lower slip energy and internal force (at most half on ``square`` and ``crab``), and RMS
+  lateral error at most 1.2x the baseline's.
+* ``square``: a stop and reconfiguration at every corner.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from control.evaluate import DEFAULT_TRACKS, episode_metrics, run_episode
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.mark.parametrize("speed_scale", [1.0, 2.5])
+def test_icr_tracks_the_paper_track(speed_scale):
+    m = episode_metrics(run_episode("icr", "paper", seed=0, speed_scale=speed_scale))
+    assert m["completed"]
+    assert m["rms_lateral_m"] <= 0.02 and m["max_lateral_m"] <= 0.05
+    assert m["limit_violation_steps"] == 0
+
+
+@pytest.mark.parametrize("track", DEFAULT_TRACKS)
+def test_icr_versus_twist_baseline(track):
+    icr = episode_metrics(run_episode("icr", track, seed=0))
+    twist = episode_metrics(run_episode("twist", track, seed=0))
+    assert icr["completed"] and twist["completed"]
+    assert icr["limit_violation_steps"] == 0
+    factor = 0.5 if track in ("square", "crab") else 1.0
+    assert icr["slip_energy_J"] < factor * twist["slip_energy_J"]
+    assert icr["mean_internal_force_N"] < factor * twist["mean_internal_force_N"]
+    assert icr["rms_lateral_m"] <= 1.2 * twist["rms_lateral_m"]
+    if track == "square":
+        assert icr["reconfigure_events"] >= 4
