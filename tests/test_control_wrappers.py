@@ -57,3 +57,18 @@ def test_wrappers_reject_bad_actions():
         env.step(np.array([np.nan, 0, 0], dtype=np.float32))
     with pytest.raises(ValueError):
         TwistAction(gym.make("Azimut-v0"), controller="pid")
+
+
+@pytest.mark.parametrize("k", range(4))
+def test_singular_icr_targets_in_the_simulator(k):
+    """An ICR exactly on steering axis k, then its antipode with μ swapped, then μ far beyond the
+    limits: commands stay finite and within limits, the robot stays healthy."""
+    from estimation import RobotGeometry
+
+    s = RobotGeometry.azimut3().s_unit[k]
+    env = ICRTargetAction(gym.make("Azimut-v0", track="circle"), mu_max=5.0)
+    env.reset(seed=k)
+    for a in [np.r_[s, 0.2]] * 60 + [np.r_[-s, -0.2]] * 30 + [np.r_[s, 1.0]] * 60:
+        obs, r, term, trunc, info = env.step(a.astype(np.float32))
+        assert np.all(np.isfinite(obs)) and "error" not in info
+        assert not info["limit_exceeded"]
