@@ -44,6 +44,39 @@ __all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_st
 
 
 @njit(cache=True)
+def _fill_obs(obs, lam, mu, beta, phidot, motor, lat, head, v_along, v_ref, look, prev_action, lo, hi):
+    """Write the observation vector in the layout of :func:`observation_layout`; non-finite values
+    become 0 and everything is clipped to [lo, hi]."""
+    i = 0
+    for j in range(3):
+        obs[i] = lam[j]
+        i += 1
+    obs[i] = mu
+    i += 1
+    for arr in (beta, phidot, motor):
+        for j in range(arr.shape[0]):
+            obs[i] = arr[j]
+            i += 1
+    obs[i] = lat
+    obs[i + 1] = head
+    obs[i + 2] = v_along
+    obs[i + 3] = v_ref
+    i += 4
+    for k in range(look.shape[0]):
+        for j in range(3):
+            obs[i] = look[k, j]
+            i += 1
+    for j in range(prev_action.shape[0]):
+        obs[i] = prev_action[j]
+        i += 1
+    for j in range(obs.shape[0]):
+        x = obs[j]
+        if not math.isfinite(x):
+            x = 0.0
+        obs[j] = min(max(x, lo[j]), hi[j])
+
+
+@njit(cache=True)
 def _apply_action(a, cmd, steer_min, steer_max, wheel_speed_max) -> bool:
     """Check a (2n,) action for NaN/inf, clip it to [−1, 1] in place and write the set-points of
     ``params.setpoints_from_action`` into cmd (n, 2). Returns False (writing nothing) if not finite."""
@@ -556,12 +589,10 @@ class AzimutEnv(gym.Env):
         self._v_along = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
 
     def _get_obs(self) -> np.ndarray:
-        obs = np.concatenate([self._lam_hat, [self._mu_hat], self._beta_m, self._phidot_m, self._motor_m,
-                              [self._lat, self._head, self._v_along, self._v_ref], self._look.ravel(),
-                              self._prev_action]).astype(np.float32)
-        if not np.isfinite(obs).all():
-            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
-        return np.clip(obs, self._obs_lo, self._obs_hi, out=obs)
+        obs = np.empty(self.observation_space.shape, dtype=np.float32)
+        _fill_obs(obs, self._lam_hat, self._mu_hat, self._beta_m, self._phidot_m, self._motor_m, self._lat,
+                  self._head, self._v_along, self._v_ref, self._look, self._prev_action, self._obs_lo, self._obs_hi)
+        return obs
 
     def _get_rew(self, ds: float, lat: float, head: float, action: np.ndarray, off_track: bool):
         w = self.weights
