@@ -1,0 +1,20 @@
+"""control: controllers for AZIMUT-3-like robots, and ``azimut eval``.
+
+Modules (the maths comes from ``estimation``; the robot from ``azimut_env``):
+
+* ``icr_controller``: the ICR-based reference controller (coordinated, time-scaled H-state
+  motion with a RUNNING -> STOPPING -> RECONFIGURING state machine);
+* ``swerve``: the WPILib-style twist baseline;
+* ``path_follower``: Track + pose -> twist / (λ_d, μ_d) targets, shared by both;
+* ``limits``: the commanded-limit checks (limits are ``azimut_env.params.ActuatorLimits``);
+* ``wrappers``: ICR-target and twist action spaces for RL;
+* ``evaluate`` (``azimut eval``), ``robustness`` (kick study), ``record_d2`` (``azimut record-d2``);
+* ``kinematic_model``: a rigid kinematic test bench.
+"""
+
+from .icr_controller import ICRController, ICRControllerConfig, Mode
+from .path_follower import PathFollower, PathFollowerConfig
+from .swerve import SwerveConfig, SwerveController
+
+__all__ = ["ICRController", "ICRControllerConfig", "Mode", "PathFollower", "PathFollowerConfig", "SwerveConfig",
+           "SwerveController"]

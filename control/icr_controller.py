@@ -55,6 +55,7 @@ __all__ = [
     "ICRController",
     "nearer_target",
     "clamp_mu",
+    "mu_bounds",
     "project_off_axes",
     "arc_blocked",
     "arc_check",
@@ -361,7 +362,7 @@ def initial_state(lam_hat, beta, phidot, geom: RobotGeometry, config: ICRControl
     err = _wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
     mode = Mode.RUNNING if np.max(np.abs(err)) <= config.reconfig_tol else Mode.RECONFIGURING
     return ICRControllerState(mode=mode, lam=lam, mu=0.0, lam_rate=np.zeros(3), beta=beta.copy(), beta_meas=beta.copy(),
-                              beta_rate=np.zeros(geom.n), phidot=np.clip(phidot, -1e9, 1e9).copy(),
+                              beta_rate=np.zeros(geom.n), phidot=phidot.copy(),
                               reconfig_lam=lam if mode == Mode.RECONFIGURING else None)
 
 
