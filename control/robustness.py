@@ -28,7 +28,9 @@ class KickTrial:
         seed: the trial's seed; wheels: the kicked wheels; impulse: [N·m·s] (signed).
         kick_time: [s] after the start; peak_beta_error: largest |β_meas − β_cmd| (mod π) after
             the kick [rad]; max_lateral_after: [m]; recovery_time: [s] from the kick until the
-            lateral error is under the tolerance for good (NaN if never); limit_violation_steps;
+            lateral error is under the tolerance for good (NaN if never); settle_time: [s] from
+            the kick until every measured wheel angle is within 5° of its command (mod π) for
+            good (NaN if never); limit_violation_steps;
             reconfigure_events; error: the run's failure, if any; recovered: see the module doc.
     """
 
@@ -39,6 +41,7 @@ class KickTrial:
     peak_beta_error: float
     max_lateral_after: float
     recovery_time: float
+    settle_time: float
     limit_violation_steps: int
     reconfigure_events: int
     error: str | None
@@ -61,11 +64,15 @@ def kick_trial(seed: int, controller: str = "icr", track: str = "paper", kick_st
     dbeta = np.abs(np.mod(log.beta_meas[k0:] - log.beta_cmd[k0:] + np.pi / 2, np.pi) - np.pi / 2)
     bad = np.flatnonzero(lat >= recover_tol)
     rec_t = 0.0 if bad.size == 0 else (float((bad[-1] + 1) * dt) if bad[-1] + 1 < lat.size else float("nan"))
+    unsettled = np.flatnonzero(np.max(dbeta, axis=1) >= np.deg2rad(5.0)) if dbeta.size else np.zeros(0, int)
+    settle_t = 0.0 if unsettled.size == 0 else (float((unsettled[-1] + 1) * dt) if unsettled[-1] + 1 < len(dbeta)
+                                                  else float("nan"))
     viol = int(np.sum(log.violations))
     recovered = (log.error is None and viol == 0 and np.isfinite(rec_t) and rec_t <= recover_time)
     return KickTrial(seed=seed, wheels=wheels, impulse=impulse, kick_time=k0 * dt,
                      peak_beta_error=float(dbeta.max()) if dbeta.size else 0.0,
                      max_lateral_after=float(lat.max()) if lat.size else float("nan"), recovery_time=rec_t,
+                     settle_time=settle_t,
                      limit_violation_steps=viol, reconfigure_events=log.events, error=log.error,
                      recovered=bool(recovered))
 
@@ -101,6 +108,7 @@ def summarize_kicks(trials: list[KickTrial]) -> dict:
         "limit_violation_steps": int(sum(t.limit_violation_steps for t in trials)),
         "reconfigure_events_mean": float(np.mean([t.reconfigure_events for t in trials])),
         "recovery_time_s": p(rec),
+        "settle_time_s": p(np.array([t.settle_time for t in trials])),
         "max_lateral_after_m": p(lat),
         "peak_beta_error_rad": p(peak),
         "trials": [asdict(t) for t in trials],
