@@ -31,9 +31,7 @@ from gymnasium import spaces
 
 from numba import njit
 
-from estimation import eta_from_twist, estimate_icr, quality, steering_from_lambda
-from estimation.it import ITParams
-from estimation.kinematics import SINGULAR_TOL
+from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
@@ -92,83 +90,19 @@ def _apply_action(a, cmd, steer_min, steer_max, wheel_speed_max) -> bool:
     return True
 
 
-@njit(cache=True)
-def _h_state_kernel(lam, phidot, E, P, b, r, steer_max, q, mu_tol, beta_out):
-    """μ̂ and S(λ̂) for an estimated λ̂; returns (μ, sign) with sign making (sign·λ, sign·μ) canonical.
-
-    Same maths as ``estimation``: β_k = F_k(λ) (eq. 16–17; the measured q_k where wheel k is
-    singular), c_k = (s⊥2,k − b_k ẑ)·λ with F_k(λ) (0 where singular, as
-    ``wheel_speed_coefficients``), μ = Σ c_k r_k φ̇_k / Σ c_k² (``mu_from_wheel_speeds``), and the
-    sign of ``canonical_eta``. Tested equal to those functions.
-    """
-    n = E.shape[0]
-    num_c = 0.0
-    den_c = 0.0
-    for k in range(n):
-        nu = P[k, 0] * lam[0] + P[k, 1] * lam[1] + P[k, 2] * lam[2]
-        de = E[k, 0] * lam[0] + E[k, 1] * lam[1] + E[k, 2] * lam[2]
-        if nu * nu + de * de < SINGULAR_TOL * SINGULAR_TOL:
-            beta = q[k]
-            bc = 0.0
-        else:
-            beta = math.atan2(nu, de)
-            while beta > steer_max:
-                beta -= math.pi
-            while beta <= steer_max - math.pi:
-                beta += math.pi
-            bc = beta
-        beta_out[k] = beta
-        cb, sb = math.cos(bc), math.sin(bc)
-        c = cb * de + sb * nu - b[k] * lam[2]
-        num_c += c * r[k] * phidot[k]
-        den_c += c * c
-    mu = num_c / den_c if den_c > 0 else 0.0
-    if abs(mu) > mu_tol:
-        sign = -1.0 if mu < 0 else 1.0
-    else:
-        key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
-        sign = -1.0 if key < 0 else 1.0
-    return mu, sign
-
-
-@njit(cache=True)
-def _h_state_batch_kernel(lam, phidot, E, P, b, r, steer_max, q, mu_tol, beta_out, mu_out):
-    for i in range(lam.shape[0]):
-        mu, sign = _h_state_kernel(lam[i], phidot[i], E, P, b, r, steer_max, q[i], mu_tol, beta_out[i])
-        mu_out[i] = mu * sign
-        for j in range(3):
-            lam[i, j] *= sign
-
-
 def h_state_batch(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`h_state_from_measurements` for N robots at once: q, φ̇ (N, n) ->
-    (λ̂ (N, 3), μ̂ (N,), S(λ̂) (N, n), qua (N,)), with one batched IT call (for the vector env)."""
-    q = geom.wrap_steering(np.asarray(q, dtype=np.float64).reshape(-1, geom.n))
-    phidot = np.ascontiguousarray(np.asarray(phidot, dtype=np.float64).reshape(-1, geom.n))
-    lam = np.ascontiguousarray(estimate_icr(q, geom, method="IT", it_params=_IT_PARAMS))
-    beta_est = np.empty_like(q)
-    mu = np.empty(q.shape[0])
-    _h_state_batch_kernel(lam, phidot, geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
-                          np.ascontiguousarray(q), mu_tol, beta_est, mu)
-    return lam, mu, beta_est, quality(beta_est, q)
-
-
-_IT_PARAMS = ITParams()  # the paper's IT thresholds (estimate_icr's default), built once
+    (λ̂ (N, 3), μ̂ (N,), S(λ̂) (N, n), qua (N,)), one batched ``estimation.estimate_eta`` call."""
+    return estimate_eta(np.reshape(q, (-1, geom.n)), np.reshape(phidot, (-1, geom.n)), geom, mu_tol=mu_tol)
 
 
 def h_state_from_measurements(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np.ndarray, float, np.ndarray, float]:
     """The observed H state from measured steering angles q (n,) and wheel speeds φ̇ (n,):
-    ``(λ̂, μ̂, S(λ̂), qua)``. λ̂ is ``estimation.estimate_icr(q, geom, "IT")``; μ̂ the least-squares
-    wheel-speed fit given λ̂; (λ̂, μ̂) takes the sign of ``canonical_eta`` (μ̂ ≥ 0 when moving);
-    qua is ``estimation.quality(S(λ̂), q)`` (eq. 28–29)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = geom.wrap_steering(q)
-    lam = estimate_icr(q, geom, method="IT", it_params=_IT_PARAMS)
-    beta_est = np.empty(geom.n)
-    mu, sign = _h_state_kernel(lam, np.asarray(phidot, dtype=np.float64), geom.a_minus_l, geom.a_perp, geom.b,
-                               geom.r, geom.steer_max, q, mu_tol, beta_est)
-    qua = float(quality(beta_est, q))
-    return lam * sign, mu * sign, beta_est, qua
+    ``(λ̂, μ̂, S(λ̂), qua)``, from ``estimation.estimate_eta`` with the paper's IT: λ̂ the IT
+    estimate, μ̂ the least-squares wheel-speed fit given λ̂, (λ̂, μ̂) with the sign of
+    ``canonical_eta`` (μ̂ ≥ 0 when moving), and qua = ``quality(S(λ̂), q)`` (eq. 28–29)."""
+    lam, mu, beta_est, qua = estimate_eta(q, phidot, geom, mu_tol=mu_tol)
+    return lam, float(mu), beta_est, float(qua)
 
 
 def observation_layout(n: int, lookahead_count: int) -> dict[str, slice]:

@@ -12,6 +12,7 @@ from .it import ITParams, it_kernel_batch
 from .kinematics import _eta_kernel
 from .operational import ls_kernel_batch, ne_kernel_batch, ns_batch
 from .oracle import OracleParams, oracle_kernel_batch, oracle_tables
+from .quality import QUALITY_F
 
 __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "IT_BEST", "IT_PAPER"]
 
@@ -146,7 +147,7 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
 
 def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
                  mu_tol: float = 1e-3, oracle_params: OracleParams = OracleParams()
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The H state η̂ = (λ̂, μ̂) from the sensors: steering angles q and wheel speeds φ̇.
 
     λ̂ is :func:`estimate_icr` (default IT); μ̂ the least-squares fit of r_k φ̇_k = μ c_k(λ̂) over
@@ -158,8 +159,10 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         q: (n,) or (N, n) measured steering angles [rad]; phidot: same shape, wheel speeds [rad/s].
 
     Returns:
-        ``(λ̂, μ̂, S(λ̂))``: (3,)/(N, 3), scalar/(N,), and the steering configuration of the estimate
-        (n,)/(N, n), whose distance to q gives the quality of eq. (28)–(29).
+        ``(λ̂, μ̂, S(λ̂), qua)``: (3,)/(N, 3); scalar/(N,); the steering configuration of the
+        estimate (n,)/(N, n), a wheel whose axis holds λ̂ taking its measured angle; and
+        ``quality(S(λ̂), q)`` of eq. (28)–(29), scalar/(N,): how well the propulsion axes define
+        the ICR.
     """
     _check_method(method)
     flat, batch = _prepare(q, geom)
@@ -171,6 +174,7 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
     lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
     beta = np.empty_like(flat)
     mu = np.empty(flat.shape[0])
+    qua = np.empty(flat.shape[0])
     _eta_kernel(lam, flat, ph.reshape(-1, geom.n), geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
-                float(mu_tol), beta, mu, np.empty(geom.n))
-    return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,))
+                float(mu_tol), QUALITY_F, beta, mu, qua, np.empty(geom.n))
+    return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,)), qua.reshape(batch)

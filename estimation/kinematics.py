@@ -37,6 +37,7 @@ from numba import njit
 
 from .geometry import RobotGeometry
 from .hrep import _canonical_eta_sign
+from .quality import _quality_from_d2
 
 __all__ = [
     "SINGULAR_TOL",
@@ -187,11 +188,13 @@ def _mu_least_squares(c, y) -> float:
 
 
 @njit(cache=True)
-def _eta_kernel(lam, q, phidot, E, P, b, r, steer_max, mu_tol, beta_out, mu_out, c):
-    """For each row: S(λ) (singular wheels take q_k), μ by least squares of r φ̇ = μ c given λ,
-    then the canonical sign of (λ, μ). λ and μ are written in place."""
+def _eta_kernel(lam, q, phidot, E, P, b, r, steer_max, mu_tol, f, beta_out, mu_out, qua_out, c):
+    """For each row: S(λ) (singular wheels take q_k) and its quality (eq. 29, factor f), μ by least
+    squares of r φ̇ = μ c given λ, then the canonical sign of (λ, μ). λ is updated in place."""
+    n = E.shape[0]
     for i in range(lam.shape[0]):
-        _steering_dist2(lam[i], q[i], E, P, steer_max, beta_out[i])
+        d2 = _steering_dist2(lam[i], q[i], E, P, steer_max, beta_out[i])
+        qua_out[i] = _quality_from_d2(d2, n, f)
         for k in range(E.shape[0]):
             c[k] = _speed_coef(lam[i], E, P, b, k, beta_out[i, k])
             phidot[i, k] *= r[k]  # phidot holds r φ̇ from here on (a private copy)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 __all__ = ["QUALITY_F", "quality", "joint_distance_metric"]
 
@@ -10,14 +13,41 @@ __all__ = ["QUALITY_F", "quality", "joint_distance_metric"]
 QUALITY_F = 500.0
 
 
-def _pair(beta_est, q) -> tuple[np.ndarray, np.ndarray]:
+@njit(cache=True)
+def _quality_from_d2(d2: float, n: int, f: float) -> float:
+    """qua of eq. (29) from the squared joint-space distance d2 = ‖q − β_e‖² of n wheels."""
+    return 1.0 - math.log1p(f * d2 / (n * math.pi * math.pi)) / math.log1p(f)
+
+
+@njit(cache=True)
+def _metric_kernel(beta, q, out) -> bool:
+    """m of eq. (28) per row into ``out``; returns False if any value is not finite."""
+    n = q.shape[1]
+    scale = 1.0 / (n * math.pi * math.pi)
+    for i in range(q.shape[0]):
+        d = 0.0
+        for k in range(n):
+            a = beta[i, k]
+            b = q[i, k]
+            if not (math.isfinite(a) and math.isfinite(b)):
+                return False
+            diff = b - a
+            d += diff * diff
+        out[i] = d * scale
+    return True
+
+
+def _metric(beta_est, q) -> tuple[np.ndarray, tuple[int, ...]]:
     beta_est = np.asarray(beta_est, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     if beta_est.shape != q.shape or beta_est.ndim == 0:
         raise ValueError(f"beta_est and q must have the same shape (n,) or (N, n), got {beta_est.shape} and {q.shape}")
-    if not (np.all(np.isfinite(beta_est)) and np.all(np.isfinite(q))):
+    batch = q.shape[:-1]
+    n = q.shape[-1]
+    out = np.empty(int(np.prod(batch, dtype=np.int64)))
+    if not _metric_kernel(np.ascontiguousarray(beta_est.reshape(-1, n)), np.ascontiguousarray(q.reshape(-1, n)), out):
         raise ValueError("beta_est and q must be finite")
-    return beta_est, q
+    return out, batch
 
 
 def joint_distance_metric(beta_est, q) -> np.ndarray:
@@ -25,9 +55,8 @@ def joint_distance_metric(beta_est, q) -> np.ndarray:
 
     q − β_e is a plain difference, both angles in the steering range: the wheel cannot cross its
     stops, so |q_k − β_k| < π. Returns a scalar (0-d) or (N,)."""
-    beta_est, q = _pair(beta_est, q)
-    d = q - beta_est
-    return np.sum(d * d, axis=-1) / (q.shape[-1] * np.pi**2)
+    out, batch = _metric(beta_est, q)
+    return out.reshape(batch)
 
 
 def quality(beta_est, q, f: float = QUALITY_F) -> np.ndarray:
@@ -37,8 +66,10 @@ def quality(beta_est, q, f: float = QUALITY_F) -> np.ndarray:
         beta_est: (n,) or (N, n) steering configuration of the estimate, S(λ̂) [rad].
         q: same shape, the measured steering angles [rad], in the steering range.
         f: scaling factor (f ≥ 1); the paper uses 500.
+
+    Returns a 0-d array for one configuration, (N,) for a batch.
     """
-    if not (np.isfinite(f) and f >= 1):
+    if not (math.isfinite(f) and f >= 1):
         raise ValueError(f"f must be >= 1, got {f}")
-    m = joint_distance_metric(beta_est, q)
-    return 1.0 - np.log(f * m + 1.0) / np.log(f + 1.0)
+    m, batch = _metric(beta_est, q)
+    return (1.0 - np.log1p(f * m) / math.log1p(f)).reshape(batch)

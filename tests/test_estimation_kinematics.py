@@ -201,13 +201,14 @@ def test_estimate_eta_recovers_the_twist_and_matches_the_public_pieces():
     lam, mu = eta_from_twist(twists)
     q = steering_from_lambda(lam, G)
     phidot = wheel_speeds(lam, mu, G)
-    lam_hat, mu_hat, beta = estimate_eta(q, phidot, G)
+    lam_hat, mu_hat, beta, qua_hat = estimate_eta(q, phidot, G)
+    assert np.all(qua_hat >= 0.99999)
     # exact data: the twist comes back (μ > 0 convention)
     from estimation import twist_from_eta
     np.testing.assert_allclose(twist_from_eta(lam_hat, mu_hat), twists, atol=1e-8)
     # noisy data: same as composing the public functions
     qn = G.wrap_steering(q + rng.normal(scale=0.05, size=q.shape))
-    lam_hat, mu_hat, beta = estimate_eta(qn, phidot, G)
+    lam_hat, mu_hat, beta, qua_hat = estimate_eta(qn, phidot, G)
     lam_it = estimate_icr(qn, G, "IT")
     beta_ref = steering_from_lambda(lam_it, G, singular_fill=qn)
     mu_ref = mu_from_wheel_speeds(lam_it, phidot, G, beta=beta_ref)
@@ -215,9 +216,11 @@ def test_estimate_eta_recovers_the_twist_and_matches_the_public_pieces():
     np.testing.assert_allclose(lam_hat, lam_ref, atol=1e-12)
     np.testing.assert_allclose(mu_hat, mu_ref, atol=1e-12)
     np.testing.assert_allclose(beta, beta_ref, atol=1e-12)
+    from estimation import quality
+    np.testing.assert_allclose(qua_hat, quality(beta_ref, qn), atol=1e-12)
     # single point and input checking
-    l1, m1, b1 = estimate_eta(qn[0], phidot[0], G)
-    assert l1.shape == (3,) and np.shape(m1) == () and b1.shape == (4,)
+    l1, m1, b1, q1 = estimate_eta(qn[0], phidot[0], G)
+    assert l1.shape == (3,) and np.shape(m1) == () and b1.shape == (4,) and np.shape(q1) == ()
     with pytest.raises(ValueError):
         estimate_eta(qn[0], phidot[0, :3], G)
     with pytest.raises(ValueError):
