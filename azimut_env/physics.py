@@ -438,7 +438,10 @@ class AzimutPhysics:
         self.chassis: list[pymunk.Body] = []
         self.modules: list[list[pymunk.Body]] = []
         bodies: list[pymunk.Body] = []
+        self._joints: list[list[pymunk.Constraint]] = []
         for _ in range(self.n_robots):
+            joints: list[pymunk.Constraint] = []
+            self._joints.append(joints)
             ch = pymunk.Body(p.chassis.mass, p.chassis.inertia)
             space.add(ch)
             if with_shapes:
@@ -453,11 +456,10 @@ class AzimutPhysics:
                 m.position = tuple(g.axis_xy[k])
                 m.angle = float(g.alpha[k])
                 r = float(g.r[k])
-                pivot = pymunk.PivotJoint(ch, m, tuple(g.axis_xy[k]), (0.0, 0.0))
-                stop = pymunk.RotaryLimitJoint(ch, m, float(g.alpha[k] + g.steer_min), float(g.alpha[k] + g.steer_max))
-                pivot.collide_bodies = False
-                stop.collide_bodies = False
-                space.add(m, pivot, stop)
+                space.add(m)
+                pivot, stop = self._make_joints(ch, m, k)
+                space.add(pivot, stop)
+                joints.extend((pivot, stop))
                 if with_shapes:
                     wheel = pymunk.Poly(m, [(float(g.b[k]) + dx, dy) for dx, dy in
                                             ((-0.025, -r), (0.025, -r), (0.025, r), (-0.025, r))])
@@ -474,6 +476,37 @@ class AzimutPhysics:
         for ob in self.obstacles:
             self._add_obstacle(ob)
         self._setup_buffers()
+
+    def _make_joints(self, ch: pymunk.Body, m: pymunk.Body, k: int) -> tuple[pymunk.Constraint, pymunk.Constraint]:
+        """Module k's pivot joint at its steering axis and its steering hard stop."""
+        g = self.params.geometry
+        pivot = pymunk.PivotJoint(ch, m, tuple(g.axis_xy[k]), (0.0, 0.0))
+        stop = pymunk.RotaryLimitJoint(ch, m, float(g.alpha[k] + g.steer_min), float(g.alpha[k] + g.steer_max))
+        pivot.collide_bodies = False
+        stop.collide_bodies = False
+        return pivot, stop
+
+    def renew_joints(self, robot: int) -> None:
+        """Replace robot ``robot``'s joints by fresh ones (no accumulated impulses).
+
+        pymunk warm-starts each constraint with the impulse it accumulated at the previous step;
+        a fresh Space starts from zero. Fresh joints give a robot reset inside a running Space the
+        same solver state as a fresh Space, so its episode replays bit for bit (without obstacle
+        contacts). Chipmunk deletes a constraint by moving the array's last one into its slot and
+        solves constraints in array order: removing this robot's joints last-first moves the final
+        robot's block into its slots in order, and the new joints go at the end in order, so every
+        robot keeps its joints contiguous and in creation order."""
+        if not 0 <= robot < self.n_robots:
+            raise ValueError(f"robot index {robot} out of range 0..{self.n_robots - 1}")
+        old = self._joints[robot]
+        for c in reversed(old):
+            self.space.remove(c)
+        ch, mods = self.chassis[robot], self.modules[robot]
+        new: list[pymunk.Constraint] = []
+        for k, m in enumerate(mods):
+            new.extend(self._make_joints(ch, m, k))
+        self.space.add(*new)
+        self._joints[robot] = new
 
     def _setup_buffers(self) -> None:
         """(Re)create the batch buffers; check that pymunk.batch lists our bodies first, in order."""
