@@ -94,9 +94,10 @@ class ICRControllerConfig:
         kick_tol: measured-versus-commanded steering error [rad] (modulo π) that counts as a
             wheel knocked out of place; it triggers stop-and-reconfigure.
         reconfig_tol: steering error [rad] below which a reconfiguration is complete.
-        reconfig_freeze: once every steering command is within this [rad] of the configuration
-            being reached, the reconfiguration target stops following the target (so it
-            converges exactly; the RUNNING mode then takes the remaining motion).
+        reconfig_freeze: while RECONFIGURING, the configuration being reached follows a new target
+            only if that target is not reachable from it without another stop, and only while
+            some steering command is farther than this [rad] from it (so it converges exactly;
+            the RUNNING mode then takes the remaining motion).
         reconfig_timeout: time [s] after which RECONFIGURING resumes even if a measured wheel
             angle has not settled within ``reconfig_tol`` (commands have).
         coupling_from_measurement: in RECONFIGURING, compute the steer-to-drive coupling
@@ -392,8 +393,11 @@ def _saturate(beta_prev, beta_rate_prev, phidot_prev, beta_want, phidot_want, ge
 
 
 def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float, geom: RobotGeometry,
-                      limits: ActuatorLimits, config: ICRControllerConfig, dt: float):
+                      limits: ActuatorLimits, config: ICRControllerConfig, dt: float, mu_first: bool = False):
     """One time-scaled step of (λ, μ) toward (λ_d, μ_d) with every wheel on the surface.
+
+    With ``mu_first`` (STOPPING), μ takes its full ramp step whatever κ the λ motion gets, so the
+    robot brakes at once even while λ is still slowing down.
 
     Returns (λ, μ, λ̇, β_c, β̇_c, φ̇_c, info).
     """
@@ -417,7 +421,7 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     kappa = np.linspace(0.0, 1.0, config.n_kappa)
     v = v_prev[None, :] + kappa[:, None] * (v_des - v_prev)[None, :]
     lam_new = _exp_map(lam, v * dt)
-    mu_new = state.mu + kappa * (mu_des - state.mu)
+    mu_new = np.full(kappa.shape, mu_des) if mu_first else state.mu + kappa * (mu_des - state.mu)
     fill = np.broadcast_to(state.beta, (kappa.size, geom.n))
     beta_new = steering_from_lambda(lam_new, geom, singular_fill=fill)
     dbeta = beta_new - state.beta[None, :]
@@ -449,6 +453,13 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     info["kappa"] = float(kappa[i])
     lam_rate = v[i]
     return lam_new[i], float(mu_new[i]), lam_rate, beta_c, rate_c, phidot_c, info
+
+
+def _must_stop(lam: np.ndarray, lam_d: np.ndarray, geom: RobotGeometry, config: ICRControllerConfig) -> bool:
+    """Whether reaching λ_d from λ needs a stop and reconfiguration: the arc passes a steering
+    axis, or goes past a steering stop by more than ``stop_hysteresis``."""
+    blocked, free, theta = arc_check(lam, lam_d, geom, config.axis_margin, config.arc_step)
+    return blocked == "axis" or (blocked == "stop" and theta - free >= config.stop_hysteresis)
 
 
 def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: RobotGeometry,
@@ -486,7 +497,7 @@ def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: 
 def _stop_step(state: ICRControllerState, geom: RobotGeometry, limits: ActuatorLimits,
                config: ICRControllerConfig, dt: float):
     """Bring μ to 0 with λ held (STOPPING), through the coordinated, time-scaled step."""
-    return _coordinated_step(state, state.lam, 0.0, geom, limits, config, dt)
+    return _coordinated_step(state, state.lam, 0.0, geom, limits, config, dt, mu_first=True)
 
 
 def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
@@ -550,9 +561,12 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     if mode == Mode.RECONFIGURING and reconfig_lam is None:
         reconfig_lam = lam_d
     if mode == Mode.RECONFIGURING:
-        if not zero_cmd and np.max(np.abs(state.beta - steering_from_lambda(
-                reconfig_lam, geom, singular_fill=state.beta))) > config.reconfig_freeze:
-            reconfig_lam = lam_d  # follow the latest target while the wheels are far from it
+        if (not zero_cmd and np.max(np.abs(state.beta - steering_from_lambda(
+                reconfig_lam, geom, singular_fill=state.beta))) > config.reconfig_freeze
+                and _must_stop(reconfig_lam, lam_d, geom, config)):
+            # retarget only if the latest target could not be reached continuously from the
+            # configuration being reached (RUNNING does the rest); no chasing a jittery target
+            reconfig_lam = lam_d
         beta_target = steering_from_lambda(reconfig_lam, geom, singular_fill=state.beta)
         settled_cmd = np.max(np.abs(state.beta - beta_target)) < 1e-6 and np.max(np.abs(state.beta_rate)) < 1e-9
         settled_meas = np.max(np.abs(_wrap_half(beta_meas - beta_target))) < config.reconfig_tol
