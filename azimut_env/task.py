@@ -1,0 +1,582 @@
+"""The task of ``Azimut-v0`` over N robots at once: observation, reward, termination, resets.
+
+:class:`AzimutTask` holds N robots in one :class:`~azimut_env.physics.AzimutPhysics` (one pymunk
+Space) and every per-robot task quantity as an array with a leading robot axis. Both envs are thin
+front ends over it, so there is one copy of the task and of the physics:
+
+* :class:`~azimut_env.env.AzimutEnv` (``Azimut-v0``) is the N = 1 case;
+* :class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
+
+One control step (:meth:`AzimutTask.step`) is: a compiled check/clip/write of all actions, the
+physics step (per substep one batched read, the compiled force model over all wheels, one batched
+write, one ``space.step``), a compiled sensor model over all wheels, one batched IT estimate
+(``estimation.estimate_eta``), one compiled track query per distinct track, and one compiled
+reward and observation fill for all robots.
+
+Randomness comes from one ``numpy.random.Generator`` per robot, passed in by the caller (the single
+env's ``np_random``, or the vector env's sub-env generators). Each robot consumes its generator in
+the same order whatever N is, so robot i of a batch replays a single env seeded the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Sequence
+
+import numpy as np
+from numba import njit
+
+from estimation import estimate_eta, eta_from_twist, steering_from_lambda
+
+from .params import RobotParams, SensorParams, action_from_setpoints
+from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
+from .sensors import _measure_kernel
+from .tracks import Track, make_track
+
+__all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
+           "REWARD_TERMS", "RESET_OPTIONS"]
+
+#: the reward terms, in the order of the columns of ``AzimutTask.reward_terms``
+REWARD_TERMS = ("progress", "lateral", "heading", "slip", "action_rate", "off_track")
+#: the keys ``reset(options=...)`` accepts
+RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
+
+
+def observation_layout(n: int, lookahead_count: int) -> dict[str, slice]:
+    """Names and slices of the observation vector for n wheels and K look-ahead points (see
+    :class:`~azimut_env.env.AzimutEnv`, "Observation Space")."""
+    sizes = [("lambda_hat", 3), ("mu_hat", 1), ("beta", n), ("phidot", n), ("motor_angle", n),
+             ("lateral_error", 1), ("heading_error", 1), ("speed_along", 1), ("speed_ref", 1),
+             ("lookahead", 3 * lookahead_count), ("prev_action", 2 * n)]
+    out, i = {}, 0
+    for name, size in sizes:
+        out[name] = slice(i, i + size)
+        i += size
+    return out
+
+
+def observation_bounds(n: int, lookahead_count: int, wheel_speed_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """Finite (low, high) float32 bounds of the observation vector (the Box limits)."""
+    layout = observation_layout(n, lookahead_count)
+    size = max(s.stop for s in layout.values())
+    lo, hi = np.zeros(size), np.zeros(size)
+    bounds = dict(lambda_hat=1.0, mu_hat=10.0, beta=math.pi, phidot=3 * wheel_speed_max, motor_angle=math.pi,
+                  lateral_error=10.0, heading_error=math.pi, speed_along=10.0, speed_ref=10.0,
+                  lookahead=20.0, prev_action=1.0)
+    for name, sl in layout.items():
+        lo[sl], hi[sl] = -bounds[name], bounds[name]
+    la = layout["lookahead"]
+    hi_la = hi[la].reshape(-1, 3)
+    hi_la[:, 2] = math.pi
+    hi[la] = hi_la.ravel()
+    lo[la] = -hi[la]
+    lo[layout["speed_ref"]] = 0.0
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:
+    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied."""
+    params = params if params is not None else RobotParams()
+    if sensors is not None:
+        sensors = SensorParams.ideal() if sensors == "ideal" else sensors
+        if not isinstance(sensors, SensorParams):
+            raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
+        params = replace(params, sensors=sensors)
+    if not (math.isfinite(noise_scale) and noise_scale >= 0):
+        raise ValueError(f"noise_scale must be finite and >= 0, got {noise_scale!r}")
+    if noise_scale != 1.0:
+        sp = params.sensors
+        params = replace(params, sensors=replace(sp, steer_noise=sp.steer_noise * noise_scale,
+                                                 motor_noise=sp.motor_noise * noise_scale,
+                                                 wheel_speed_noise=sp.wheel_speed_noise * noise_scale))
+    return params
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Settings of the task (see :class:`~azimut_env.env.AzimutEnv`, "Arguments").
+
+    Attributes:
+        control_period: seconds per step [s]. substeps: physics substeps per step.
+        domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
+            damping and chassis mass, drawn per reset.
+        progress_weight, lateral_weight [1/m²], heading_weight [1/rad²], slip_weight [1/W],
+        action_rate_weight, off_track_penalty: reward weights.
+        max_lateral_error: lateral error that ends the episode [m].
+        lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
+            [m of progress]. start_noise: uniform start pose noise [m, rad].
+    """
+
+    control_period: float = 0.02
+    substeps: int = 8
+    domain_randomization: float = 0.0
+    progress_weight: float = 1.0
+    lateral_weight: float = 5.0
+    heading_weight: float = 0.5
+    slip_weight: float = 0.002
+    action_rate_weight: float = 0.05
+    off_track_penalty: float = 10.0
+    max_lateral_error: float = 0.5
+    lookahead_count: int = 5
+    lookahead_spacing: float = 0.3
+    start_noise: float = 0.02
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.domain_randomization <= 0.5:
+            raise ValueError(f"domain_randomization must be in [0, 0.5], got {self.domain_randomization!r}")
+        for name in ("progress_weight", "lateral_weight", "heading_weight", "slip_weight", "action_rate_weight",
+                     "off_track_penalty", "start_noise"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        if not self.max_lateral_error > 0:
+            raise ValueError("max_lateral_error must be > 0 [m]")
+        k = self.lookahead_count
+        if int(k) != k or k < 1 or not self.lookahead_spacing > 0:
+            raise ValueError("lookahead_count must be a positive integer and lookahead_spacing > 0")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        """Reward weights by term name (``off_track`` is the penalty)."""
+        return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
+                    slip=self.slip_weight, action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+
+
+# ---------------------------------------------------------------------- compiled stages
+
+
+@njit(cache=True)
+def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
+    """Actions a (N, 2n) float32 for the robots where ``rows`` is True: return the first row with
+    NaN/inf (writing nothing), else clip them to [−1, 1] in place and write the set-points of
+    ``params.setpoints_from_action`` into cmd (N, n, 2) and return −1."""
+    n = cmd.shape[1]
+    for i in range(a.shape[0]):
+        if rows[i]:
+            for j in range(a.shape[1]):
+                if not math.isfinite(a[i, j]):
+                    return i
+    for i in range(a.shape[0]):
+        if rows[i]:
+            for j in range(a.shape[1]):
+                a[i, j] = min(max(a[i, j], -1.0), 1.0)
+            for k in range(n):
+                cmd[i, k, 0] = max(a[i, k] * steer_max, steer_min)
+                cmd[i, k, 1] = a[i, n + k] * wheel_speed_max
+    return -1
+
+
+@njit(cache=True)
+def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds, lam, mu, beta, phidot, motor,
+                       action, prev_action, weights, dt, max_lat, lo, hi, v_along, reward, terms, off_track,
+                       finished, obs):
+    """For the robots where ``rows`` is True: speed along the path, reward terms and reward,
+    off-track and finished flags, and the observation (layout of :func:`observation_layout`;
+    non-finite values become 0, all clipped to [lo, hi]); prev_action takes the action."""
+    n = beta.shape[1]
+    for i in range(rows.shape[0]):
+        if not rows[i]:
+            continue
+        s = track_out[i, 0]
+        lat = track_out[i, 1]
+        head = track_out[i, 2]
+        v_ref = track_out[i, 3]
+        psi = track_out[i, 4]
+        va = summ[i, 3] * math.cos(psi) + summ[i, 4] * math.sin(psi)
+        v_along[i] = va
+        off = abs(lat) > max_lat
+        off_track[i] = off
+        finished[i] = s >= lengths[i] - 1e-6
+        v_max = max(max_speeds[i], 1e-3)
+        da2 = 0.0
+        for j in range(action.shape[1]):
+            d = action[i, j] - prev_action[i, j]  # float32, as the actions
+            da2 += d * d
+        t0 = weights[0] * min(s - s_prev[i], v_ref * dt + 1e-3 * dt) / (v_max * dt)
+        t1 = -weights[1] * lat * lat
+        t2 = -weights[2] * head * head
+        t3 = -weights[3] * summ[i, 8]
+        t4 = -weights[4] * da2
+        t5 = -weights[5] if off else 0.0
+        terms[i, 0] = t0
+        terms[i, 1] = t1
+        terms[i, 2] = t2
+        terms[i, 3] = t3
+        terms[i, 4] = t4
+        terms[i, 5] = t5
+        reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5
+        for j in range(action.shape[1]):
+            prev_action[i, j] = action[i, j]
+        _fill_obs_row(obs[i], lam[i], mu[i], beta[i], phidot[i], motor[i], lat, head, va, v_ref, look[i],
+                      prev_action[i], lo, hi, n)
+
+
+@njit(cache=True)
+def _fill_obs_row(obs, lam, mu, beta, phidot, motor, lat, head, v_along, v_ref, look, prev_action, lo, hi, n):
+    """One observation row in the layout of :func:`observation_layout`."""
+    i = 0
+    for j in range(3):
+        obs[i] = lam[j]
+        i += 1
+    obs[i] = mu
+    i += 1
+    for j in range(n):
+        obs[i] = beta[j]
+        obs[i + n] = phidot[j]
+        obs[i + 2 * n] = motor[j]
+        i += 1
+    i += 2 * n
+    obs[i] = lat
+    obs[i + 1] = head
+    obs[i + 2] = v_along
+    obs[i + 3] = v_ref
+    i += 4
+    for k in range(look.shape[0]):
+        for j in range(3):
+            obs[i] = look[k, j]
+            i += 1
+    for j in range(prev_action.shape[0]):
+        obs[i] = prev_action[j]
+        i += 1
+    for j in range(obs.shape[0]):
+        x = obs[j]
+        if not math.isfinite(x):
+            x = 0.0
+        obs[j] = min(max(x, lo[j]), hi[j])
+
+
+# ---------------------------------------------------------------------- the task over N robots
+
+
+class AzimutTask:
+    """N robots on their tracks in one physics Space: the state and the stages of the task.
+
+    Args:
+        params: robot parameters (shared; domain randomisation varies them per robot and reset).
+        config: :class:`TaskConfig`.
+        n_robots: N.
+        track: a :class:`~azimut_env.tracks.Track` or a built-in name, the default of every robot.
+        obstacles: static obstacles shared by all robots (robots never collide with each other).
+
+    Per-robot arrays (leading axis N), valid after the robot's reset: ``beta_m``, ``phidot_m``,
+    ``motor_m`` (measurements, (N, n)); ``lam_hat`` (N, 3), ``mu_hat``, ``qua`` (N,), ``beta_est``
+    (N, n) (the IT estimate); ``s``, ``lat``, ``head``, ``v_ref``, ``v_along`` (N,), ``look``
+    (N, K, 3) (track state); ``prev_action`` (N, 2n) float32; ``obs`` (N, D) float32;
+    ``reward`` (N,), ``reward_terms`` (N, 6) (columns :data:`REWARD_TERMS`), ``off_track``,
+    ``finished`` (N,) bool of the last step; ``steps`` (N,) steps since the robot's reset.
+    """
+
+    def __init__(self, params: RobotParams, config: TaskConfig, n_robots: int = 1, track: str | Track = "paper",
+                 obstacles: Sequence = ()) -> None:
+        if isinstance(track, str):
+            make_track(track, rng=np.random.default_rng(0))  # validate the name now
+        elif not isinstance(track, Track):
+            raise ValueError(f"track must be a Track or a built-in name, got {track!r}")
+        self.params = params
+        self.config = config
+        self.n = n = params.n
+        self.n_robots = N = int(n_robots)
+        self.physics = AzimutPhysics(params, n_robots=N, control_period=config.control_period,
+                                     substeps=config.substeps, blowup=BlowUpLimits())
+        self.physics.set_obstacles(obstacles)
+        self.default_obstacles = self.physics.obstacles
+        self.track_spec = track
+        default = track if isinstance(track, Track) else make_track(track, rng=np.random.default_rng(0))
+        self.tracks: list[Track] = [default] * N
+        self._default_wp = self.physics._default_wheel_params()
+        K = config.lookahead_count
+        self.layout = observation_layout(n, K)
+        self.obs_low, self.obs_high = observation_bounds(n, K, params.limits.wheel_speed_max)
+        self._weights = np.array([config.weights[k] for k in REWARD_TERMS])
+        lim = params.limits
+        self._lim = (float(lim.steer_min), float(lim.steer_max), float(lim.wheel_speed_max))
+        sp = params.sensors
+        self._sensor_args = (float(config.control_period), sp.steer_noise, sp.motor_noise, sp.steer_resolution,
+                             int(sp.wheel_cpr), sp.wheel_speed_noise)
+        self.beta_m = np.zeros((N, n))
+        self.phidot_m = np.zeros((N, n))
+        self.motor_m = np.zeros((N, n))
+        self.lam_hat = np.tile(np.array([0.0, 0.0, 1.0]), (N, 1))
+        self.mu_hat = np.zeros(N)
+        self.qua = np.ones(N)
+        self.beta_est = np.zeros((N, n))
+        self.s = np.zeros(N)
+        self.lat = np.zeros(N)
+        self.head = np.zeros(N)
+        self.v_ref = np.zeros(N)
+        self.v_along = np.zeros(N)
+        self.look = np.zeros((N, K, 3))
+        self.track_out = np.zeros((N, 5))
+        self.prev_action = np.zeros((N, 2 * n), dtype=np.float32)
+        self.obs = np.zeros((N, self.obs_low.shape[0]), dtype=np.float32)
+        self.reward = np.zeros(N)
+        self.reward_terms = np.zeros((N, len(REWARD_TERMS)))
+        self.off_track = np.zeros(N, dtype=np.bool_)
+        self.finished = np.zeros(N, dtype=np.bool_)
+        self.steps = np.zeros(N, dtype=np.int64)
+        self.steer_bias = np.zeros((N, n))
+        self.phi_prev = np.zeros((N, n))
+        self.track_length = np.array([t.length for t in self.tracks])
+        self.track_max_speed = np.array([t.max_speed for t in self.tracks])
+        self.kicks: list[dict | None] = [None] * N
+        self._all = np.ones(N, dtype=np.bool_)
+        self._normals = np.zeros((N, 3, n))
+        self._meas = np.empty((N, 3, n))
+        self._groups: list[tuple[Track, np.ndarray | None]] | None = None
+
+    # ------------------------------------------------------------------ reset
+
+    def reset_robot(self, i: int, rng: np.random.Generator, options: dict[str, Any] | None = None,
+                    fresh_space: bool = False) -> None:
+        """Start robot i's episode, drawing from ``rng`` (its generator) in the single env's order.
+
+        ``fresh_space`` rebuilds the whole Space (the single env's bit-exact replay, N = 1 only);
+        otherwise the robot gets fresh joints in the running Space, which replays the same
+        episode bit for bit as long as no obstacle contact is involved."""
+        options = dict(options or {})
+        unknown = set(options) - RESET_OPTIONS
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}")
+        phys, cfg, n = self.physics, self.config, self.n
+        spec = options.get("track", self.track_spec)
+        track = self.tracks[i]
+        if isinstance(spec, Track):
+            track = spec
+        elif spec == "random" or spec != getattr(track, "name", None):
+            track = make_track(spec, rng=rng)
+        if track is not self.tracks[i]:
+            self.tracks[i] = track
+            self._groups = None
+        self.track_length[i] = track.length
+        self.track_max_speed[i] = track.max_speed
+        if "obstacles" in options:
+            if not fresh_space or self.n_robots != 1:
+                raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
+                                 "obstacles between sub-envs (pass obstacles= to the constructor)")
+            phys.obstacles = tuple(Obstacle.coerce(o) for o in options["obstacles"])
+        elif fresh_space:
+            phys.obstacles = self.default_obstacles
+        if fresh_space:
+            if self.n_robots != 1:
+                raise ValueError("fresh_space rebuilds every robot: only for a single robot")
+            phys.rebuild()
+        else:
+            phys.renew_joints(i)
+        self.kicks[i] = None
+        if "kick" in options:
+            kick = dict(options["kick"])
+            if set(kick) - {"step", "wheels", "impulse"}:
+                raise ValueError("kick option takes keys 'step', 'wheels', 'impulse'")
+            self.kicks[i] = dict(step=int(kick.get("step", 0)), wheels=list(kick.get("wheels", range(n))),
+                                 impulse=float(kick.get("impulse", 0.5)))
+        self._randomize(i, rng)
+        sb = self.params.sensors.steer_bias
+        self.steer_bias[i] = rng.normal(0.0, sb, size=n) if sb > 0 else 0.0
+        s0 = float(options.get("start_progress", 0.0))
+        if not math.isfinite(s0):
+            raise ValueError("start_progress must be finite")
+        ref = track.sample(s0)
+        noise = cfg.start_noise
+        pose = ref[:3] + rng.uniform(-noise, noise, size=3)
+        beta = self.reference_beta(track, s0, pose[2]) + rng.uniform(-noise, noise, size=n)
+        geom = self.params.geometry
+        beta = np.clip(beta, geom.steer_min + 1e-6, geom.steer_max)
+        phys.reset_robot(i, pose, beta)
+        clash = phys.overlapping_obstacles(i)
+        if clash:
+            raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
+                             "move them off the start of the track")
+        self.phi_prev[i] = phys.motor_state[i, :, 4]
+        self.prev_action[i] = action_from_setpoints(beta, np.zeros(n), self.params.limits)
+        self.steps[i] = 0
+        self.reward[i] = 0.0
+        self.reward_terms[i] = 0.0
+        self.off_track[i] = False
+        self.finished[i] = False
+        sl = slice(i, i + 1)
+        rng.standard_normal(out=self._normals[i])
+        self._measure(sl)
+        self._estimate(sl)
+        s_, look = track.query_many(phys.summary[sl, :3], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+        self.track_out[i] = s_[0]
+        self.look[i] = look[0]
+        self._unpack_track(sl)
+        psi = self.track_out[i, 4]
+        summ = phys.summary[i]
+        self.v_along[i] = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
+        _fill_obs_row(self.obs[i], self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
+                      self.motor_m[i], self.lat[i], self.head[i], self.v_along[i], self.v_ref[i], self.look[i],
+                      self.prev_action[i], self.obs_low, self.obs_high, n)
+
+    def reference_beta(self, track: Track, s: float, theta: float) -> np.ndarray:
+        """Steering angles of the reference motion at progress s (direction only)."""
+        tw = track.reference_twist_body(s, theta, speed=1.0)
+        if np.linalg.norm(tw) < 1e-9:
+            return np.zeros(self.n)
+        lam, _ = eta_from_twist(tw)
+        return steering_from_lambda(lam, self.params.geometry)
+
+    def _randomize(self, i: int, rng: np.random.Generator) -> None:
+        phys = self.physics
+        wp = self._default_wp[i].copy()
+        d = self.config.domain_randomization
+        if d > 0:
+            f = rng.uniform(1 - d, 1 + d, size=4)
+            wp[..., WP.MU] *= f[0]
+            wp[..., WP.K_S] *= f[1]
+            wp[..., WP.C_S] *= f[2]
+            phys.set_chassis_mass(i, self.params.chassis.mass * f[3])
+        phys.wheel_params[i] = wp
+
+    def park(self, i: int) -> None:
+        """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
+        its reset), so that no NaN stays in the Space."""
+        self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
+        self.phi_prev[i] = 0.0
+
+    # ------------------------------------------------------------------ step
+
+    def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all).
+
+        Returns the clipped float32 copy. Raises ``ValueError`` (changing nothing) on NaN or inf."""
+        a = np.array(actions, dtype=np.float32)
+        if a.shape != (self.n_robots, 2 * self.n):
+            raise ValueError(f"actions must have shape {(self.n_robots, 2 * self.n)}, got {np.shape(actions)}")
+        rows = self._all if rows is None else rows
+        bad = _apply_actions_kernel(a, self.physics.commands, rows, *self._lim)
+        if bad >= 0:
+            raise ValueError(f"action contains NaN or inf (robot {bad}): {np.asarray(actions)[bad]}")
+        return a
+
+    def step_physics(self) -> np.ndarray:
+        """Kicks due now, then one control period of physics for all robots. Returns the blow-up
+        codes (N,) (0: fine; see ``physics.BLOWUP_MESSAGES``)."""
+        phys = self.physics
+        for i, kick in enumerate(self.kicks):
+            if kick is not None and self.steps[i] == kick["step"]:
+                phys.kick(i, kick["wheels"], kick["impulse"])
+        phys.step()
+        self.steps += 1
+        return phys.summary[:, 10]
+
+    def observe(self, action: np.ndarray, rngs: Sequence[np.random.Generator], rows: np.ndarray | None = None) -> None:
+        """After :meth:`step_physics`: measurements, IT estimate, track state, reward and
+        observation for ``rows`` (default all), each robot drawing its sensor noise from its
+        generator. Rows left out keep their previous values except the raw measurements."""
+        rows = self._all if rows is None else rows
+        normals = self._normals
+        if rows is self._all:
+            for i, rng in enumerate(rngs):
+                rng.standard_normal(out=normals[i])
+        else:
+            for i in np.flatnonzero(rows):
+                rngs[i].standard_normal(out=normals[i])
+        s_prev = self.s.copy()
+        keep = None if rows is self._all or rows.all() else ~rows
+        if keep is not None:
+            saved = [a[keep].copy() for a in (self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat,
+                                             self.head, self.v_ref, self.track_out, self.look)]
+        all_rows = slice(None)
+        self._measure(all_rows)
+        self._estimate(all_rows)
+        self._query_tracks(s_prev)
+        if keep is not None:
+            for a, v in zip((self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat, self.head,
+                             self.v_ref, self.track_out, self.look), saved):
+                a[keep] = v
+        _reward_obs_kernel(rows, self.physics.summary, self.track_out, self.look, s_prev, self.track_length,
+                           self.track_max_speed, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
+                           action, self.prev_action, self._weights, self.config.control_period,
+                           self.config.max_lateral_error, self.obs_low, self.obs_high, self.v_along, self.reward,
+                           self.reward_terms, self.off_track, self.finished, self.obs)
+
+    # ------------------------------------------------------------------ stages
+
+    def _measure(self, rows: slice) -> None:
+        """Sensors (``sensors`` models, compiled) on views of the physics arrays for ``rows``."""
+        phys = self.physics
+        ms = phys.motor_state
+        beta_true = phys.wheel_summary[rows, :, 0] + self.steer_bias[rows]
+        out = self._meas[rows]
+        _measure_kernel(beta_true, ms[rows, :, 0], ms[rows, :, 4], self.phi_prev[rows], ms[rows, :, 3],
+                        *self._sensor_args, self._normals[rows], out)
+        self.phi_prev[rows] = ms[rows, :, 4]
+        self.beta_m[rows] = out[:, 0]
+        self.motor_m[rows] = out[:, 1]
+        self.phidot_m[rows] = out[:, 2]
+
+    def _estimate(self, rows: slice) -> None:
+        """The IT-estimated H state of ``rows``: one batched ``estimation.estimate_eta`` call."""
+        lam, mu, beta_est, qua = estimate_eta(self.beta_m[rows], self.phidot_m[rows], self.params.geometry,
+                                              mu_tol=1e-3)
+        self.lam_hat[rows] = lam
+        self.mu_hat[rows] = mu
+        self.beta_est[rows] = beta_est
+        self.qua[rows] = qua
+
+    def _track_groups(self) -> list[tuple[Track, np.ndarray | None]]:
+        """Robots grouped by track object (None: all robots share it)."""
+        if self._groups is None:
+            first = self.tracks[0]
+            if all(t is first for t in self.tracks):
+                self._groups = [(first, None)]
+            else:
+                by_id: dict[int, tuple[Track, list[int]]] = {}
+                for i, t in enumerate(self.tracks):
+                    by_id.setdefault(id(t), (t, []))[1].append(i)
+                self._groups = [(t, np.array(idx)) for t, idx in by_id.values()]
+        return self._groups
+
+    def _query_tracks(self, s_hint: np.ndarray) -> None:
+        cfg, summ = self.config, self.physics.summary
+        for track, idx in self._track_groups():
+            if idx is None:
+                out, look = track.query_many(summ[:, :3], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
+                self.track_out[:] = out
+                self.look[:] = look
+            else:
+                out, look = track.query_many(summ[idx, :3], s_hint[idx], cfg.lookahead_count, cfg.lookahead_spacing)
+                self.track_out[idx] = out
+                self.look[idx] = look
+        self._unpack_track(slice(None))
+
+    def _unpack_track(self, rows: slice) -> None:
+        out = self.track_out[rows]
+        self.s[rows] = out[:, 0]
+        self.lat[rows] = out[:, 1]
+        self.head[rows] = out[:, 2]
+        self.v_ref[rows] = out[:, 3]
+
+    # ------------------------------------------------------------------ info
+
+    def info(self, i: int, with_terms: bool = True) -> dict[str, Any]:
+        """Robot i's info dict of the single env (ground truth, estimate, reward terms)."""
+        phys = self.physics
+        summ = phys.summary[i]
+        twist = summ[[6, 7, 5]]
+        # true η from the twist, ξ̇ = μ (v, −u, w): λ ∝ (−ẏ, ẋ, θ̇), μ = ‖ξ̇‖ ≥ 0
+        mu = math.sqrt(float(twist @ twist))
+        lam = np.array([-twist[1], twist[0], twist[2]]) / mu if mu > 0 else np.array([0.0, 0.0, 1.0])
+        if mu <= 1e-3:  # the sign rule of canonical_eta(mu_tol=1e-3), as for the estimate
+            key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
+            if key < 0:
+                lam, mu = -lam, -mu
+        terms = {name: float(self.reward_terms[i, j]) for j, name in enumerate(REWARD_TERMS)} if with_terms else {}
+        return {
+            "pose": summ[0:3].copy(),
+            "twist": twist,
+            "eta_true": (lam, mu),
+            "eta_hat": (self.lam_hat[i].copy(), float(self.mu_hat[i])),
+            "beta_true": phys.wheel_summary[i, :, 0].copy(),
+            "beta_est": self.beta_est[i].copy(),
+            "tire_forces": phys.wheel_summary[i, :, 2:4].copy(),
+            "slip_power": float(summ[8]),
+            "internal_force": float(summ[9]),
+            "qua": float(self.qua[i]),
+            "progress": float(self.s[i]),
+            "lateral_error": float(self.lat[i]),
+            "heading_error": float(self.head[i]),
+            "reward_terms": terms,
+        }
