@@ -125,7 +125,7 @@ class ICRControllerConfig:
     reconfig_freeze: float = np.deg2rad(5.0)
     reconfig_timeout: float = 2.0
     stop_timeout: float = 0.5
-    stop_hysteresis: float = np.deg2rad(4.0)
+    stop_hysteresis: float = np.deg2rad(6.0)
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
