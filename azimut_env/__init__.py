@@ -3,7 +3,10 @@
 Importing this package only registers the environment (by entry-point string); the physics,
 pymunk and numba load when the env is made. Modules: ``params`` (physical parameters, actuator
 limits, action <-> set-point map), ``physics`` (N robots in one pymunk Space), ``tire``,
-``actuators``, ``sensors``, ``tracks``, ``env`` (the task), ``rendering``, ``bench``, ``paper_run``.
+``actuators``, ``sensors``, ``tracks``, ``task`` (the task over N robots), ``env`` (the single
+env, N = 1), ``vector_env`` (``AzimutVectorEnv``: N robots in one Space, also what
+``gymnasium.make_vec("Azimut-v0", num_envs=N, vectorization_mode="vector_entry_point")`` returns),
+``sb3`` (an SB3 ``VecEnv`` over it), ``rendering``, ``bench``, ``paper_run``.
 """
 
 from gymnasium.envs.registration import register, registry
@@ -13,4 +16,5 @@ __all__ = ["ENV_ID"]
 ENV_ID = "Azimut-v0"
 
 if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv", max_episode_steps=6000)  # 120 s: the paper track takes about 82 s
+    register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv", vector_entry_point="azimut_env.vector_env:AzimutVectorEnv",
+             max_episode_steps=6000)  # 120 s: the paper track takes about 82 s

@@ -643,8 +643,8 @@ class AzimutPhysics:
         v_world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1]])
         w = float(twist[2])
         ch = self.chassis[robot]
+        ch.angle = float(th)  # the angle first: the position setter uses the (maybe non-finite) transform
         ch.position = (float(x), float(y))
-        ch.angle = float(th)
         ch.velocity = tuple(v_world)
         ch.angular_velocity = w
         ch.force = (0.0, 0.0)
@@ -652,8 +652,8 @@ class AzimutPhysics:
         for k, m in enumerate(self.modules[robot]):
             ax, ay = g.axis_xy[k]
             wx, wy = x + c * ax - s * ay, y + s * ax + c * ay
-            m.position = (wx, wy)
             m.angle = float(th + g.alpha[k] + beta[k])
+            m.position = (wx, wy)
             m.velocity = (v_world[0] - w * (wy - y), v_world[1] + w * (wx - x))
             m.angular_velocity = w
             m.force = (0.0, 0.0)

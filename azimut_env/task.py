@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 from numba import njit
+from numba.typed import List as NumbaList
 
 from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 
@@ -165,6 +166,19 @@ def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
                 cmd[i, k, 0] = max(a[i, k] * steer_max, steer_min)
                 cmd[i, k, 1] = a[i, n + k] * wheel_speed_max
     return -1
+
+
+@njit(cache=True)
+def _draw_normals_kernel(rngs, rows, out):
+    """out[i] (3, n) = rngs[i].standard_normal((3, n)) for the rows where ``rows`` is True: the
+    same numbers, in the same order, as NumPy's (numba's Generator runs NumPy's algorithms on the
+    same bit generator state)."""
+    for i in range(len(rngs)):
+        if rows[i]:
+            rng = rngs[i]
+            for j in range(out.shape[1]):
+                for k in range(out.shape[2]):
+                    out[i, j, k] = rng.standard_normal()
 
 
 @njit(cache=True)
@@ -431,7 +445,8 @@ class AzimutTask:
 
     def park(self, i: int) -> None:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
-        its reset), so that no NaN stays in the Space."""
+        its reset), so that no NaN stays in the Space (its joints' accumulated impulses included)."""
+        self.physics.renew_joints(i)
         self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
         self.phi_prev[i] = 0.0
 
@@ -464,10 +479,14 @@ class AzimutTask:
     def observe(self, action: np.ndarray, rngs: Sequence[np.random.Generator], rows: np.ndarray | None = None) -> None:
         """After :meth:`step_physics`: measurements, IT estimate, track state, reward and
         observation for ``rows`` (default all), each robot drawing its sensor noise from its
-        generator. Rows left out keep their previous values except the raw measurements."""
+        generator (``rngs``: a sequence of N generators, or a ``numba.typed.List`` of them, which
+        draws for all robots in one compiled call with the same streams). Rows left out keep
+        their previous values except the raw measurements."""
         rows = self._all if rows is None else rows
         normals = self._normals
-        if rows is self._all:
+        if isinstance(rngs, NumbaList):
+            _draw_normals_kernel(rngs, rows, normals)
+        elif rows is self._all:
             for i, rng in enumerate(rngs):
                 rng.standard_normal(out=normals[i])
         else:

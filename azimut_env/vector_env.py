@@ -1,0 +1,433 @@
+"""``AzimutVectorEnv``: N ``Azimut-v0`` robots in one pymunk Space, stepped as one batch.
+
+A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.AzimutTask`, the same task and
+physics code as the single env (which is its N = 1 case). Per control step: one compiled
+action check for all robots, ``substeps`` physics substeps (each: one ``pymunk.batch`` read of all
+bodies, the compiled actuator/spring/tire kernel over all robots × wheels, one batched write of all
+forces and torques, one ``space.step``), then the compiled sensor model over all wheels, one
+batched IT estimate (``estimation.estimate_eta``), one compiled track query per distinct track and
+one compiled reward/observation fill. Robots never collide with each other.
+
+``gymnasium.make_vec("Azimut-v0", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
+(keyword arguments as for ``gymnasium.make("Azimut-v0", ...)``).
+"""
+
+from __future__ import annotations
+
+import types
+from typing import Any, Sequence
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+from numba.typed import List as NumbaList
+
+from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
+from .physics import AzimutPhysics
+from .task import REWARD_TERMS, AzimutTask, TaskConfig, resolve_params
+from .tracks import Track
+
+__all__ = ["AzimutVectorEnv"]
+
+
+class AzimutVectorEnv(gym.vector.VectorEnv):
+    """
+    ## Description
+    ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v0``) that share
+    one pymunk Space (no robot-robot collisions) and run every stage batched. Sub-env i behaves
+    exactly as a single ``Azimut-v0`` seeded with ``seed + i`` and given the same actions: the
+    same observations, rewards and terminations to the bit (its robot gets fresh joints at each
+    reset, so the shared Space's solver state does not leak between episodes; with obstacle
+    contacts this holds to floating-point tolerance only).
+
+    ## Spaces
+    ``single_action_space`` and ``single_observation_space`` are the single env's (see
+    :class:`~azimut_env.env.AzimutEnv` for the layout); ``action_space`` and
+    ``observation_space`` are them batched: ``(num_envs, 2n)`` and ``(num_envs, D)`` float32.
+
+    ## Autoreset
+    ``autoreset_mode`` is ``AutoresetMode.NEXT_STEP`` by default (Gymnasium 1.x's default): a
+    sub-env that terminated or truncated is reset by the next :meth:`step`, which ignores its
+    action and returns its first observation with reward 0, ``terminated = truncated = False``.
+    ``AutoresetMode.SAME_STEP`` resets it within the step that ended it and puts the last
+    observation in ``info["final_obs"]`` (object array) and the step's info in
+    ``info["final_info"]`` (used by the SB3 adapter). ``AutoresetMode.DISABLED`` never resets.
+
+    ## Episode End
+    As the single env, per sub-env: off the track or finished (terminated), a physics blow-up of
+    that robot (terminated, reward ``−off_track_penalty``, the last finite observation, and
+    ``info["error"][i]``; the other robots go on), and ``max_episode_steps`` (truncated; default
+    6000 as registered, ``None`` for no limit).
+
+    ## Info
+    ``step`` and ``reset`` return a dict of arrays with a leading ``num_envs`` axis and, per key,
+    a boolean mask ``"_key"`` (the Gymnasium vector convention): ``pose`` (N, 3), ``progress``,
+    ``lateral_error``, ``heading_error``, ``qua``, ``slip_power``, ``internal_force``,
+    ``off_track``, ``finished`` and ``reward_terms`` (a dict of (N,) arrays); ``error`` (object
+    array) only where a robot blew up. :meth:`sub_env_info` gives the single env's full info of
+    one sub-env.
+
+    ## Arguments
+    ``num_envs``; ``max_episode_steps`` (default 6000); ``autoreset_mode``; ``render_index``
+    (the sub-env :meth:`render` draws; settable); and all the single env's keyword arguments:
+    ``track`` (one for all sub-envs; ``"random"`` draws a track per sub-env and episode),
+    ``control_period``, ``substeps``, ``params``, ``sensors``, ``noise_scale``,
+    ``domain_randomization`` (drawn per sub-env and reset), reward weights,
+    ``max_lateral_error``, ``lookahead_count``, ``lookahead_spacing``, ``obstacles`` (shared by all
+    sub-envs, at the same world positions), ``start_noise``, ``render_mode``.
+
+    ``reset(seed=..., options=...)``: ``seed`` an int (sub-env i gets ``seed + i``) or a list of
+    ``num_envs`` ints/None; ``options`` a dict applied to every reset sub-env, or a sequence of
+    ``num_envs`` dicts (or None), one per sub-env; a dict may carry ``"reset_mask"`` (bool
+    array (num_envs,)) to reset only some sub-envs. Per-sub-env options are those of the single
+    env (``track``, ``start_progress``, ``kick``) except ``obstacles``, which are shared.
+
+    ## Controller interface
+    As the single env's, batched: ``limits``, ``geometry``, ``params``, ``control_period``;
+    ``measured_beta``, ``measured_phidot``, ``measured_motor_angles`` (N, n);
+    ``estimated_eta`` -> (λ̂ (N, 3), μ̂ (N,)); ``progress`` (N,); ``tracks`` (one per sub-env);
+    ``true_pose``, ``true_twist`` (N, 3); ``setpoints_from_action`` and
+    ``action_from_setpoints`` on (N, ...) arrays; :meth:`kick`.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, track: str | Track = "paper", control_period: float = 0.02,
+                 substeps: int = 8, params: RobotParams | None = None, sensors: SensorParams | str | None = None,
+                 noise_scale: float = 1.0, domain_randomization: float = 0.0, progress_weight: float = 1.0,
+                 lateral_weight: float = 5.0, heading_weight: float = 0.5, slip_weight: float = 0.002,
+                 action_rate_weight: float = 0.05, off_track_penalty: float = 10.0, max_lateral_error: float = 0.5,
+                 lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
+                 render_mode: str | None = None, max_episode_steps: int | None = 6000,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0) -> None:
+        if int(num_envs) != num_envs or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
+        try:
+            autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(f"autoreset_mode must be an AutoresetMode, got {autoreset_mode!r}") from None
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
+        params = resolve_params(params, sensors, noise_scale)
+        config = TaskConfig(control_period=control_period, substeps=substeps,
+                            domain_randomization=domain_randomization, progress_weight=progress_weight,
+                            lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
+                            action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
+                            max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
+                            lookahead_spacing=lookahead_spacing, start_noise=start_noise)
+        self.num_envs = N = int(num_envs)
+        self.params = params
+        self.config = config
+        self.task = AzimutTask(params, config, n_robots=N, track=track, obstacles=obstacles)
+        self.n = params.n
+        self.control_period = float(config.control_period)
+        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.autoreset_mode = autoreset_mode
+        self.render_mode = render_mode
+        self.render_index = int(render_index)
+        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.control_period)),
+                         "autoreset_mode": autoreset_mode}
+        self.single_action_space = spaces.Box(-1.0, 1.0, (2 * self.n,), dtype=np.float32)
+        self.single_observation_space = spaces.Box(self.task.obs_low, self.task.obs_high, dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, N)
+        self.observation_space = batch_space(self.single_observation_space, N)
+        self._rngs: list[np.random.Generator] = [None] * N  # type: ignore[list-item]
+        self._seeds: list[int | None] = [None] * N
+        self._rng_list: NumbaList | None = None
+        self._autoreset = np.zeros(N, dtype=np.bool_)
+        self._needs_reset = True
+        self._errors: list[str | None] = [None] * N
+        self._renderer = None
+        self._trail: list[tuple[float, float]] = []
+
+    # ------------------------------------------------------------------ controller interface (batched)
+
+    @property
+    def physics(self) -> AzimutPhysics:
+        """The shared physics (N robots)."""
+        return self.task.physics
+
+    @property
+    def tracks(self) -> list[Track]:
+        """Each sub-env's track of the current episode."""
+        return list(self.task.tracks)
+
+    @property
+    def limits(self) -> ActuatorLimits:
+        """The actuator limits (shared)."""
+        return self.params.limits
+
+    @property
+    def geometry(self):
+        """The robots' :class:`~estimation.geometry.RobotGeometry`."""
+        return self.params.geometry
+
+    @property
+    def np_random(self) -> list[np.random.Generator]:
+        """The sub-envs' generators (sub-env i's is that of a single env seeded with seed + i)."""
+        return list(self._rngs)
+
+    def setpoints_from_action(self, action) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised actions (N, 2n) -> (β_cmd [rad], φ̇_cmd [rad/s]), each (N, n)."""
+        return setpoints_from_action(action, self.params.limits, self.n)
+
+    def action_from_setpoints(self, beta_cmd, phidot_cmd) -> np.ndarray:
+        """(β_cmd [rad], φ̇_cmd [rad/s]), each (N, n) -> normalised float32 actions (N, 2n)."""
+        return action_from_setpoints(beta_cmd, phidot_cmd, self.params.limits)
+
+    @property
+    def measured_beta(self) -> np.ndarray:
+        """Measured steering angles β (N, n) [rad] of the last step."""
+        return self.task.beta_m.copy()
+
+    @property
+    def measured_phidot(self) -> np.ndarray:
+        """Measured wheel spin rates φ̇ (N, n) [rad/s] of the last step."""
+        return self.task.phidot_m.copy()
+
+    @property
+    def measured_motor_angles(self) -> np.ndarray:
+        """Measured steering motor angles (N, n) [rad] of the last step."""
+        return self.task.motor_m.copy()
+
+    @property
+    def estimated_eta(self) -> tuple[np.ndarray, np.ndarray]:
+        """IT-estimated H states (λ̂ (N, 3), μ̂ (N,) [m/s]) from the last measurements."""
+        return self.task.lam_hat.copy(), self.task.mu_hat.copy()
+
+    @property
+    def progress(self) -> np.ndarray:
+        """Progress s (N,) along each sub-env's track [m]."""
+        return self.task.s.copy()
+
+    @property
+    def true_pose(self) -> np.ndarray:
+        """Ground-truth chassis poses (N, 3) (x, y, θ) (for evaluation)."""
+        return self.physics.chassis_pose()
+
+    @property
+    def true_twist(self) -> np.ndarray:
+        """Ground-truth chassis twists (N, 3) (ẋ, ẏ, θ̇) in the chassis frame (for evaluation)."""
+        return self.physics.chassis_twist().copy()
+
+    def observation_slices(self) -> dict[str, slice]:
+        """Names and slices of the observation vector (last axis)."""
+        return dict(self.task.layout)
+
+    def decode_observation(self, obs) -> dict[str, np.ndarray]:
+        """Split observations (..., D) into named arrays (lookahead reshaped to (..., K, 3))."""
+        obs = np.asarray(obs)
+        out = {name: obs[..., sl].copy() for name, sl in self.task.layout.items()}
+        out["lookahead"] = out["lookahead"].reshape(obs.shape[:-1] + (self.config.lookahead_count, 3))
+        return out
+
+    def kick(self, env_index: int, wheels, impulse: float) -> None:
+        """Knock sub-env ``env_index``'s modules ``wheels`` with an angular impulse [N·m·s]."""
+        self.physics.kick(int(env_index), list(wheels), float(impulse))
+
+    def sub_env_info(self, i: int) -> dict[str, Any]:
+        """Sub-env i's info dict as the single env gives it (ground truth, estimate, terms)."""
+        return self.task.info(int(i))
+
+    # ------------------------------------------------------------------ vector API
+
+    def _typed_rngs(self) -> NumbaList:
+        """The generators as a numba typed list (rebuilt when one is replaced by a reseed)."""
+        if self._rng_list is None:
+            self._rng_list = NumbaList(self._rngs)
+        return self._rng_list
+
+    def _seed_list(self, seed) -> list[int | None]:
+        N = self.num_envs
+        if seed is None:
+            return [None] * N
+        if isinstance(seed, (int, np.integer)):
+            return [int(seed) + i for i in range(N)]
+        seeds = list(seed)
+        if len(seeds) != N:
+            raise ValueError(f"seed must be an int or a list of {N} seeds, got {len(seeds)}")
+        return seeds
+
+    def _options_list(self, options) -> tuple[list[dict], np.ndarray]:
+        N = self.num_envs
+        mask = np.ones(N, dtype=np.bool_)
+        if options is None:
+            return [{} for _ in range(N)], mask
+        if isinstance(options, dict):
+            options = dict(options)
+            if "reset_mask" in options:
+                m = np.asarray(options.pop("reset_mask"))
+                if m.shape != (N,) or m.dtype != np.bool_:
+                    raise ValueError(f"options['reset_mask'] must be a bool array of shape ({N},)")
+                if not m.any():
+                    raise ValueError("options['reset_mask'] must select at least one sub-env")
+                mask = m.copy()
+            return [dict(options) for _ in range(N)], mask
+        per = list(options)
+        if len(per) != N or not all(o is None or isinstance(o, dict) for o in per):
+            raise ValueError(f"options must be a dict or a sequence of {N} dicts (or None)")
+        return [dict(o or {}) for o in per], mask
+
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict | Sequence[dict | None] | None = None):
+        """Reset all sub-envs (or those of ``options["reset_mask"]``); see the class docstring."""
+        seeds = self._seed_list(seed)
+        opts, mask = self._options_list(options)
+        task = self.task
+        for i in np.flatnonzero(mask):
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
+                self._rng_list = None
+            task.reset_robot(int(i), self._rngs[i], opts[i])
+            self._errors[i] = None
+        self._autoreset[mask] = False
+        self._needs_reset = False
+        self._start_trail()
+        obs = task.obs.copy()
+        return obs, self._vector_info(np.zeros(self.num_envs, dtype=np.bool_))
+
+    def step(self, actions):
+        """Step every sub-env (autoresetting those that ended, in NEXT_STEP mode)."""
+        if self._needs_reset:
+            raise RuntimeError("call reset() before step()")
+        task, N = self.task, self.num_envs
+        resetting = self._autoreset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
+        if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():
+            raise RuntimeError(f"sub-envs {np.flatnonzero(self._autoreset).tolist()} ended: with autoreset "
+                               "disabled, reset them (options={'reset_mask': ...}) before stepping")
+        any_reset = resetting is not None and bool(resetting.any())
+        active = ~resetting if any_reset else None
+        a = task.apply_actions(actions, active)
+        codes = task.step_physics()
+        errored = codes != 0
+        if any_reset:
+            errored &= active
+        any_error = bool(errored.any())
+        if any_error:
+            err_idx = np.flatnonzero(errored)
+            messages = self.physics.check()[1]
+            for i in err_idx:
+                self._errors[i] = messages[i]
+                task.park(int(i))
+        if any_reset or any_error:
+            ok = np.ones(N, dtype=np.bool_)
+            if any_reset:
+                ok &= active
+            if any_error:
+                ok &= ~errored
+            task.observe(a, self._typed_rngs(), ok)
+        else:
+            task.observe(a, self._typed_rngs())
+        reward = task.reward.copy()
+        terminated = task.off_track | task.finished
+        truncated = (task.steps >= self.max_episode_steps) if self.max_episode_steps is not None \
+            else np.zeros(N, dtype=np.bool_)
+        if any_error:
+            reward[errored] = -self.config.off_track_penalty
+            terminated[errored] = True
+            task.reward_terms[errored] = 0.0
+            task.off_track[errored] = False
+            task.finished[errored] = False
+        if any_reset:
+            for i in np.flatnonzero(resetting):
+                task.reset_robot(int(i), self._rngs[i])
+                self._errors[i] = None
+            reward[resetting] = 0.0
+            terminated[resetting] = False
+            truncated[resetting] = False
+        done = terminated | truncated
+        infos = self._vector_info(errored if any_error else None)
+        obs = task.obs.copy()
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            final_obs = np.full(N, None, dtype=object)
+            for i in np.flatnonzero(done):
+                final_obs[i] = obs[i].copy()
+            final_info = infos
+            for i in np.flatnonzero(done):
+                task.reset_robot(int(i), self._rngs[i])
+                self._errors[i] = None
+            obs = task.obs.copy()
+            infos = self._vector_info(None)
+            infos["final_obs"] = final_obs
+            infos["_final_obs"] = done.copy()
+            infos["final_info"] = final_info
+            infos["_final_info"] = done.copy()
+            if self.render_index < N and done[self.render_index]:
+                self._start_trail()
+        else:
+            self._autoreset = done
+        if any_reset and self.render_index < N and resetting[self.render_index]:
+            self._start_trail()
+        self._extend_trail()
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, terminated, truncated, infos
+
+    def _vector_info(self, errored: np.ndarray | None) -> dict[str, Any]:
+        """The batched info (arrays with masks) of the current state."""
+        task, N = self.task, self.num_envs
+        summ = self.physics.summary
+        info: dict[str, Any] = {
+            "pose": summ[:, 0:3].copy(),
+            "progress": task.s.copy(),
+            "lateral_error": task.lat.copy(),
+            "heading_error": task.head.copy(),
+            "qua": task.qua.copy(),
+            "slip_power": summ[:, 8].copy(),
+            "internal_force": summ[:, 9].copy(),
+            "off_track": task.off_track.copy(),
+            "finished": task.finished.copy(),
+        }
+        for key in list(info):
+            info["_" + key] = np.ones(N, dtype=np.bool_)
+        terms = {name: task.reward_terms[:, j].copy() for j, name in enumerate(REWARD_TERMS)}
+        for name in REWARD_TERMS:
+            terms["_" + name] = np.ones(N, dtype=np.bool_)
+        info["reward_terms"] = terms
+        info["_reward_terms"] = np.ones(N, dtype=np.bool_)
+        if errored is not None and errored.any():
+            err = np.full(N, None, dtype=object)
+            for i in np.flatnonzero(errored):
+                err[i] = self._errors[i]
+            info["error"] = err
+            info["_error"] = errored.copy()
+        return info
+
+    # ------------------------------------------------------------------ rendering
+
+    def _start_trail(self) -> None:
+        if self.render_mode is not None and self.render_index < self.num_envs:
+            p = self.physics.summary[self.render_index]
+            self._trail = [(float(p[0]), float(p[1]))]
+
+    def _extend_trail(self) -> None:
+        if self.render_mode is not None and self.render_index < self.num_envs:
+            p = self.physics.summary[self.render_index]
+            self._trail.append((float(p[0]), float(p[1])))
+            if len(self._trail) > 2000:
+                del self._trail[:1000]
+
+    def render(self):
+        """Draw sub-env ``render_index`` (an RGB array in ``"rgb_array"`` mode)."""
+        if self.render_mode is None:
+            gym.logger.warn("You are calling render method without specifying any render mode.")
+            return None
+        i = self.render_index
+        if not 0 <= i < self.num_envs:
+            raise ValueError(f"render_index {i} out of range 0..{self.num_envs - 1}")
+        if self._renderer is None:
+            from .rendering import Renderer
+
+            self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
+        view = types.SimpleNamespace(track=self.task.tracks[i], physics=self.physics, _trail=self._trail,
+                                     _lam_hat=self.task.lam_hat[i], params=self.params, geometry=self.geometry)
+        return self._renderer.draw(view, robot=i)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
