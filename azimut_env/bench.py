@@ -1,46 +1,62 @@
-"""``azimut bench-env``: single-env throughput (steps/s) of Azimut-v0 with a time breakdown.
+"""``azimut bench-env``: simulator throughput (env steps/s), single env and vector env, with time splits.
 
-The breakdown times each stage of ``AzimutEnv.step`` inside the end-to-end loop (physics: the
-pymunk substeps and the compiled actuator/tire kernel; estimation: IT, μ̂ and qua; observation:
-sensors, track query, observation vector, reward, info). The end-to-end
-figure is the plain ``env.step`` loop with small uniformly random actions (resets excluded), also
-given for the fastest of five chunks since the machine may be shared; "other" is what the
-end-to-end time has beyond the stages (action checks, Python glue, cache effects).
+* The single env (``AzimutEnv``, the "naive" one robot per Space and per Python call) is timed in a
+  plain ``env.step`` loop with small uniformly random actions (resets excluded), with its stages
+  timed inside the same loop (thin timing wrappers on the task's stage methods).
+* ``--num-envs 1,16,64,256`` also times ``AzimutVectorEnv`` at each N, in the same run: an
+  uninstrumented loop of ``vec.step`` gives the steps/s (robot-steps per second: N per call) and
+  the ratio against the single env; a second, instrumented loop splits the time per robot-step
+  into actions, batched read, force model (the compiled actuator/spring/tire kernel), write,
+  ``space.step``, the per-step state read and summary, sensors (noise draws and encoder models),
+  estimation (the batched IT), track queries, reward + observation, and the rest (Python glue,
+  info arrays). The instrumented physics loop mirrors ``AzimutPhysics.step``'s fast path with a
+  clock around each call. Memory: resident-set growth of a 512-robot vector env per robot, measured
+in a fresh process.
+
+Compare ratios measured within one run: the machine may be shared.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import time
 
 import numpy as np
 
-__all__ = ["bench_env", "add_arguments", "run"]
+__all__ = ["bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
+
+#: stages of the vector env's split, in print order
+VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "sensors", "estimation", "track",
+                 "reward_obs", "other")
 
 
-def _time(fn, repeat: int) -> float:
-    t0 = time.perf_counter()
-    for _ in range(repeat):
-        fn()
-    return (time.perf_counter() - t0) / repeat
+def _rss_mb() -> float:
+    """Resident set size of this process [MB] (Linux /proc; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+        import os
+
+        return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, AttributeError):
+        return float("nan")
 
 
 def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8) -> dict[str, float]:
-    """Measure steps/s and per-stage microseconds per step. Returns a dict of figures.
+    """Single env: steps/s and per-stage microseconds per step. Returns a dict of figures.
 
-    The stages are timed inside the end-to-end loop itself (thin timing wrappers on the env's
+    The stages are timed inside the end-to-end loop itself (thin timing wrappers on the task's
     stage methods), so the breakdown adds up to the measured total on a shared machine too."""
-    from . import env as env_module
     from .env import AzimutEnv
 
     env = AzimutEnv(track=track, substeps=substeps)
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     actions = rng.uniform(-1, 1, size=(steps, env.action_space.shape[0])).astype(np.float32) * 0.2
-    # warm-up (numba kernels load from cache or compile)
-    for i in range(50):
+    for i in range(50):  # warm-up (numba kernels load from cache or compile)
         env.step(actions[i])
-    acc = {"physics": 0.0, "estimation": 0.0, "sensors": 0.0, "track": 0.0, "observation": 0.0}
+    acc = {"physics": 0.0, "estimation": 0.0, "sensors": 0.0, "track": 0.0, "observe": 0.0}
     clock = time.perf_counter
 
     def timed(fn, key):
@@ -51,59 +67,211 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
             return out
         return wrapper
 
-    h_state = env_module.h_state_from_measurements
-    env.physics.step = timed(env.physics.step, "physics")
-    env._measure = timed(env._measure, "sensors")  # includes estimation, subtracted below
-    env._track_state = timed(env._track_state, "track")
-    env._get_obs = timed(env._get_obs, "observation")
-    env._get_rew = timed(env._get_rew, "observation")
-    env._get_info = timed(env._get_info, "observation")
-    env_module.h_state_from_measurements = timed(h_state, "estimation")
-    try:
-        env.reset(seed=seed)
-        for key in acc:
-            acc[key] = 0.0
-        done, resets, elapsed = 0, 0, 0.0
-        chunk_rates = []
-        chunk = max(1, steps // 5)
-        while done < steps:
-            t0 = clock()
-            n_chunk = 0
-            for _ in range(chunk):
-                _, _, term, trunc, _ = env.step(actions[done % steps])
-                done += 1
-                n_chunk += 1
-                if term or trunc:
-                    break
-            dt = clock() - t0
-            elapsed += dt
-            chunk_rates.append(n_chunk / dt)
-            if term or trunc:  # resets are not timed, in the total or in the stages
-                saved = dict(acc)
-                env.reset()
-                acc.update(saved)
-                resets += 1
-    finally:
-        env_module.h_state_from_measurements = h_state
+    task = env.task
+    task.physics.step = timed(task.physics.step, "physics")
+    task._measure = timed(task._measure, "sensors")
+    task._estimate = timed(task._estimate, "estimation")
+    task._query_tracks = timed(task._query_tracks, "track")
+    task.observe = timed(task.observe, "observe")  # includes sensors, estimation, track
+    task.info = timed(task.info, "observe")
+    env.reset(seed=seed)
+    for key in acc:
+        acc[key] = 0.0
+    done, resets, elapsed = 0, 0, 0.0
+    chunk_rates = []
+    chunk = max(1, steps // 5)
+    while done < steps:
+        t0 = clock()
+        n_chunk = 0
+        term = trunc = False
+        for _ in range(chunk):
+            _, _, term, trunc, _ = env.step(actions[done % steps])
+            done += 1
+            n_chunk += 1
+            if term or trunc:
+                break
+        dt = clock() - t0
+        elapsed += dt
+        chunk_rates.append(n_chunk / dt)
+        if term or trunc:  # resets are not timed, in the total or in the stages
+            saved = dict(acc)
+            env.reset()
+            acc.update(saved)
+            resets += 1
     total = elapsed / done
     per = {key: value / done for key, value in acc.items()}
-    per["sensors"] = max(0.0, per["sensors"] - per["estimation"])
-    staged = sum(per.values())
+    obs_rest = max(0.0, per["observe"] - per["sensors"] - per["estimation"] - per["track"])
+    staged = per["physics"] + per["observe"]
     return {
         "steps_per_s": 1.0 / total,
         "us_per_step": total * 1e6,
         "physics_us": per["physics"] * 1e6,
         "estimation_us": per["estimation"] * 1e6,
-        "observation_us": (per["sensors"] + per["track"] + per["observation"]) * 1e6,
+        "observation_us": (per["sensors"] + per["track"] + obs_rest) * 1e6,
         "sensors_us": per["sensors"] * 1e6,
         "track_us": per["track"] * 1e6,
-        "obs_reward_info_us": per["observation"] * 1e6,
+        "obs_reward_info_us": obs_rest * 1e6,
         "other_us": max(0.0, total - staged) * 1e6,
         "substeps": float(substeps),
         "steps": float(done),
         "resets": float(resets),
         "best_chunk_steps_per_s": max(chunk_rates),
     }
+
+
+def _timed_physics_step(phys, acc: dict[str, float]) -> None:
+    """``AzimutPhysics.step`` (fast path) with a clock around each call of the substep loop."""
+    from .physics import _substep_kernel
+
+    clock = time.perf_counter
+    if phys._fast is None:
+        raise RuntimeError("the pymunk.batch fast path is unavailable: cannot split the physics time")
+    phys.acc[:] = 0.0
+    space, dt, n = phys.space, phys.dt, phys.n
+    ms, cmd, wp, en, accum, forces = phys.motor_state, phys.commands, phys.wheel_params, phys.enabled, phys.acc, \
+        phys._forces
+    lib, get_data, set_data, get_fn, set_fn = phys._fast
+    each, cstep, cspace = lib.cpSpaceEachBody, lib.cpSpaceStep, space._space
+    get_arr, set_arr = phys._get_buf._float_arr, phys._set_buf._float_arr
+    n_set = set_arr.num
+    t = clock()
+    space.step(0.0)
+    state = phys._state
+    t1 = clock()
+    acc["space_step"] += t1 - t
+    for _ in range(phys.substeps):
+        t0 = clock()
+        get_arr.num = 0
+        each(cspace, get_fn, get_data)
+        t1 = clock()
+        _substep_kernel(state, forces, ms, cmd, wp, en, accum, n, dt)
+        t2 = clock()
+        set_arr.num = 0
+        each(cspace, set_fn, set_data)
+        set_arr.num = n_set
+        t3 = clock()
+        cstep(cspace, dt)
+        t4 = clock()
+        acc["read"] += t1 - t0
+        acc["force"] += t2 - t1
+        acc["write"] += t3 - t2
+        acc["space_step"] += t4 - t3
+    t0 = clock()
+    phys._read_state()
+    acc["summary"] += clock() - t0
+
+
+def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "paper", seed: int = 0,
+                     substeps: int = 8, split: bool = True) -> dict[str, float]:
+    """``AzimutVectorEnv`` with N = ``num_envs``: robot-steps/s over about ``robot_steps`` robot-steps
+    (uninstrumented), the per-robot-step time split (a second, instrumented loop) and the memory
+    per robot. Returns a dict of figures (times in µs per robot-step)."""
+    from .vector_env import AzimutVectorEnv
+
+    gc.collect()
+    rss0 = _rss_mb()
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, substeps=substeps)
+    venv.reset(seed=seed)
+    N = num_envs
+    rng = np.random.default_rng(seed)
+    actions = (rng.uniform(-1, 1, size=(64, N, 2 * venv.n)) * 0.2).astype(np.float32)
+    for i in range(10):  # warm-up
+        venv.step(actions[i % 64])
+    calls = max(20, int(robot_steps // N))
+    clock = time.perf_counter
+    chunk = max(1, calls // 5)
+    rates = []
+    t_total = 0.0
+    done = 0
+    while done < calls:
+        t0 = clock()
+        m = min(chunk, calls - done)
+        for j in range(m):
+            venv.step(actions[(done + j) % 64])
+        dt = clock() - t0
+        t_total += dt
+        rates.append(m * N / dt)
+        done += m
+    rss1 = _rss_mb()
+    out: dict[str, float] = {
+        "num_envs": float(N),
+        "steps_per_s": calls * N / t_total,
+        "best_chunk_steps_per_s": max(rates),
+        "us_per_robot_step": t_total / (calls * N) * 1e6,
+        "rss_growth_mb_per_robot": (rss1 - rss0) / N,
+        "calls": float(calls),
+    }
+    if split:
+        out.update(_vector_split(venv, actions, calls))
+    venv.close()
+    return out
+
+
+def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
+    """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
+    from . import task as task_module
+
+    acc = {k: 0.0 for k in VECTOR_STAGES}
+    clock = time.perf_counter
+    task, phys = venv.task, venv.physics
+    original = (task.apply_actions, phys.step, task._measure, task._estimate, task._query_tracks,
+                task_module._reward_obs_kernel, task_module._draw_normals_kernel)
+
+    def timed(fn, key):
+        def wrapper(*args, **kwargs):
+            t = clock()
+            result = fn(*args, **kwargs)
+            acc[key] += clock() - t
+            return result
+        return wrapper
+
+    task.apply_actions = timed(original[0], "actions")
+    phys.step = lambda: _timed_physics_step(phys, acc)
+    task._measure = timed(original[2], "sensors")
+    task._estimate = timed(original[3], "estimation")
+    task._query_tracks = timed(original[4], "track")
+    task_module._reward_obs_kernel = timed(original[5], "reward_obs")
+    task_module._draw_normals_kernel = timed(original[6], "sensors")
+    N = venv.num_envs
+    try:
+        t0 = clock()
+        for i in range(calls):
+            venv.step(actions[i % 64])
+        total = clock() - t0
+    finally:
+        for name in ("apply_actions", "_measure", "_estimate", "_query_tracks"):
+            task.__dict__.pop(name, None)
+        phys.__dict__.pop("step", None)
+        task_module._reward_obs_kernel = original[5]
+        task_module._draw_normals_kernel = original[6]
+    acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
+    scale = 1e6 / (calls * N)
+    out = {f"{k}_us": v * scale for k, v in acc.items()}
+    out["instrumented_us_per_robot_step"] = total * scale
+    return out
+
+
+def memory_per_robot(num_envs: int = 512, track: str = "paper", substeps: int = 8) -> float:
+    """MB per robot of the vector env: the resident-set growth from building and running a
+    ``num_envs``-robot vector env after a 16-robot one (imports, compiled kernels and one-time
+    allocations paid), divided by ``num_envs``, in a fresh Python process."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gc, numpy as np\n"
+        "from azimut_env.bench import _rss_mb\n"
+        "from azimut_env.vector_env import AzimutVectorEnv\n"
+        "def run(n):\n"
+        f"    v = AzimutVectorEnv(num_envs=n, track={track!r}, substeps={int(substeps)})\n"
+        "    v.reset(seed=0)\n"
+        "    for _ in range(5): v.step(np.zeros((n, 8), dtype=np.float32))\n"
+        "    return v\n"
+        "keep = run(16); gc.collect(); r0 = _rss_mb()\n"
+        f"big = run({int(num_envs)}); gc.collect(); print((_rss_mb() - r0) / {int(num_envs)})\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
 
 
 def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: int = 0) -> float:
@@ -123,11 +291,25 @@ def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: 
     return steps / (time.perf_counter() - t0)
 
 
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of integers, got {text!r}") from None
+    if not values or any(v < 1 for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
+    return values
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--steps", type=int, default=5000, help="env steps in the end-to-end loop")
+    parser.add_argument("--steps", type=int, default=5000, help="single-env steps in the end-to-end loop")
     parser.add_argument("--track", default="paper")
     parser.add_argument("--substeps", type=int, default=8, help="physics substeps per control step")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--num-envs", type=_int_list, default=None, metavar="N[,N...]",
+                        help="also time the vector env at these N (e.g. 1,16,64,256)")
+    parser.add_argument("--vector-steps", type=int, default=20000,
+                        help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
     parser.add_argument("--reference", default="Pendulum-v1",
                         help="a Gymnasium env timed in the same run as a yardstick ('' to skip)")
 
@@ -144,9 +326,35 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'total':<16}{per:>10.1f}")
     print(f"steps/s: {r['steps_per_s']:.0f} overall, {r['best_chunk_steps_per_s']:.0f} in the best chunk "
           f"({int(r['resets'])} resets, not timed)  (bar 1500, goal 5000)")
+    if args.num_envs:
+        single = r["steps_per_s"]
+        print()
+        print(f"AzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
+              f"IT estimation included; ~{args.vector_steps} robot-steps per N")
+        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}")
+        rows = []
+        for N in args.num_envs:
+            v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps)
+            rows.append(v)
+            print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
+                  f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
+                  flush=True)
+        print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
+              "env above, same run; bar 20000, goal 50000 and 15x)")
+        mb = memory_per_robot(512, args.track, args.substeps)
+        print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env, fresh process)")
+        print()
+        print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
+              "control step, all substeps)")
+        labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
+        head = "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES)
+        print(f"{'N':>5}{head}{'total':>9}")
+        for v in rows:
+            cells = "".join(f"{v[k + '_us']:>11.2f}" for k in VECTOR_STAGES)
+            print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
     if args.reference:
         ref = reference_steps_per_s(args.reference)
-        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v0 at "
+        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v0 single env at "
               f"{r['steps_per_s'] / ref:.2f}x of it)")
     return 0
 
