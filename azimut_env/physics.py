@@ -156,7 +156,10 @@ def _substep_kernel(state, forces, ms, cmd, wp, enabled, acc, n, dt):
             th_m = state[rm, 2]
             w_m = state[rm, 5]
             beta = th_m - th_c - p[2]
-            beta = math.atan2(math.sin(beta), math.cos(beta))
+            if beta > math.pi:  # wrapped by branches: atan2(sin, cos) costs ~30% of the kernel
+                beta -= 2.0 * math.pi
+            elif beta < -math.pi:
+                beta += 2.0 * math.pi
             beta_dot = w_m - w_c
             # steering motor and series spring
             theta, omega = steer_motor_kernel(ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, on,
