@@ -118,7 +118,8 @@ class AzimutEnv(gym.Env):
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
       ``figure8``, ``square``, ``crab``, ``random``: a new seeded track per reset). Default ``paper``.
     * ``control_period``: seconds per step (default 0.02). ``substeps``: physics substeps per step
-      (default 8: a 2.5 ms substep).
+      (default 8: a 2.5 ms substep). ``solver_iterations``: pymunk solver iterations per substep
+      (default 20; 10 gives the same motion to ~1e-8 and runs ~15% faster, see ``AzimutPhysics``).
     * ``params``: :class:`~azimut_env.params.RobotParams`. ``sensors``: ``SensorParams`` or
       ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
       standard deviations (0: noise-free, quantisation kept).
@@ -149,9 +150,9 @@ class AzimutEnv(gym.Env):
                  heading_weight: float = 0.5, slip_weight: float = 0.002, action_rate_weight: float = 0.05,
                  off_track_penalty: float = 10.0, max_lateral_error: float = 0.5, lookahead_count: int = 5,
                  lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None) -> None:
+                 render_mode: str | None = None, solver_iterations: int = 20) -> None:
         params = resolve_params(params, sensors, noise_scale)
-        config = TaskConfig(control_period=control_period, substeps=substeps,
+        config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
                             domain_randomization=domain_randomization, progress_weight=progress_weight,
                             lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,

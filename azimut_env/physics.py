@@ -353,12 +353,15 @@ class AzimutPhysics:
         control_period: duration of one :meth:`step` [s].
         substeps: physics substeps per step; the substep is ``control_period / substeps``.
         blowup: thresholds of :meth:`check`.
+        solver_iterations: pymunk solver iterations per substep (pivot joints and hard stops). The
+            joints converge in fewer: 10 gave the same observations as 20 in a bang-bang-and-kicks
+            stress run and within 1e-8 in random driving, for about 15% less time per step.
 
     State accessors return arrays with a leading robot axis N.
     """
 
     def __init__(self, params: RobotParams | None = None, n_robots: int = 1, control_period: float = 0.02,
-                 substeps: int = 8, blowup: BlowUpLimits | None = None) -> None:
+                 substeps: int = 8, blowup: BlowUpLimits | None = None, solver_iterations: int = 20) -> None:
         self.params = params if params is not None else RobotParams()
         if int(n_robots) != n_robots or n_robots < 1:
             raise ValueError(f"n_robots must be a positive integer, got {n_robots!r}")
@@ -370,6 +373,9 @@ class AzimutPhysics:
         self.n = self.params.n
         self.control_period = float(control_period)
         self.substeps = int(substeps)
+        if int(solver_iterations) != solver_iterations or solver_iterations < 1:
+            raise ValueError(f"solver_iterations must be a positive integer, got {solver_iterations!r}")
+        self.solver_iterations = int(solver_iterations)
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
         self._check_stability()
@@ -432,7 +438,7 @@ class AzimutPhysics:
     def _build_space(self) -> None:
         p, g = self.params, self.params.geometry
         space = pymunk.Space()
-        space.iterations = 20
+        space.iterations = self.solver_iterations
         space.gravity = (0.0, 0.0)
         robot_filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
         # Collision shapes only matter against obstacles; without obstacles the bodies carry their

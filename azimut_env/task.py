@@ -100,6 +100,7 @@ class TaskConfig:
 
     Attributes:
         control_period: seconds per step [s]. substeps: physics substeps per step.
+        solver_iterations: pymunk solver iterations per substep (see ``AzimutPhysics``).
         domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
             damping and chassis mass, drawn per reset.
         progress_weight, lateral_weight [1/m²], heading_weight [1/rad²], slip_weight [1/W],
@@ -111,6 +112,7 @@ class TaskConfig:
 
     control_period: float = 0.02
     substeps: int = 8
+    solver_iterations: int = 20
     domain_randomization: float = 0.0
     progress_weight: float = 1.0
     lateral_weight: float = 5.0
@@ -292,7 +294,8 @@ class AzimutTask:
         self.n = n = params.n
         self.n_robots = N = int(n_robots)
         self.physics = AzimutPhysics(params, n_robots=N, control_period=config.control_period,
-                                     substeps=config.substeps, blowup=BlowUpLimits())
+                                     substeps=config.substeps, blowup=BlowUpLimits(),
+                                     solver_iterations=config.solver_iterations)
         self.physics.set_obstacles(obstacles)
         self.default_obstacles = self.physics.obstacles
         self.track_spec = track

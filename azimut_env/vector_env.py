@@ -74,7 +74,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     ``num_envs``; ``max_episode_steps`` (default 6000); ``autoreset_mode``; ``render_index``
     (the sub-env :meth:`render` draws; settable); and all the single env's keyword arguments:
     ``track`` (one for all sub-envs; ``"random"`` draws a track per sub-env and episode),
-    ``control_period``, ``substeps``, ``params``, ``sensors``, ``noise_scale``,
+    ``control_period``, ``substeps``, ``solver_iterations``, ``params``, ``sensors``, ``noise_scale``,
     ``domain_randomization`` (drawn per sub-env and reset), reward weights,
     ``max_lateral_error``, ``lookahead_count``, ``lookahead_spacing``, ``obstacles`` (shared by all
     sub-envs, at the same world positions), ``start_noise``, ``render_mode``.
@@ -101,7 +101,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                  lateral_weight: float = 5.0, heading_weight: float = 0.5, slip_weight: float = 0.002,
                  action_rate_weight: float = 0.05, off_track_penalty: float = 10.0, max_lateral_error: float = 0.5,
                  lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, max_episode_steps: int | None = 6000,
+                 render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = 6000,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -114,7 +114,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
         params = resolve_params(params, sensors, noise_scale)
-        config = TaskConfig(control_period=control_period, substeps=substeps,
+        config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
                             domain_randomization=domain_randomization, progress_weight=progress_weight,
                             lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,

@@ -221,3 +221,22 @@ def test_batched_controller_interface():
     info = venv.sub_env_info(2)
     assert set(info) >= {"pose", "eta_true", "tire_forces", "reward_terms"}
     assert len(venv.tracks) == 4 and venv.true_pose.shape == (4, 3)
+
+
+def test_solver_iterations_knob():
+    venv = AzimutVectorEnv(num_envs=2, solver_iterations=10)
+    assert venv.physics.space.iterations == 10
+    assert AzimutEnv(solver_iterations=12).physics.space.iterations == 12
+    with pytest.raises(ValueError, match="solver_iterations"):
+        AzimutVectorEnv(num_envs=2, solver_iterations=0)
+
+
+def test_constructor_validation():
+    with pytest.raises(ValueError, match="num_envs"):
+        AzimutVectorEnv(num_envs=0)
+    with pytest.raises(ValueError, match="max_episode_steps"):
+        AzimutVectorEnv(num_envs=2, max_episode_steps=0)
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        AzimutVectorEnv(num_envs=2, autoreset_mode="sometimes")
+    with pytest.raises(ValueError, match="lateral"):
+        AzimutVectorEnv(num_envs=2, max_lateral_error=0.0)
