@@ -337,6 +337,7 @@ class AzimutTask:
         self.track_length = np.array([t.length for t in self.tracks])
         self.track_max_speed = np.array([t.max_speed for t in self.tracks])
         self.kicks: list[dict | None] = [None] * N
+        self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
         self._normals = np.zeros((N, 3, n))
         self._meas = np.empty((N, 3, n))
@@ -381,12 +382,14 @@ class AzimutTask:
         else:
             phys.renew_joints(i)
         self.kicks[i] = None
+        self._kick_step[i] = -1
         if "kick" in options:
             kick = dict(options["kick"])
             if set(kick) - {"step", "wheels", "impulse"}:
                 raise ValueError("kick option takes keys 'step', 'wheels', 'impulse'")
             self.kicks[i] = dict(step=int(kick.get("step", 0)), wheels=list(kick.get("wheels", range(n))),
                                  impulse=float(kick.get("impulse", 0.5)))
+            self._kick_step[i] = self.kicks[i]["step"]
         self._randomize(i, rng)
         sb = self.params.sensors.steer_bias
         self.steer_bias[i] = rng.normal(0.0, sb, size=n) if sb > 0 else 0.0
@@ -472,9 +475,10 @@ class AzimutTask:
         """Kicks due now, then one control period of physics for all robots. Returns the blow-up
         codes (N,) (0: fine; see ``physics.BLOWUP_MESSAGES``)."""
         phys = self.physics
-        for i, kick in enumerate(self.kicks):
-            if kick is not None and self.steps[i] == kick["step"]:
-                phys.kick(i, kick["wheels"], kick["impulse"])
+        if self._kick_step.max() >= 0:
+            for i in np.flatnonzero(self._kick_step == self.steps):
+                kick = self.kicks[i]
+                phys.kick(int(i), kick["wheels"], kick["impulse"])
         phys.step()
         self.steps += 1
         return phys.summary[:, 10]

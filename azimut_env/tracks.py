@@ -80,7 +80,9 @@ def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s
             off = 0.0
         dx = X[i] - px
         dy = Y[i] - py
-        dth = _wrap_pi(TH[i] - pth)
+        dth = TH[i] - pth
+        if dth > math.pi or dth <= -math.pi:  # the float modulo only when needed (hot loop)
+            dth = _wrap_pi(dth)
         c = dx * dx + dy * dy + (rho * dth) ** 2
         if c < best:
             best = c
@@ -467,8 +469,9 @@ def _line(p0, p1, spacing):
     return p0 + t[:, None] * (p1 - p0)
 
 
-def paper_track(speed: float = 0.4, spacing: float = 0.02) -> Track:
-    """Spiral, then circle, then square with rounded corners (after the paper's Fig. 9).
+def paper_track(speed: float = 1.0, spacing: float = 0.02) -> Track:
+    """Spiral, then circle, then square with rounded corners (after the paper's Fig. 9), at a nominal
+    ``speed`` of 1 m/s (the path follower slows for curvature and stops).
 
     As in the paper (§4): the spiral is a continuously moving ICR with concurrent axes, the circle a
     constant ICR, and the rounded square switches between parallel propulsion axes (straight

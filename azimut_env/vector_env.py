@@ -382,13 +382,16 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
             "off_track": task.off_track.copy(),
             "finished": task.finished.copy(),
         }
+        every = np.ones(N, dtype=np.bool_)
         for key in list(info):
-            info["_" + key] = np.ones(N, dtype=np.bool_)
-        terms = {name: task.reward_terms[:, j].copy() for j, name in enumerate(REWARD_TERMS)}
-        for name in REWARD_TERMS:
-            terms["_" + name] = np.ones(N, dtype=np.bool_)
+            info["_" + key] = every.copy()
+        columns = task.reward_terms.T.copy()
+        terms: dict[str, np.ndarray] = {}
+        for j, name in enumerate(REWARD_TERMS):
+            terms[name] = columns[j]
+            terms["_" + name] = every.copy()
         info["reward_terms"] = terms
-        info["_reward_terms"] = np.ones(N, dtype=np.bool_)
+        info["_reward_terms"] = every
         if errored is not None and errored.any():
             err = np.full(N, None, dtype=object)
             for i in np.flatnonzero(errored):
