@@ -1,8 +1,10 @@
 """The Gymnasium task: drive a simulated AZIMUT-3 along a track (``Azimut-v0``).
 
-The physics lives in :mod:`azimut_env.physics`; this module holds the task (observation, reward,
-termination) and the interface that controllers use (limits, set-point mapping, measurements,
-estimated H state, track).
+The physics lives in :mod:`azimut_env.physics` and the task (observation, reward, termination,
+resets, over N robots at once) in :mod:`azimut_env.task`; this module is the single env, the N = 1
+front end of that task (:class:`~azimut_env.vector_env.AzimutVectorEnv` is the N-robot one), and
+the interface that controllers use (limits, set-point mapping, measurements, estimated H state,
+track).
 
 Controller interface (stable names, on ``env.unwrapped``):
 
