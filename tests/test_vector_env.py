@@ -240,3 +240,18 @@ def test_constructor_validation():
         AzimutVectorEnv(num_envs=2, autoreset_mode="sometimes")
     with pytest.raises(ValueError, match="lateral"):
         AzimutVectorEnv(num_envs=2, max_lateral_error=0.0)
+
+
+def test_gymnasium_vector_wrappers_work():
+    from gymnasium.wrappers.vector import NormalizeObservation, RecordEpisodeStatistics
+
+    venv = NormalizeObservation(RecordEpisodeStatistics(AzimutVectorEnv(num_envs=3, max_episode_steps=5)))
+    venv.reset(seed=0)
+    episodes = 0
+    for _ in range(12):
+        obs, rew, term, trunc, info = venv.step(np.zeros((3, 8), dtype=np.float32))
+        assert np.all(np.isfinite(obs))
+        if "episode" in info:
+            episodes += int(info["_episode"].sum())
+            assert np.all(info["episode"]["l"][info["_episode"]] == 5)
+    assert episodes == 6
