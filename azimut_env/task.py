@@ -7,11 +7,12 @@ front ends over it, so there is one copy of the task and of the physics:
 * :class:`~azimut_env.env.AzimutEnv` (``Azimut-v0``) is the N = 1 case;
 * :class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
 
-One control step (:meth:`AzimutTask.step`) is: a compiled check/clip/write of all actions, the
-physics step (per substep one batched read, the compiled force model over all wheels, one batched
-write, one ``space.step``), a compiled sensor model over all wheels, one batched IT estimate
-(``estimation.estimate_eta``), one compiled track query per distinct track, and one compiled
-reward and observation fill for all robots.
+One control step is :meth:`AzimutTask.apply_actions` (a compiled check/clip/write of all
+actions), :meth:`AzimutTask.step_physics` (per substep one batched read, the compiled force model
+over all wheels, one batched write, one ``space.step``) and :meth:`AzimutTask.observe` (a compiled
+sensor model over all wheels, one batched IT estimate with ``estimation.estimate_eta``, one
+compiled track query for all robots, each on its own track, and one compiled reward and
+observation fill for all robots).
 
 Randomness comes from one ``numpy.random.Generator`` per robot, passed in by the caller (the single
 env's ``np_random``, or the vector env's sub-env generators). Each robot consumes its generator in
@@ -33,7 +34,7 @@ from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 from .params import RobotParams, SensorParams, action_from_setpoints
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import _measure_kernel
-from .tracks import Track, make_track
+from .tracks import Track, make_track, query_tracks
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
            "REWARD_TERMS", "RESET_OPTIONS"]
@@ -336,12 +337,14 @@ class AzimutTask:
         self.phi_prev = np.zeros((N, n))
         self.track_length = np.array([t.length for t in self.tracks])
         self.track_max_speed = np.array([t.max_speed for t in self.tracks])
+        self.track_closed = np.array([t.closed for t in self.tracks], dtype=np.bool_)
+        self.track_rho = np.array([t.progress_radius for t in self.tracks])
+        self._packs = NumbaList([t.packed() for t in self.tracks])
         self.kicks: list[dict | None] = [None] * N
         self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
         self._normals = np.zeros((N, 3, n))
         self._meas = np.empty((N, 3, n))
-        self._groups: list[tuple[Track, np.ndarray | None]] | None = None
 
     # ------------------------------------------------------------------ reset
 
@@ -365,9 +368,11 @@ class AzimutTask:
             track = make_track(spec, rng=rng)
         if track is not self.tracks[i]:
             self.tracks[i] = track
-            self._groups = None
+            self._packs[i] = track.packed()
         self.track_length[i] = track.length
         self.track_max_speed[i] = track.max_speed
+        self.track_closed[i] = track.closed
+        self.track_rho[i] = track.progress_radius
         if "obstacles" in options:
             if not fresh_space or self.n_robots != 1:
                 raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
@@ -542,30 +547,13 @@ class AzimutTask:
         self.beta_est[rows] = beta_est
         self.qua[rows] = qua
 
-    def _track_groups(self) -> list[tuple[Track, np.ndarray | None]]:
-        """Robots grouped by track object (None: all robots share it)."""
-        if self._groups is None:
-            first = self.tracks[0]
-            if all(t is first for t in self.tracks):
-                self._groups = [(first, None)]
-            else:
-                by_id: dict[int, tuple[Track, list[int]]] = {}
-                for i, t in enumerate(self.tracks):
-                    by_id.setdefault(id(t), (t, []))[1].append(i)
-                self._groups = [(t, np.array(idx)) for t, idx in by_id.values()]
-        return self._groups
-
     def _query_tracks(self, s_hint: np.ndarray) -> None:
-        cfg, summ = self.config, self.physics.summary
-        for track, idx in self._track_groups():
-            if idx is None:
-                out, look = track.query_many(summ[:, :3], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
-                self.track_out[:] = out
-                self.look[:] = look
-            else:
-                out, look = track.query_many(summ[idx, :3], s_hint[idx], cfg.lookahead_count, cfg.lookahead_spacing)
-                self.track_out[idx] = out
-                self.look[idx] = look
+        """Every robot's track state, each on its own track, in one compiled call."""
+        cfg = self.config
+        out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho,
+                                 self.physics.summary[:, :3], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
+        self.track_out[:] = out
+        self.look[:] = look
         self._unpack_track(slice(None))
 
     def _unpack_track(self, rows: slice) -> None:
@@ -574,6 +562,17 @@ class AzimutTask:
         self.lat[rows] = out[:, 1]
         self.head[rows] = out[:, 2]
         self.v_ref[rows] = out[:, 3]
+
+    # ------------------------------------------------------------------ pickling
+
+    def __getstate__(self) -> dict:
+        d = self.__dict__.copy()
+        d.pop("_packs", None)  # a numba typed list: rebuilt from the tracks
+        return d
+
+    def __setstate__(self, d: dict) -> None:
+        self.__dict__.update(d)
+        self._packs = NumbaList([t.packed() for t in self.tracks])
 
     # ------------------------------------------------------------------ info
 

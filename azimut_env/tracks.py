@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-__all__ = ["Track", "make_track", "TRACK_NAMES", "wrap_angle"]
+__all__ = ["Track", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle"]
 
 TRACK_NAMES = ("paper", "circle", "figure8", "square", "crab", "random")
 
@@ -134,6 +134,45 @@ def _track_query_many_kernel(S, X, Y, TH, V, PSI, closed, length, rho, poses, hi
         out[i, 2] = head
         out[i, 3] = vr
         out[i, 4] = psi
+
+
+@njit(cache=True)
+def _track_query_multi_kernel(packs, closed, length, rho, poses, hints, back, ahead, spacing, out, look):
+    """:func:`_track_query_kernel` for N robots, each on its own track: ``packs[i]`` is robot i's
+    :meth:`Track.packed` array (6, m); closed, length, rho (N,) its flags and scalars."""
+    for i in range(poses.shape[0]):
+        p = packs[i]
+        s, lat, head, vr, psi = _track_query_kernel(p[0], p[1], p[2], p[3], p[4], p[5], closed[i], length[i],
+                                                    rho[i], poses[i, 0], poses[i, 1], poses[i, 2], hints[i],
+                                                    back, ahead, spacing, look[i])
+        out[i, 0] = s
+        out[i, 1] = lat
+        out[i, 2] = head
+        out[i, 3] = vr
+        out[i, 4] = psi
+
+
+def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: int, spacing: float,
+                 back: float = 0.5, ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Track.query` for N robots on N tracks in one compiled call.
+
+    Args:
+        packs: a ``numba.typed.List`` of the robots' :meth:`Track.packed` arrays.
+        closed (N,) bool, length (N,) [m], rho (N,) [m]: each track's ``closed``, ``length`` and
+            ``progress_radius``. poses (N, 3), s_hints (N,): as :meth:`Track.query_many`.
+
+    Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``,
+    the same numbers as :meth:`Track.query` robot by robot.
+    """
+    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
+    hints = np.ascontiguousarray(np.asarray(s_hints, dtype=np.float64).reshape(-1))
+    n = poses.shape[0]
+    if hints.shape[0] != n or len(packs) != n or closed.shape[0] != n or length.shape[0] != n or rho.shape[0] != n:
+        raise ValueError("query_tracks needs one track, flag, length, radius and s_hint per pose")
+    out = np.empty((n, 5))
+    look = np.empty((n, int(lookahead_count), 3))
+    _track_query_multi_kernel(packs, closed, length, rho, poses, hints, back, ahead, spacing, out, look)
+    return out, look
 
 
 @dataclass(frozen=True, eq=False)
@@ -442,6 +481,16 @@ class Track:
         _track_query_many_kernel(self.s, self._x, self._y, self.heading, self.speed, self.tangent, self.closed,
                                  self.length, self.progress_radius, poses, hints, back, ahead, spacing, out, look)
         return out, look
+
+    def packed(self) -> np.ndarray:
+        """(6, m) C-contiguous rows (s, x, y, heading, speed, tangent), what the compiled queries
+        read (built once per track and cached)."""
+        cached = self.__dict__.get("_packed")
+        if cached is None:
+            cached = np.ascontiguousarray(np.stack([self.s, self._x, self._y, self.heading, self.speed,
+                                                    self.tangent]).astype(np.float64))
+            object.__setattr__(self, "_packed", cached)
+        return cached
 
     def finished(self, s: float) -> bool:
         """Whether progress s has reached the end (one lap on a closed track)."""

@@ -5,8 +5,8 @@ physics code as the single env (which is its N = 1 case). Per control step: one 
 action check for all robots, ``substeps`` physics substeps (each: one ``pymunk.batch`` read of all
 bodies, the compiled actuator/spring/tire kernel over all robots × wheels, one batched write of all
 forces and torques, one ``space.step``), then the compiled sensor model over all wheels, one
-batched IT estimate (``estimation.estimate_eta``), one compiled track query per distinct track and
-one compiled reward/observation fill. Robots never collide with each other.
+batched IT estimate (``estimation.estimate_eta``), one compiled track query for all robots (each on
+its own track) and one compiled reward/observation fill. Robots never collide with each other.
 
 ``gymnasium.make_vec("Azimut-v0", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
 (keyword arguments as for ``gymnasium.make("Azimut-v0", ...)``).

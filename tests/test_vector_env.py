@@ -255,3 +255,20 @@ def test_gymnasium_vector_wrappers_work():
             episodes += int(info["_episode"].sum())
             assert np.all(info["episode"]["l"][info["_episode"]] == 5)
     assert episodes == 6
+
+
+def test_query_tracks_matches_track_query_per_robot():
+    from numba.typed import List
+
+    from azimut_env.tracks import make_track, query_tracks
+
+    rng = np.random.default_rng(0)
+    tracks = [make_track("paper"), make_track("circle"), make_track("random", rng=rng), make_track("crab")]
+    s = np.array([1.0, 7.0, 3.0, 0.5])
+    poses = np.stack([t.sample(si)[:3] for t, si in zip(tracks, s)]) + rng.normal(0, 0.05, (4, 3))
+    out, look = query_tracks(List([t.packed() for t in tracks]), np.array([t.closed for t in tracks]),
+                             np.array([t.length for t in tracks]), np.array([t.progress_radius for t in tracks]),
+                             poses, s, 5, 0.3)
+    for i, t in enumerate(tracks):
+        ref = t.query(poses[i], s[i], 5, 0.3)
+        assert np.array_equal(out[i], np.array(ref[:5])) and np.array_equal(look[i], ref[5])
