@@ -162,15 +162,18 @@ def _timed_physics_step(phys, acc: dict[str, float]) -> None:
 
 
 def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "paper", seed: int = 0,
-                     substeps: int = 8, split: bool = True, solver_iterations: int = 20) -> dict[str, float]:
+                     substeps: int = 8, split: bool = True, solver_iterations: int = 20,
+                     max_episode_steps: int | None = 6000) -> dict[str, float]:
     """``AzimutVectorEnv`` with N = ``num_envs``: robot-steps/s over about ``robot_steps`` robot-steps
     (uninstrumented), the per-robot-step time split (a second, instrumented loop) and the memory
-    per robot. Returns a dict of figures (times in µs per robot-step)."""
+    per robot. ``max_episode_steps`` short enough puts autoresets (timed) in the loop. Returns a
+    dict of figures (times in µs per robot-step)."""
     from .vector_env import AzimutVectorEnv
 
     gc.collect()
     rss0 = _rss_mb()
-    venv = AzimutVectorEnv(num_envs=num_envs, track=track, substeps=substeps, solver_iterations=solver_iterations)
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, substeps=substeps, solver_iterations=solver_iterations,
+                           max_episode_steps=max_episode_steps)
     venv.reset(seed=seed)
     N = num_envs
     rng = np.random.default_rng(seed)
@@ -310,6 +313,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also time the vector env at these N (e.g. 1,16,64,256)")
     parser.add_argument("--vector-steps", type=int, default=20000,
                         help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
+    parser.add_argument("--episode-steps", type=int, default=6000,
+                        help="vector env time limit; short values put (timed) autoresets in the loop")
     parser.add_argument("--solver-iterations", type=int, default=20,
                         help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
     parser.add_argument("--reference", default="Pendulum-v1",
@@ -332,12 +337,13 @@ def run(args: argparse.Namespace) -> int:
         single = r["steps_per_s"]
         print()
         print(f"AzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
-              f"{args.solver_iterations} solver iterations, IT estimation included; ~{args.vector_steps} robot-steps per N")
+              f"{args.solver_iterations} solver iterations, IT estimation included; ~{args.vector_steps} robot-steps per N, "
+              f"episodes of at most {args.episode_steps} steps (autoresets timed)")
         print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}")
         rows = []
         for N in args.num_envs:
             v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
-                                 solver_iterations=args.solver_iterations)
+                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps)
             rows.append(v)
             print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
                   f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
