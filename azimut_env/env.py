@@ -24,7 +24,6 @@ Controller interface (stable names, on ``env.unwrapped``):
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import gymnasium as gym
