@@ -319,7 +319,7 @@ class AzimutEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("You are calling render method without specifying any render mode. "
                             "You can specify the render_mode at initialization, "
-                            f'e.g. gym.make("Azimut-v0", render_mode="rgb_array")')
+                            'e.g. gym.make("Azimut-v0", render_mode="rgb_array")')
             return None
         if self._renderer is None:
             from .rendering import Renderer
