@@ -380,11 +380,29 @@ def _exp_map(lam: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
+def _stop_room(beta, beta_rate, geom) -> np.ndarray:
+    """Angle [rad] left before the steering stop each wheel is turning toward (inf at rest)."""
+    return np.where(beta_rate > 0, geom.steer_max - beta, np.where(beta_rate < 0, beta - geom.steer_min, np.inf))
+
+
+def _safe_stop_speed(room, accel, dt) -> np.ndarray:
+    """Largest steering speed from which braking at ``accel``, one period late, stops within ``room``:
+    v dt/2 + v²/(2 a) ≤ room."""
+    room = np.maximum(room, 0.0)
+    return -0.5 * accel * dt + np.sqrt((0.5 * accel * dt) ** 2 + 2.0 * accel * room)
+
+
 def _saturate(beta_prev, beta_rate_prev, phidot_prev, beta_want, phidot_want, geom, limits, dt):
-    """Per-wheel saturation of a command (fallback): rate, accel, range, then φ̇ and φ̈."""
+    """Per-wheel saturation of a command (fallback): rate, accel, braking before the stops, range,
+    then φ̇ and φ̈."""
+    a = limits.steer_accel_max
     rate = (beta_want - beta_prev) / dt
-    rate = np.clip(rate, beta_rate_prev - limits.steer_accel_max * dt, beta_rate_prev + limits.steer_accel_max * dt)
+    rate = np.clip(rate, beta_rate_prev - a * dt, beta_rate_prev + a * dt)
     rate = np.clip(rate, -limits.steer_rate_max, limits.steer_rate_max)
+    # a wheel turning toward its stop brakes (within the accel limit) so it can stop before it
+    room = _stop_room(beta_prev + rate * dt, rate, geom)
+    v_safe = np.maximum(_safe_stop_speed(room, 0.95 * a, dt), np.abs(beta_rate_prev) - a * dt)
+    rate = np.sign(rate) * np.minimum(np.abs(rate), v_safe)
     beta = np.clip(beta_prev + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - beta_prev) / dt
     phidot = np.clip(phidot_want, phidot_prev - limits.wheel_accel_max * dt, phidot_prev + limits.wheel_accel_max * dt)
@@ -431,11 +449,15 @@ def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float,
     c = wheel_speed_coefficients(lam_new, geom, beta_new)
     phidot = (mu_new[:, None] * c - geom.b[None, :] * beta_rate) / geom.r[None, :]
     phiddot = (phidot - state.phidot[None, :]) / dt
+    # every wheel must keep the room to brake before the stop it turns toward (a wheel that runs
+    # into a stop at speed would exceed the acceleration limit there)
+    v_stop = _safe_stop_speed(_stop_room(beta_new, beta_rate, geom), 0.8 * limits.steer_accel_max, dt)
     ratio = np.max(np.stack([
         np.abs(beta_rate) / limits.steer_rate_max,
         np.abs(beta_acc) / limits.steer_accel_max,
         np.abs(phidot) / limits.wheel_speed_max,
         np.abs(phiddot) / limits.wheel_accel_max,
+        np.abs(beta_rate) / np.maximum(v_stop, 1e-12),
     ]), axis=(0, 2))
     ratio = np.where(flipped, np.inf, ratio)
     feasible = ratio <= 1.0 - 1e-9
@@ -486,7 +508,12 @@ def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: 
         a_plan = 0.85 * a
         vstop = -0.5 * a_plan * dt + np.sqrt((0.5 * a_plan * dt) ** 2 + 2.0 * a_plan * np.abs(err))
         want = np.sign(err) * np.minimum(vmax, np.minimum(vstop, np.abs(err) / dt))
-        rate = np.clip(want, state.beta_rate - a * dt, state.beta_rate + a * dt)
+        # speeding up follows the gentle profile; braking (less speed, or a reversal) may use the
+        # full limit, so a wheel still turning toward a stop when the reconfiguration starts
+        # stops short of it instead of being clipped there
+        braking = (want * state.beta_rate < 0) | (np.abs(want) < np.abs(state.beta_rate) - 1e-12)
+        a_step = np.where(braking, np.maximum(a, 0.95 * limits.steer_accel_max), a) * dt
+        rate = np.clip(want, state.beta_rate - a_step, state.beta_rate + a_step)
     beta = np.clip(state.beta + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - state.beta) / dt
     phidot_want = -geom.b * (rate if measured_rate is None else measured_rate) / geom.r
