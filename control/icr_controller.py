@@ -20,7 +20,9 @@ Per control step (RUNNING):
    along the great circle from the current λ, so β stays defined and slow;
 4. the great-circle arc λ -> λ_d is checked: if it passes a steering stop (some β_k wraps) or a
    steering axis, the controller stops, reconfigures the wheels in place and goes on
-   (RUNNING -> STOPPING -> RECONFIGURING -> RUNNING);
+   (RUNNING -> STOPPING -> RECONFIGURING -> RUNNING); a target only just past a stop is held at
+   the stop (λ waits there) for at most ``stop_hold_time``, so jitter does not turn wheels by π
+   but a target that stays past the stop is not missed for long;
 5. otherwise λ moves along the great circle toward λ_d with a braking profile, and μ toward μ_d.
    The step is *time-scaled* [35–36] in discrete form: a common factor κ ∈ [0, 1] blends the
    previous motion (λ̇, μ̇ carried over) with the desired one, and the largest κ for which every
@@ -108,6 +110,11 @@ class ICRControllerConfig:
             less: the compliant steering lags less behind its set-point).
         stop_hysteresis: a target less than this arc [rad] past a steering stop is held at the
             stop (the robot goes on with λ at the stop) instead of triggering a reconfiguration.
+        stop_hold_time: longest time [s] a target may stay held at a steering stop: one that stays
+            past the stop longer is not jitter but a motion the wheels cannot make from this side
+            (the held λ then misses it, the path follower's feedback pushes it farther past, and
+            the tracking error grows until the hysteresis is exceeded, at speed), so the robot
+            stops and reconfigures at once.
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -126,13 +133,15 @@ class ICRControllerConfig:
     reconfig_timeout: float = 2.0
     stop_timeout: float = 0.5
     stop_hysteresis: float = np.deg2rad(6.0)
+    stop_hold_time: float = 0.1
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("k_lambda", "mu_accel_fraction", "mu_headroom", "axis_margin", "arc_step", "stop_mu_tol",
-                     "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout"):
+                     "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
+                     "stop_hold_time"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"ICRControllerConfig.{name} must be finite and > 0, got {value!r}")
@@ -159,6 +168,7 @@ class ICRControllerState:
         events: number of stop-and-reconfigure sequences started so far.
         beta_meas: (n,) the previous step's measured steering angles [rad] (for the measured
             steering rate), or None.
+        held_time: how long [s] the target has been held at a steering stop without a break.
     """
 
     mode: Mode
@@ -172,6 +182,7 @@ class ICRControllerState:
     reconfig_lam: np.ndarray | None = None
     events: int = 0
     beta_meas: np.ndarray | None = None
+    held_time: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -563,6 +574,7 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     info.update(lam_target=lam_d, mu_target=mu_d, axis_cap=axis_k)
 
     mode, mode_time, events, reconfig_lam = state.mode, state.mode_time + dt, state.events, state.reconfig_lam
+    held_time = 0.0
 
     # a wheel knocked out of place (measured far from commanded) -> stop and reconfigure
     kicked = bool(np.max(np.abs(_wrap_half(beta_meas - state.beta))) > config.kick_tol)
@@ -571,11 +583,14 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
         if not zero_cmd:
             blocked, free, theta = arc_check(state.lam, lam_d, geom, config.axis_margin, config.arc_step)
             if blocked == "stop" and theta - free < config.stop_hysteresis:
-                # only just past a steering stop: wait at the stop instead of turning wheels by π;
-                # a target that keeps going reconfigures once, a jittering one never does
-                lam_d = slerp(state.lam, lam_d, free)
-                blocked = None
-                info["held_at_stop"] = True
+                held_time = state.held_time + dt
+                if held_time <= config.stop_hold_time + 1e-9:
+                    # only just past a steering stop: wait at the stop instead of turning wheels
+                    # by π; a target that keeps going (or stays past) reconfigures once, a
+                    # jittering one never does
+                    lam_d = slerp(state.lam, lam_d, free)
+                    blocked = None
+                    info["held_at_stop"] = True
         if kicked or blocked is not None:
             info["event"] = "kick" if kicked else blocked
             events += 1
@@ -636,7 +651,8 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     new_state = ICRControllerState(mode=mode, lam=lam_new, mu=float(mu_new), lam_rate=np.asarray(lam_rate),
                                    beta=np.asarray(beta_c), beta_rate=np.asarray(rate_c),
                                    phidot=np.asarray(phidot_c), mode_time=mode_time,
-                                   reconfig_lam=reconfig_lam, events=events, beta_meas=beta_meas.copy())
+                                   reconfig_lam=reconfig_lam, events=events, beta_meas=beta_meas.copy(),
+                                   held_time=held_time if info.get("held_at_stop") else 0.0)
     cmd = WheelCommand(beta=new_state.beta.copy(), phidot=new_state.phidot.copy(), beta_rate=rate_c.copy(),
                        beta_accel=accel, phiddot=phiddot, info=info)
     return new_state, cmd

@@ -13,7 +13,8 @@ Per step, with the pose (x, y, θ) in the world:
 3. feedback on the pose error, position and heading separately (the robot is omnidirectional, so
    the heading follows its own profile, independent of the path direction):
    v = v_ref + k_p (p_ref − p) + k_i n ∫ e_n dt and ω = θ̇_ref + k_θ wrap(θ_ref − θ), with the
-   corrections capped (n: the path normal, e_n the cross-track error, integrated while moving);
+   corrections capped (n: the path normal, e_n the cross-track error, integrated while the robot
+   makes progress along the track);
 4. the world twist is rotated into the chassis frame; ``eta_from_twist`` gives (λ_d, μ_d), using
    ξ̇ = μ (v, −u, w) (§2).
 """
@@ -40,9 +41,11 @@ class PathFollowerConfig:
         k_pos: position error gain [1/s].
         k_heading: heading error gain [1/s].
         k_int: integral gain on the cross-track error [1/s²] (removes the steady offset that tire
-            slip and steering compliance leave in curves); integrated only while the robot moves.
+            slip and steering compliance leave in curves); integrated only while the robot makes
+            progress along the track.
         max_integral: cap on the integral correction speed [m/s].
-        moving_speed: robot speed [m/s] above which it counts as moving (for the integral).
+        moving_speed: rate of progress along the track [m/s] above which the robot counts as moving
+            (for the integral).
         max_correction: cap on the position correction speed [m/s].
         max_heading_correction: cap on the heading correction rate [rad/s].
         preview: feed-forward preview time τ [s].
@@ -139,7 +142,7 @@ class PathFollower:
         self.dt = float(dt)
         self.progress: float | None = None
         self._integral = 0.0
-        self._last_pose: np.ndarray | None = None
+        self._max_progress: float | None = None
         self.stops = self._find_stops(stop_mask)
 
     def reset(self, progress: float | None = None) -> None:
@@ -147,7 +150,7 @@ class PathFollower:
         integral of the cross-track error."""
         self.progress = progress
         self._integral = 0.0
-        self._last_pose = None
+        self._max_progress = None
 
     def _find_stops(self, stop_mask) -> np.ndarray:
         """Sorted progress values [m] where the robot should arrive slowly: sharp path corners
@@ -215,9 +218,14 @@ class PathFollower:
         err = np.array([x_r - pose[0], y_r - pose[1]])
         psi = float(tr.tangent_at(s))
         normal = np.array([-math.sin(psi), math.cos(psi)])
-        moved = self._last_pose is not None and np.hypot(*(pose[:2] - self._last_pose[:2])) > cfg.moving_speed * self.dt
-        self._last_pose = pose.copy()
-        if moved and not finished:  # integrate the cross-track error only while moving (anti-windup)
+        # anti-windup: integrate the cross-track error only while the robot makes new progress along
+        # the track, not while it stands off the path turning its wheels in place (after a knock, at
+        # a reconfiguration): the chassis still shakes then, but an error it cannot reduce there
+        # would wind the integral up, and the robot would overshoot the path once it drives on
+        # (progress past the farthest reached so far, so shaking back and forth does not count)
+        moved = self._max_progress is not None and s - self._max_progress > cfg.moving_speed * self.dt
+        self._max_progress = s if self._max_progress is None else max(self._max_progress, s)
+        if moved and not finished:
             lim = cfg.max_integral / cfg.k_int if cfg.k_int > 0 else 0.0
             self._integral = float(np.clip(self._integral + float(err @ normal) * self.dt, -lim, lim))
         corr = cfg.k_pos * err + cfg.k_int * self._integral * normal

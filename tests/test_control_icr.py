@@ -229,6 +229,30 @@ def test_state_machine_on_stop_crossing():
     assert lambda_distance(ctl.state.lam, y) < 1e-9
 
 
+def test_target_that_stays_just_past_a_stop_reconfigures_after_the_hold_time():
+    """A rotation about a point 0.40 m to the side (the paper track's rounded corner) puts wheels 1
+    and 2 3.5° inside their stops; 0.45 m puts them past (an ICR arc of 2.4°, inside the
+    hysteresis). Held at the stop, λ would miss that target for as long as it stays there, so the
+    hold lasts at most ``stop_hold_time``; a target jittering across the stop is held throughout."""
+    lam_in = eta_from_twist(np.array([0.0, 1.0, 1 / 0.40]))[0]
+    lam_past = eta_from_twist(np.array([0.0, 1.0, 1 / 0.45]))[0]
+    assert arc_blocked(lam_in, lam_past, GEOM, np.deg2rad(3), np.deg2rad(0.5)) == "stop"
+    hold = ICRControllerConfig().stop_hold_time
+    ctl, robot, log = _run([(lam_in, 0.5, 150), (lam_past, 0.5, 250)])
+    modes = [m for m, *_ in log[150:]]
+    first_stop = modes.index(Mode.STOPPING)
+    assert all(log[150 + i][3].info.get("held_at_stop") for i in range(first_stop))
+    assert first_stop == int(round(hold / DT))
+    assert ctl.mode == Mode.RUNNING and lambda_distance(ctl.state.lam, lam_past) < 1e-6
+    # the old behaviour (hold for good) stays available, and a jittering target never stops
+    forever = ICRController(GEOM, LIM, DT, ICRControllerConfig(stop_hold_time=1e6))
+    _, _, log = _run([(lam_in, 0.5, 150), (lam_past, 0.5, 100)], ctl=forever)
+    assert all(m == Mode.RUNNING for m, *_ in log)
+    jitter = [(lam_in, 0.5, 150)] + [(t, 0.5, 2) for t in (lam_past, lam_in) * 50]
+    _, _, log = _run(jitter)
+    assert all(m == Mode.RUNNING for m, *_ in log[1:])
+
+
 def test_kicked_wheel_triggers_stop_and_reconfigure():
     x = eta_from_twist(np.array([1.0, 0.1, 0]))[0]
 

@@ -123,6 +123,20 @@ def test_follower_corrects_toward_the_path_with_independent_heading():
     assert out.mu == pytest.approx(np.linalg.norm(out.twist))
 
 
+def test_follower_integrates_only_while_progressing_along_the_track():
+    """Anti-windup: a robot standing 3 cm off the path (turning its wheels in place after a knock)
+    with its chassis shaking sideways does not wind the integral up; driving along the path does."""
+    pf = PathFollower(_line_track(), PathFollowerConfig(preview=0.0))
+    rng = np.random.default_rng(0)
+    for _ in range(100):  # shakes by up to ±2 mm a step, but makes no progress
+        pf.step(np.array([1.0 + rng.uniform(-1e-3, 1e-3), 0.03 + rng.uniform(-2e-3, 2e-3), 0.3]))
+    assert abs(pf._integral) < 5 * 0.03 * 0.02  # a few steps at most, while the shaking starts
+    before = pf._integral
+    for k in range(10):
+        pf.step(np.array([1.0 + 0.01 * (k + 1), 0.03, 0.3]))  # 0.5 m/s along the path
+    assert pf._integral < before - 5 * 0.03 * 0.02  # integrates, toward the path (the robot is to its left)
+
+
 def test_follower_bad_input():
     with pytest.raises(ValueError):
         PathFollower("paper")  # type: ignore[arg-type]
