@@ -50,6 +50,7 @@ __all__ = [
     "wheel_speed_coefficients",
     "wheel_speeds",
     "mu_from_wheel_speeds",
+    "twist_from_wheels",
     "steering_path_derivatives",
     "wheel_speed_path_derivative",
 ]
@@ -385,6 +386,33 @@ def mu_from_wheel_speeds(lam, phidot, geom: RobotGeometry, beta=None, beta_rate=
     out = np.empty(c2.shape[0])
     _mu_batch(c2, y2, out)
     return out.reshape(batch)
+
+
+def twist_from_wheels(beta, beta_rate, phidot, geom: RobotGeometry) -> tuple[np.ndarray, float]:
+    """Odometry: the chassis twist (ẋ, ẏ, θ̇) in R [m/s, m/s, rad/s] that best explains the wheel
+    states, and the residual slip ‖A ξ̇ − y‖ [m/s] (zero when the propulsion axes concur).
+
+    Least squares over every wheel's no-side-slip and rolling constraints, with the contact point
+    P_k = A_k + b_k e_k, e_k = (cos γ_k, sin γ_k), rolling direction d_k = (sin γ_k, −cos γ_k)::
+
+        v(P_k) · e_k = 0,    v(P_k) · d_k = r_k φ̇_k + b_k β̇_k
+
+    where v(P) = (ẋ − θ̇ P_y, ẏ + θ̇ P_x): the inverse of :func:`wheel_speeds` for one robot,
+    β, β̇, φ̇ of shape (n,).
+    """
+    beta = np.asarray(beta, dtype=np.float64)
+    gamma = geom.alpha + beta
+    e = np.stack([np.cos(gamma), np.sin(gamma)], axis=1)
+    d = np.stack([np.sin(gamma), -np.cos(gamma)], axis=1)
+    p = geom.axis_xy + geom.b[:, None] * e
+    rows, rhs = [], []
+    for dirs, target in ((e, np.zeros(geom.n)), (d, geom.r * np.asarray(phidot) + geom.b * np.asarray(beta_rate))):
+        # v(P)·u = u_x ẋ + u_y ẏ + θ̇ (P_x u_y − P_y u_x)
+        rows.append(np.stack([dirs[:, 0], dirs[:, 1], p[:, 0] * dirs[:, 1] - p[:, 1] * dirs[:, 0]], axis=1))
+        rhs.append(target)
+    a, y = np.concatenate(rows), np.concatenate(rhs)
+    twist, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return twist, float(np.linalg.norm(a @ twist - y))
 
 
 def steering_path_derivatives(lam, dlam, ddlam, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:

@@ -225,3 +225,22 @@ def test_estimate_eta_recovers_the_twist_and_matches_the_public_pieces():
         estimate_eta(qn[0], phidot[0, :3], G)
     with pytest.raises(ValueError):
         estimate_eta(qn[0], np.full(4, np.nan), G)
+
+
+@pytest.mark.parametrize("geom", GEOMS)
+def test_twist_from_wheels_inverts_wheel_speeds(geom):
+    """Odometry: the twist comes back from (β, β̇, φ̇) built by the inverse kinematics, with zero
+    slip; non-concurrent axes leave a residual."""
+    from estimation import twist_from_wheels
+    rng = np.random.default_rng(9)
+    for _ in range(20):
+        twist = rng.normal(size=3)
+        lam, mu = eta_from_twist(twist)
+        beta = steering_from_lambda(lam, geom)
+        bdot = rng.normal(size=geom.n)
+        phidot = wheel_speeds(lam, mu, geom, beta_rate=bdot)
+        est, slip = twist_from_wheels(beta, bdot, phidot, geom)
+        np.testing.assert_allclose(est, twist, atol=1e-10)
+        assert slip < 1e-10
+    _, slip = twist_from_wheels(beta + np.deg2rad(10) * np.arange(geom.n), bdot, phidot, geom)
+    assert slip > 1e-3
