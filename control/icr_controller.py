@@ -35,12 +35,18 @@ The commands are integrated from the previous *commands*, not from the measureme
 noise does not reach the set-points; the measurements (β, φ̇, λ̂, μ̂) are used to start, to detect
 that the robot has stopped, and to detect a wheel knocked out of place (then the same
 stop-and-reconfigure sequence recovers it).
+
+Batching: :func:`icr_control_step_batch` steps N controllers at once (state :class:`ICRBatchState`,
+(N, …) arrays; the modes are per-row masks; the κ grid and the arc checks are evaluated for all
+rows together). It is the only implementation: :func:`icr_control_step`, :func:`initial_state`,
+:func:`arc_check` and :func:`project_off_axes` are its N = 1 case, and give the same bits as
+before the batching.
 """
 
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -53,6 +59,12 @@ __all__ = [
     "Mode",
     "ICRControllerConfig",
     "ICRControllerState",
+    "ICRBatchState",
+    "BatchWheelCommand",
+    "initial_state_batch",
+    "icr_control_step_batch",
+    "project_off_axes_batch",
+    "arc_check_batch",
     "WheelCommand",
     "ICRController",
     "nearer_target",
@@ -280,6 +292,65 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.arctan2(np.linalg.norm(np.cross(a, b)), np.dot(a, b)))
 
 
+def _unit_rows(x, name: str) -> np.ndarray:
+    """(N, 3) rows normalised; raises on non-finite or zero rows."""
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    norm = np.linalg.norm(arr, axis=-1)
+    if np.any(norm == 0):
+        raise ValueError(f"{name} is the zero vector, not a point of Λ")
+    return arr / norm[:, None]
+
+
+def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sum(a * b, axis=-1)
+
+
+def _angle_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles [rad] between unit vectors, row by row (..., 3) -> (...), in [0, π]."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), _dot_rows(a, b))
+
+
+def _slerp_rows(lam: np.ndarray, lam_d: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """:func:`slerp` row by row: λ, λ_d (N, 3), angle (N,) or (N, M) -> (N, 3) or (N, M, 3)."""
+    tang = lam_d - _dot_rows(lam, lam_d)[:, None] * lam
+    tn = np.linalg.norm(tang, axis=-1)
+    degenerate = tn < 1e-15
+    e = tang / np.where(degenerate, 1.0, tn)[:, None]
+    extra = (None,) * (angle.ndim - 1)
+    lam_b, e_b = lam[(slice(None),) + extra], e[(slice(None),) + extra]
+    out = np.cos(angle)[..., None] * lam_b + np.sin(angle)[..., None] * e_b
+    if np.any(degenerate):
+        out[degenerate] = np.broadcast_to(lam_b[degenerate], out[degenerate].shape)
+    return out
+
+
+def project_off_axes_batch(lam_d, lam, geom: RobotGeometry, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project_off_axes` for (N, 3) targets and current λ: returns ((N, 3), (N,) wheel or −1)."""
+    lam_d = _unit_rows(lam_d, "lam_d")
+    lam = _unit_rows(lam, "lam")
+    out = lam_d.copy()
+    idx = np.full(lam_d.shape[0], -1, dtype=np.int64)
+    for k in range(geom.n):
+        s = geom.s_unit[k]
+        sk = s[None, :] * np.where(np.sum(s[None, :] * lam_d, axis=-1) >= 0, 1.0, -1.0)[:, None]
+        ang = _angle_rows(sk, lam_d)
+        hit = (idx < 0) & (ang < margin)
+        for i in np.flatnonzero(hit):  # rare: a target within the margin of a steering axis
+            ski = sk[i]
+            through = lam_d[i] if ang[i] > 1e-9 else lam[i] * (1.0 if np.sum(lam[i] * ski) >= 0 else -1.0)
+            if _angle_rows(ski, through) < 1e-9:
+                # λ on the axis too: any direction away from it will do; pick one orthogonal to s_k.
+                through = np.cross(ski, [0.0, 0.0, 1.0]) if abs(ski[2]) < 0.9 else np.cross(ski, [1.0, 0.0, 0.0])
+                through = ski * np.cos(1.0) + through / np.linalg.norm(through) * np.sin(1.0)
+            out[i] = _slerp_rows(ski[None, :], np.asarray(through)[None, :], np.array([margin]))[0]
+            idx[i] = k
+    return out, idx
+
+
 def project_off_axes(lam_d, lam, geom: RobotGeometry, margin: float) -> tuple[np.ndarray, int]:
     """Move a target λ_d out of the cap of angular radius ``margin`` around each steering axis.
 
@@ -288,20 +359,46 @@ def project_off_axes(lam_d, lam, geom: RobotGeometry, margin: float) -> tuple[np
     that circle β_k = F_k is constant, so approaching the rim does not swing wheel k (all the
     propulsion great circles of wheel k pass through s_k, eq. (15)).
 
-    Returns (λ_d', index of the wheel whose cap held λ_d, or −1).
+    Returns (λ_d', index of the wheel whose cap held λ_d, or −1). The N = 1 case of
+    :func:`project_off_axes_batch`.
     """
-    lam_d = _unit3(lam_d, "lam_d")
-    lam = _unit3(lam, "lam")
-    for k in range(geom.n):
-        sk = geom.s_unit[k] * (1.0 if np.dot(geom.s_unit[k], lam_d) >= 0 else -1.0)
-        if _angle(sk, lam_d) < margin:
-            through = lam_d if _angle(sk, lam_d) > 1e-9 else lam * (1.0 if np.dot(lam, sk) >= 0 else -1.0)
-            if _angle(sk, through) < 1e-9:
-                # λ on the axis too: any direction away from it will do; pick one orthogonal to s_k.
-                through = np.cross(sk, [0.0, 0.0, 1.0]) if abs(sk[2]) < 0.9 else np.cross(sk, [1.0, 0.0, 0.0])
-                through = sk * np.cos(1.0) + through / np.linalg.norm(through) * np.sin(1.0)
-            return slerp(sk, through, margin), k
-    return lam_d, -1
+    _unit3(lam_d, "lam_d"), _unit3(lam, "lam")
+    out, idx = project_off_axes_batch(np.asarray(lam_d, dtype=np.float64)[None, :],
+                                      np.asarray(lam, dtype=np.float64)[None, :], geom, margin)
+    return out[0], int(idx[0])
+
+
+_REASONS = (None, "stop", "axis")
+
+
+def arc_check_batch(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`arc_check` for (N, 3) arcs: (reason (N,) 0 none / 1 stop / 2 axis, free (N,), theta (N,))."""
+    lam = _unit_rows(lam, "lam")
+    lam_d = _unit_rows(lam_d, "lam_d")
+    nrows = lam.shape[0]
+    theta = _angle_rows(lam, lam_d)
+    m = np.maximum(2, np.ceil(theta / step).astype(np.int64) + 1)
+    big = int(m.max()) if nrows else 2
+    j = np.arange(big)
+    # np.linspace(0, θ, m) row by row (the same arithmetic), padded with θ beyond m
+    angles = j[None, :] * (theta / (m - 1))[:, None]
+    angles = np.where(j[None, :] >= (m - 1)[:, None], theta[:, None], angles)
+    pts = _slerp_rows(lam, lam_d, angles)  # (N, M, 3)
+    sin_to_axis = np.linalg.norm(np.cross(pts[:, :, None, :], geom.s_unit[None, None, :, :]), axis=-1)
+    # the endpoints may sit on a cap rim (projected target, or λ itself): only the interior counts
+    near = np.any(sin_to_axis < np.sin(0.5 * axis_margin), axis=-1) & (j[None, :] >= 1) & (j[None, :] < (m - 1)[:, None])
+    beta = steering_from_lambda(pts.reshape(-1, 3), geom).reshape(nrows, big, geom.n)
+    wraps = np.any(np.abs(np.diff(beta, axis=1)) > np.pi / 2, axis=-1) & (j[None, :-1] < (m - 1)[:, None])
+    first_axis = np.where(near.any(axis=1), np.argmax(near, axis=1), m)
+    first_wrap = np.where(wraps.any(axis=1), np.argmax(wraps, axis=1) + 1, m)
+    rows = np.arange(nrows)
+    none = (first_axis == m) & (first_wrap == m)
+    axis = ~none & (first_axis <= first_wrap - 1)
+    reason = np.where(none, 0, np.where(axis, 2, 1))
+    free = np.where(none, theta, np.where(axis, angles[rows, np.maximum(first_axis - 1, 0)],
+                                          angles[rows, np.clip(first_wrap - 1, 0, big - 1)]))
+    return reason, free, theta
 
 
 def arc_check(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) -> tuple[str | None, float, float]:
@@ -311,27 +408,12 @@ def arc_check(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) 
     would wrap across the steering stops along the arc (a jump of more than π/2 between samples
     ``step`` apart), or ``"axis"`` if the arc passes closer than ``axis_margin``/2 to a steering
     axis (eq. (21)); ``free`` is the arc angle [rad] from λ that can be driven before the first
-    such point, ``theta`` the whole arc's angle [rad].
+    such point, ``theta`` the whole arc's angle [rad]. The N = 1 case of :func:`arc_check_batch`.
     """
-    lam = _unit3(lam, "lam")
-    lam_d = _unit3(lam_d, "lam_d")
-    theta = _angle(lam, lam_d)
-    m = max(2, int(np.ceil(theta / step)) + 1)
-    angles = np.linspace(0.0, theta, m)
-    pts = slerp(lam, lam_d, angles)
-    sin_to_axis = np.linalg.norm(np.cross(pts[:, None, :], geom.s_unit[None, :, :]), axis=-1)
-    # the endpoints may sit on a cap rim (projected target, or λ itself): only the interior counts
-    near = np.any(sin_to_axis < np.sin(0.5 * axis_margin), axis=1)
-    near[0] = near[-1] = False
-    beta = steering_from_lambda(pts, geom)
-    wraps = np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2, axis=1)
-    first_axis = int(np.argmax(near)) if near.any() else m
-    first_wrap = int(np.argmax(wraps)) + 1 if wraps.any() else m
-    if first_axis == m and first_wrap == m:
-        return None, theta, theta
-    if first_axis <= first_wrap - 1:
-        return "axis", float(angles[max(first_axis - 1, 0)]), theta
-    return "stop", float(angles[first_wrap - 1]), theta
+    _unit3(lam, "lam"), _unit3(lam_d, "lam_d")
+    reason, free, theta = arc_check_batch(np.asarray(lam, dtype=np.float64)[None, :],
+                                          np.asarray(lam_d, dtype=np.float64)[None, :], geom, axis_margin, step)
+    return _REASONS[int(reason[0])], float(free[0]), float(theta[0])
 
 
 def arc_blocked(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: float) -> str | None:
@@ -361,21 +443,125 @@ def reference_stop_mask(lams, geom: RobotGeometry, axis_margin: float = np.deg2r
 # ----------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class ICRBatchState:
+    """The state of N controllers, as (N, …) arrays (see :class:`ICRControllerState`, field by field).
+
+    ``reconfig_lam`` and ``beta_meas`` are valid only where ``has_reconfig_lam`` / ``has_beta_meas``.
+    """
+
+    mode: np.ndarray  # (N,) int64, Mode values
+    lam: np.ndarray  # (N, 3)
+    mu: np.ndarray  # (N,)
+    lam_rate: np.ndarray  # (N, 3)
+    beta: np.ndarray  # (N, n)
+    beta_rate: np.ndarray  # (N, n)
+    phidot: np.ndarray  # (N, n)
+    mode_time: np.ndarray  # (N,)
+    reconfig_lam: np.ndarray  # (N, 3)
+    has_reconfig_lam: np.ndarray  # (N,) bool
+    events: np.ndarray  # (N,) int64
+    beta_meas: np.ndarray  # (N, n)
+    has_beta_meas: np.ndarray  # (N,) bool
+    held_time: np.ndarray  # (N,)
+
+    @property
+    def num(self) -> int:
+        return int(self.mode.shape[0])
+
+    @staticmethod
+    def stack(states: "list[ICRControllerState]") -> "ICRBatchState":
+        """N single-robot states as one batch."""
+        n = states[0].beta.shape[0]
+        return ICRBatchState(
+            mode=np.array([int(s.mode) for s in states], dtype=np.int64),
+            lam=np.array([s.lam for s in states], dtype=np.float64),
+            mu=np.array([s.mu for s in states], dtype=np.float64),
+            lam_rate=np.array([s.lam_rate for s in states], dtype=np.float64),
+            beta=np.array([s.beta for s in states], dtype=np.float64),
+            beta_rate=np.array([s.beta_rate for s in states], dtype=np.float64),
+            phidot=np.array([s.phidot for s in states], dtype=np.float64),
+            mode_time=np.array([s.mode_time for s in states], dtype=np.float64),
+            reconfig_lam=np.array([np.zeros(3) if s.reconfig_lam is None else s.reconfig_lam for s in states],
+                                  dtype=np.float64),
+            has_reconfig_lam=np.array([s.reconfig_lam is not None for s in states], dtype=np.bool_),
+            events=np.array([s.events for s in states], dtype=np.int64),
+            beta_meas=np.array([np.zeros(n) if s.beta_meas is None else s.beta_meas for s in states],
+                               dtype=np.float64),
+            has_beta_meas=np.array([s.beta_meas is not None for s in states], dtype=np.bool_),
+            held_time=np.array([s.held_time for s in states], dtype=np.float64))
+
+    def robot(self, i: int) -> ICRControllerState:
+        """Robot i's state as a single-robot :class:`ICRControllerState`."""
+        return ICRControllerState(
+            mode=Mode(int(self.mode[i])), lam=self.lam[i].copy(), mu=float(self.mu[i]),
+            lam_rate=self.lam_rate[i].copy(), beta=self.beta[i].copy(), beta_rate=self.beta_rate[i].copy(),
+            phidot=self.phidot[i].copy(), mode_time=float(self.mode_time[i]),
+            reconfig_lam=self.reconfig_lam[i].copy() if self.has_reconfig_lam[i] else None,
+            events=int(self.events[i]), beta_meas=self.beta_meas[i].copy() if self.has_beta_meas[i] else None,
+            held_time=float(self.held_time[i]))
+
+    def take(self, idx: np.ndarray) -> "ICRBatchState":
+        """The rows ``idx`` (integer indices) as a smaller batch."""
+        return ICRBatchState(**{name: getattr(self, name)[idx].copy() for name in self.__dataclass_fields__})
+
+    def put(self, idx: np.ndarray, other: "ICRBatchState") -> "ICRBatchState":
+        """A copy with the rows ``idx`` (integer indices) replaced by the rows of ``other``."""
+        out = {}
+        for name in self.__dataclass_fields__:
+            arr = getattr(self, name).copy()
+            arr[idx] = getattr(other, name)
+            out[name] = arr
+        return ICRBatchState(**out)
+
+
+@dataclass(frozen=True)
+class BatchWheelCommand:
+    """Set-points of N robots for one control period: (N, n) arrays as in :class:`WheelCommand`;
+    ``info`` holds (N, …) arrays (mode, events, kappa, saturated, event code 0 none / 1 kick /
+    2 stop / 3 axis, held_at_stop, lam_target, mu_target, axis_cap)."""
+
+    beta: np.ndarray
+    phidot: np.ndarray
+    beta_rate: np.ndarray
+    beta_accel: np.ndarray
+    phiddot: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+_EVENTS = (None, "kick", "stop", "axis")
+
+
+def initial_state_batch(lam_hat, beta, phidot, geom: RobotGeometry,
+                        config: ICRControllerConfig | None = None) -> ICRBatchState:
+    """:func:`initial_state` for N robots: λ̂ (N, 3), β (N, n), φ̇ (N, n)."""
+    config = config or ICRControllerConfig()
+    lam = _unit_rows(lam_hat, "lam_hat")
+    nrows = lam.shape[0]
+    beta = geom.wrap_steering(_finite(beta, "beta", (nrows, geom.n)))
+    phidot = _finite(phidot, "phidot", (nrows, geom.n))
+    err = _wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
+    reconf = np.max(np.abs(err), axis=-1) > config.reconfig_tol
+    return ICRBatchState(
+        mode=np.where(reconf, int(Mode.RECONFIGURING), int(Mode.RUNNING)).astype(np.int64), lam=lam,
+        mu=np.zeros(nrows), lam_rate=np.zeros((nrows, 3)), beta=beta.copy(), beta_rate=np.zeros((nrows, geom.n)),
+        phidot=phidot.copy(), mode_time=np.zeros(nrows), reconfig_lam=np.where(reconf[:, None], lam, 0.0),
+        has_reconfig_lam=reconf.copy(), events=np.zeros(nrows, dtype=np.int64), beta_meas=beta.copy(),
+        has_beta_meas=np.ones(nrows, dtype=np.bool_), held_time=np.zeros(nrows))
+
+
 def initial_state(lam_hat, beta, phidot, geom: RobotGeometry, config: ICRControllerConfig | None = None) -> ICRControllerState:
     """Start from the measurements, at rest (μ = 0).
 
     The reference λ is the estimate λ̂. If the measured wheels are not at F(λ̂) within
-    ``reconfig_tol`` (a random start), the controller starts in RECONFIGURING.
+    ``reconfig_tol`` (a random start), the controller starts in RECONFIGURING. The N = 1 case of
+    :func:`initial_state_batch`.
     """
-    config = config or ICRControllerConfig()
-    lam = _unit3(lam_hat, "lam_hat")
-    beta = geom.wrap_steering(_finite(beta, "beta", (geom.n,)))
+    _unit3(lam_hat, "lam_hat")
+    beta = _finite(beta, "beta", (geom.n,))
     phidot = _finite(phidot, "phidot", (geom.n,))
-    err = _wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
-    mode = Mode.RUNNING if np.max(np.abs(err)) <= config.reconfig_tol else Mode.RECONFIGURING
-    return ICRControllerState(mode=mode, lam=lam, mu=0.0, lam_rate=np.zeros(3), beta=beta.copy(), beta_meas=beta.copy(),
-                              beta_rate=np.zeros(geom.n), phidot=phidot.copy(),
-                              reconfig_lam=lam if mode == Mode.RECONFIGURING else None)
+    return initial_state_batch(np.asarray(lam_hat, dtype=np.float64)[None, :], beta[None, :], phidot[None, :], geom,
+                               config).robot(0)
 
 
 def _wrap_half(x: np.ndarray) -> np.ndarray:
@@ -384,10 +570,10 @@ def _wrap_half(x: np.ndarray) -> np.ndarray:
 
 
 def _exp_map(lam: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """exp_λ(v) on the unit sphere for tangent vectors v (..., 3) at unit λ (3,)."""
+    """exp_λ(v) on the unit sphere for tangent vectors v (N, K, 3) at unit λ (N, 3)."""
     nv = np.linalg.norm(v, axis=-1, keepdims=True)
     safe = np.where(nv > 0, nv, 1.0)
-    out = np.cos(nv) * lam + np.sin(nv) * v / safe
+    out = np.cos(nv) * lam[:, None, :] + np.sin(nv) * v / safe
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
@@ -421,127 +607,285 @@ def _saturate(beta_prev, beta_rate_prev, phidot_prev, beta_want, phidot_want, ge
     return beta, rate, phidot
 
 
-def _coordinated_step(state: ICRControllerState, lam_d: np.ndarray, mu_d: float, geom: RobotGeometry,
-                      limits: ActuatorLimits, config: ICRControllerConfig, dt: float, mu_first: bool = False):
-    """One time-scaled step of (λ, μ) toward (λ_d, μ_d) with every wheel on the surface.
+def _coordinated_step(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_first, geom: RobotGeometry,
+                      limits: ActuatorLimits, config: ICRControllerConfig, dt: float):
+    """One time-scaled step of (λ, μ) toward (λ_d, μ_d) with every wheel on the surface, for N rows
+    (λ (N, 3), μ (N,), λ̇ (N, 3), β, β̇, φ̇ (N, n), λ_d (N, 3), μ_d (N,), ``mu_first`` (N,) bool).
 
     With ``mu_first`` (STOPPING), μ takes its full ramp step whatever κ the λ motion gets, so the
     robot brakes at once even while λ is still slowing down.
 
-    Returns (λ, μ, λ̇, β_c, β̇_c, φ̇_c, info).
+    Returns (λ, μ, λ̇, β_c, β̇_c, φ̇_c, κ, saturated), row by row.
     """
-    lam = state.lam
+    nrows, n = beta.shape
+    rows = np.arange(nrows)
     # desired λ̇: along the great circle toward λ_d, braking so that it can stop at λ_d
-    theta = _angle(lam, lam_d)
-    grad = steering_gradient(lam, geom)  # (n, 3)
-    gmax = float(np.max(np.linalg.norm(grad, axis=-1)))
-    accel_lam = 0.8 * limits.steer_accel_max / max(gmax, 1e-6)  # λ angular accel every wheel can follow
-    speed = min(config.k_lambda * theta, np.sqrt(2.0 * accel_lam * theta), theta / dt)
-    tang = lam_d - np.dot(lam, lam_d) * lam
-    tn = np.linalg.norm(tang)
-    v_des = tang / tn * speed if tn > 1e-15 else np.zeros(3)
-    v_prev = state.lam_rate - np.dot(state.lam_rate, lam) * lam  # carried over, in the tangent plane
+    theta = _angle_rows(lam, lam_d)
+    grad = steering_gradient(lam, geom)  # (N, n, 3)
+    gmax = np.max(np.linalg.norm(grad, axis=-1), axis=-1)
+    accel_lam = 0.8 * limits.steer_accel_max / np.maximum(gmax, 1e-6)  # λ angular accel every wheel can follow
+    speed = np.minimum(np.minimum(config.k_lambda * theta, np.sqrt(2.0 * accel_lam * theta)), theta / dt)
+    tang = lam_d - _dot_rows(lam, lam_d)[:, None] * lam
+    tn = np.linalg.norm(tang, axis=-1)
+    ok = tn > 1e-15
+    v_des = np.where(ok[:, None], tang / np.where(ok, tn, 1.0)[:, None] * speed[:, None], 0.0)
+    v_prev = lam_rate - _dot_rows(lam_rate, lam)[:, None] * lam  # carried over, in the tangent plane
     # desired μ: a ramp toward μ_d at the acceleration every wheel can follow at λ
     c_now = np.abs(wheel_speed_coefficients(lam, geom))
-    accel_mu = config.mu_accel_fraction * limits.wheel_accel_max * float(
-        np.min(geom.r / np.where(c_now > 0, c_now, np.inf)))
-    mu_des = state.mu + float(np.clip(mu_d - state.mu, -accel_mu * dt, accel_mu * dt))
+    accel_mu = config.mu_accel_fraction * limits.wheel_accel_max * np.min(
+        geom.r / np.where(c_now > 0, c_now, np.inf), axis=-1)
+    mu_des = mu + np.clip(mu_d - mu, -accel_mu * dt, accel_mu * dt)
 
     kappa = np.linspace(0.0, 1.0, config.n_kappa)
-    v = v_prev[None, :] + kappa[:, None] * (v_des - v_prev)[None, :]
+    nk = kappa.size
+    v = v_prev[:, None, :] + kappa[None, :, None] * (v_des - v_prev)[:, None, :]  # (N, K, 3)
     lam_new = _exp_map(lam, v * dt)
-    mu_new = np.full(kappa.shape, mu_des) if mu_first else state.mu + kappa * (mu_des - state.mu)
-    fill = np.broadcast_to(state.beta, (kappa.size, geom.n))
-    beta_new = steering_from_lambda(lam_new, geom, singular_fill=fill)
-    dbeta = beta_new - state.beta[None, :]
-    flipped = np.any(np.abs(dbeta) > np.pi / 2, axis=1)
-    beta_rate = dbeta / dt
-    beta_acc = (beta_rate - state.beta_rate[None, :]) / dt
-    c = wheel_speed_coefficients(lam_new, geom, beta_new)
-    phidot = (mu_new[:, None] * c - geom.b[None, :] * beta_rate) / geom.r[None, :]
-    phiddot = (phidot - state.phidot[None, :]) / dt
+    mu_new = np.where(mu_first[:, None], mu_des[:, None], mu[:, None] + kappa[None, :] * (mu_des - mu)[:, None])
+    fill = np.broadcast_to(beta[:, None, :], (nrows, nk, n)).reshape(-1, n)
+    beta_new = steering_from_lambda(lam_new.reshape(-1, 3), geom, singular_fill=fill).reshape(nrows, nk, n)
+    dbeta = beta_new - beta[:, None, :]
+    flipped = np.any(np.abs(dbeta) > np.pi / 2, axis=-1)
+    b_rate = dbeta / dt
+    b_acc = (b_rate - beta_rate[:, None, :]) / dt
+    c = wheel_speed_coefficients(lam_new.reshape(-1, 3), geom, beta_new.reshape(-1, n)).reshape(nrows, nk, n)
+    phid = (mu_new[:, :, None] * c - geom.b * b_rate) / geom.r
+    phidd = (phid - phidot[:, None, :]) / dt
     # every wheel must keep the room to brake before the stop it turns toward (a wheel that runs
     # into a stop at speed would exceed the acceleration limit there)
-    v_stop = _safe_stop_speed(_stop_room(beta_new, beta_rate, geom), 0.8 * limits.steer_accel_max, dt)
+    v_stop = _safe_stop_speed(_stop_room(beta_new, b_rate, geom), 0.8 * limits.steer_accel_max, dt)
     ratio = np.max(np.stack([
-        np.abs(beta_rate) / limits.steer_rate_max,
-        np.abs(beta_acc) / limits.steer_accel_max,
-        np.abs(phidot) / limits.wheel_speed_max,
-        np.abs(phiddot) / limits.wheel_accel_max,
-        np.abs(beta_rate) / np.maximum(v_stop, 1e-12),
-    ]), axis=(0, 2))
+        np.abs(b_rate) / limits.steer_rate_max,
+        np.abs(b_acc) / limits.steer_accel_max,
+        np.abs(phid) / limits.wheel_speed_max,
+        np.abs(phidd) / limits.wheel_accel_max,
+        np.abs(b_rate) / np.maximum(v_stop, 1e-12),
+    ]), axis=(0, 3))
     ratio = np.where(flipped, np.inf, ratio)
     feasible = ratio <= 1.0 - 1e-9
-    info: dict = {}
-    if np.any(feasible):
-        i = int(np.flatnonzero(feasible)[-1])
-        info["saturated"] = False
-        beta_c, rate_c, phidot_c = beta_new[i], beta_rate[i], phidot[i]
-    else:
-        i = int(np.argmin(ratio))
-        info["saturated"] = True
-        beta_c, rate_c, phidot_c = _saturate(state.beta, state.beta_rate, state.phidot,
-                                             beta_new[i] if not flipped[i] else state.beta,
-                                             phidot[i], geom, limits, dt)
-    info["kappa"] = float(kappa[i])
-    lam_rate = v[i]
-    return lam_new[i], float(mu_new[i]), lam_rate, beta_c, rate_c, phidot_c, info
+    any_ok = feasible.any(axis=1)
+    last_ok = nk - 1 - np.argmax(feasible[:, ::-1], axis=1)
+    i = np.where(any_ok, last_ok, np.argmin(ratio, axis=1))
+    beta_c, rate_c, phidot_c = beta_new[rows, i], b_rate[rows, i], phid[rows, i]
+    sat = ~any_ok
+    if np.any(sat):
+        want = np.where(flipped[rows, i][:, None], beta, beta_c)
+        sb, sr, sp = _saturate(beta[sat], beta_rate[sat], phidot[sat], want[sat], phidot_c[sat], geom, limits, dt)
+        beta_c, rate_c, phidot_c = beta_c.copy(), rate_c.copy(), phidot_c.copy()
+        beta_c[sat], rate_c[sat], phidot_c[sat] = sb, sr, sp
+    return lam_new[rows, i], mu_new[rows, i], v[rows, i], beta_c, rate_c, phidot_c, kappa[i], sat
 
 
-def _must_stop(lam: np.ndarray, lam_d: np.ndarray, geom: RobotGeometry, config: ICRControllerConfig) -> bool:
-    """Whether reaching λ_d from λ needs a stop and reconfiguration: the arc passes a steering
-    axis, or goes past a steering stop by more than ``stop_hysteresis``."""
-    blocked, free, theta = arc_check(lam, lam_d, geom, config.axis_margin, config.arc_step)
-    return blocked == "axis" or (blocked == "stop" and theta - free >= config.stop_hysteresis)
+def _must_stop(lam: np.ndarray, lam_d: np.ndarray, geom: RobotGeometry, config: ICRControllerConfig) -> np.ndarray:
+    """Whether reaching λ_d from λ (N, 3) needs a stop and reconfiguration, row by row: the arc
+    passes a steering axis, or goes past a steering stop by more than ``stop_hysteresis``."""
+    reason, free, theta = arc_check_batch(lam, lam_d, geom, config.axis_margin, config.arc_step)
+    return (reason == 2) | ((reason == 1) & (theta - free >= config.stop_hysteresis))
 
 
-def _reconfigure_step(state: ICRControllerState, beta_target: np.ndarray, geom: RobotGeometry,
-                      limits: ActuatorLimits, dt: float, exact: bool = False,
-                      measured_rate: np.ndarray | None = None, rate_fraction: float = 0.95,
+def _reconfigure_step(beta0: np.ndarray, beta_rate0: np.ndarray, phidot0: np.ndarray, beta_target: np.ndarray,
+                      geom: RobotGeometry, limits: ActuatorLimits, dt: float, exact: np.ndarray,
+                      measured_rate: np.ndarray, use_measured: np.ndarray, rate_fraction: float = 0.95,
                       accel_fraction: float = 0.95):
-    """Turn each wheel in place toward ``beta_target`` (μ = 0), rate- and accel-limited.
+    """Turn each wheel in place toward ``beta_target`` (μ = 0), rate- and accel-limited; (N, n) rows.
 
-    With ``exact``, ``beta_target`` is taken as the next set-point as it is (the caller made it
-    feasible). With ``measured_rate``, the coupling uses the wheels' measured steering rate: the
-    compliant steering lags its set-point, and it is the actual contact point that must roll.
+    Where ``exact`` (N,), ``beta_target`` is taken as the next set-point as it is (the caller made it
+    feasible). Where ``use_measured`` (N,), the coupling uses the wheels' measured steering rate
+    ``measured_rate``: the compliant steering lags its set-point, and it is the actual contact
+    point that must roll.
 
     Each wheel follows a discrete trapezoidal profile. The propulsion set-point is the pure
     steer-to-drive coupling r φ̇ = −b β̇, so the contact point rolls on its circle about A_k
     instead of scrubbing, and the chassis stays put.
     """
-    err = beta_target - state.beta  # both inside the range: the direct way never crosses a stop
+    err = beta_target - beta0  # both inside the range: the direct way never crosses a stop
     a, vmax = limits.steer_accel_max * accel_fraction, limits.steer_rate_max * rate_fraction
-    if exact:  # ``beta_target`` is already a feasible next set-point
-        rate = err / dt
-    else:
-        # discrete braking profile: moving v for one period, then braking at a_plan, covers
-        # v²/(2 a_plan) + v dt/2; planning with less deceleration than allowed leaves margin
-        a_plan = 0.85 * a
-        vstop = -0.5 * a_plan * dt + np.sqrt((0.5 * a_plan * dt) ** 2 + 2.0 * a_plan * np.abs(err))
-        want = np.sign(err) * np.minimum(vmax, np.minimum(vstop, np.abs(err) / dt))
-        # speeding up follows the gentle profile; braking (less speed, or a reversal) may use the
-        # full limit, so a wheel still turning toward a stop when the reconfiguration starts
-        # stops short of it instead of being clipped there
-        braking = (want * state.beta_rate < 0) | (np.abs(want) < np.abs(state.beta_rate) - 1e-12)
-        a_step = np.where(braking, np.maximum(a, 0.95 * limits.steer_accel_max), a) * dt
-        rate = np.clip(want, state.beta_rate - a_step, state.beta_rate + a_step)
-    beta = np.clip(state.beta + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
-    rate = (beta - state.beta) / dt
-    phidot_want = -geom.b * (rate if measured_rate is None else measured_rate) / geom.r
-    _, _, phidot = _saturate(state.beta, state.beta_rate, state.phidot, beta, phidot_want, geom, limits, dt)
+    # discrete braking profile: moving v for one period, then braking at a_plan, covers
+    # v²/(2 a_plan) + v dt/2; planning with less deceleration than allowed leaves margin
+    a_plan = 0.85 * a
+    vstop = -0.5 * a_plan * dt + np.sqrt((0.5 * a_plan * dt) ** 2 + 2.0 * a_plan * np.abs(err))
+    want = np.sign(err) * np.minimum(vmax, np.minimum(vstop, np.abs(err) / dt))
+    # speeding up follows the gentle profile; braking (less speed, or a reversal) may use the
+    # full limit, so a wheel still turning toward a stop when the reconfiguration starts
+    # stops short of it instead of being clipped there
+    braking = (want * beta_rate0 < 0) | (np.abs(want) < np.abs(beta_rate0) - 1e-12)
+    a_step = np.where(braking, np.maximum(a, 0.95 * limits.steer_accel_max), a) * dt
+    rate = np.clip(want, beta_rate0 - a_step, beta_rate0 + a_step)
+    rate = np.where(exact[:, None], err / dt, rate)  # ``beta_target`` is already a feasible next set-point
+    beta = np.clip(beta0 + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
+    rate = (beta - beta0) / dt
+    phidot_want = -geom.b * np.where(use_measured[:, None], measured_rate, rate) / geom.r
+    _, _, phidot = _saturate(beta0, beta_rate0, phidot0, beta, phidot_want, geom, limits, dt)
     return beta, rate, phidot
 
 
-def _stop_step(state: ICRControllerState, geom: RobotGeometry, limits: ActuatorLimits,
-               config: ICRControllerConfig, dt: float):
-    """Bring μ to 0 with λ held (STOPPING), through the coordinated, time-scaled step."""
-    return _coordinated_step(state, state.lam, 0.0, geom, limits, config, dt, mu_first=True)
+def icr_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
+                           geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig,
+                           dt: float) -> tuple[ICRBatchState, BatchWheelCommand]:
+    """One control period of N ICR controllers at once (pure: returns the new state and the commands).
+
+    Row i is exactly what :func:`icr_control_step` does for robot i (that function is the N = 1
+    case of this one); the modes of the state machine are handled with per-row masks.
+
+    Args:
+        state: from :func:`initial_state_batch` or the previous step.
+        lam_hat: (N, 3) estimated λ̂ (any sign); mu_hat: (N,) estimated μ̂ [m/s].
+        beta_meas: (N, n) measured steering angles [rad]; phidot_meas: (N, n) measured φ̇ [rad/s].
+        lam_d: (N, 3) target ICRs (non-zero, any sign); mu_d: (N,) target μ [m/s].
+        dt: control period [s].
+
+    Raises:
+        ValueError: on non-finite input, wrong shapes, a zero λ_d, or dt <= 0.
+    """
+    n = geom.n
+    nrows = state.num
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+    _unit_rows(lam_hat, "lam_hat")
+    if np.asarray(lam_hat).shape[0] != nrows:
+        raise ValueError(f"lam_hat must have shape ({nrows}, 3)")
+    mu_hat = _finite(mu_hat, "mu_hat", (nrows,))
+    beta_meas = _finite(beta_meas, "beta_meas", (nrows, n))
+    _finite(phidot_meas, "phidot_meas", (nrows, n))
+    lam_d = _unit_rows(lam_d, "lam_d")
+    if lam_d.shape[0] != nrows:
+        raise ValueError(f"lam_d must have shape ({nrows}, 3)")
+    mu_d = _finite(mu_d, "mu_d", (nrows,))
+
+    zero_cmd = np.abs(mu_d) < config.zero_mu_tol
+    lam_d = np.where(zero_cmd[:, None], state.lam, lam_d)  # a stop command holds λ: no wheel swings
+    mu_d = np.where(zero_cmd, 0.0, mu_d)
+    lam_d, mu_d = nearer_target(state.lam, lam_d, mu_d)
+    lam_d, axis_k = project_off_axes_batch(lam_d, state.lam, geom, config.axis_margin)
+    lam_d, mu_d = nearer_target(state.lam, lam_d, mu_d)
+    mu_d = clamp_mu(lam_d, mu_d, geom, limits, config.mu_headroom)
+    info: dict = {"lam_target": lam_d.copy(), "mu_target": mu_d.copy(), "axis_cap": axis_k}
+
+    mode, mode_time, events = state.mode.copy(), state.mode_time + dt, state.events.copy()
+    reconfig_lam, has_rl = state.reconfig_lam.copy(), state.has_reconfig_lam.copy()
+    s_lam, s_mu, s_lam_rate = state.lam.copy(), state.mu.copy(), state.lam_rate.copy()
+    held = np.zeros(nrows, dtype=np.bool_)
+    held_time = np.zeros(nrows)
+    event = np.zeros(nrows, dtype=np.int64)
+
+    # a wheel knocked out of place (measured far from commanded) -> stop and reconfigure
+    kicked = np.max(np.abs(_wrap_half(beta_meas - state.beta)), axis=-1) > config.kick_tol
+    running = mode == Mode.RUNNING
+    blocked = np.zeros(nrows, dtype=np.int64)
+    check = running & ~zero_cmd
+    if np.any(check):
+        r = np.flatnonzero(check)
+        reason, free, theta = arc_check_batch(state.lam[r], lam_d[r], geom, config.axis_margin, config.arc_step)
+        near_stop = (reason == 1) & (theta - free < config.stop_hysteresis)
+        ht = state.held_time[r] + dt
+        # only just past a steering stop: wait at the stop instead of turning wheels by π; a
+        # target that keeps going (or stays past) reconfigures once, a jittering one never does
+        hold = near_stop & (ht <= config.stop_hold_time + 1e-9)
+        if np.any(hold):
+            rh = r[hold]
+            lam_d[rh] = _slerp_rows(state.lam[rh], lam_d[rh], free[hold])
+        reason = np.where(hold, 0, reason)
+        blocked[r] = reason
+        held[r] = hold
+        held_time[r] = np.where(hold, ht, 0.0)
+    trig = running & (kicked | (blocked != 0))
+    event = np.where(trig, np.where(kicked, 1, blocked + 1), 0)
+    events = events + trig
+    mode = np.where(trig, int(Mode.STOPPING), mode)
+    mode_time = np.where(trig, 0.0, mode_time)
+
+    stopping = mode == Mode.STOPPING
+    stopped = stopping & (state.mu == 0.0) & (np.linalg.norm(state.lam_rate, axis=-1) < 1e-9) & (
+        (np.abs(mu_hat) < config.stop_mu_tol) | (mode_time > config.stop_timeout))
+    mode = np.where(stopped, int(Mode.RECONFIGURING), mode)
+    mode_time = np.where(stopped, 0.0, mode_time)
+
+    recon = mode == Mode.RECONFIGURING
+    fresh = recon & ~has_rl
+    reconfig_lam[fresh] = lam_d[fresh]
+    has_rl |= fresh
+    beta_target = np.zeros((nrows, n))
+    if np.any(recon):
+        r = np.flatnonzero(recon)
+        cand = ~zero_cmd[r] & (np.max(np.abs(state.beta[r] - steering_from_lambda(
+            reconfig_lam[r], geom, singular_fill=state.beta[r])), axis=-1) > config.reconfig_freeze)
+        if np.any(cand):
+            rc = r[cand]
+            # retarget only if the latest target could not be reached continuously from the
+            # configuration being reached (RUNNING does the rest); no chasing a jittery target
+            rt = rc[_must_stop(reconfig_lam[rc], lam_d[rc], geom, config)]
+            reconfig_lam[rt] = lam_d[rt]
+        bt = steering_from_lambda(reconfig_lam[r], geom, singular_fill=state.beta[r])
+        beta_target[r] = bt
+        settled_cmd = (np.max(np.abs(state.beta[r] - bt), axis=-1) < 1e-6) & (
+            np.max(np.abs(state.beta_rate[r]), axis=-1) < 1e-9)
+        settled_meas = np.max(np.abs(_wrap_half(beta_meas[r] - bt)), axis=-1) < config.reconfig_tol
+        resume = settled_cmd & (settled_meas | (mode_time[r] > config.reconfig_timeout)) & ~zero_cmd[r]
+        if np.any(resume):
+            rr = r[resume]
+            s_lam[rr], s_mu[rr], s_lam_rate[rr] = reconfig_lam[rr], 0.0, 0.0
+            mode[rr], mode_time[rr], has_rl[rr] = int(Mode.RUNNING), 0.0, False
+            lam_d[rr], mu_d[rr] = nearer_target(s_lam[rr], lam_d[rr], mu_d[rr])
+
+    lam_new, mu_new, lam_rate = s_lam.copy(), np.zeros(nrows), np.zeros((nrows, 3))
+    beta_c, rate_c, phidot_c = state.beta.copy(), state.beta_rate.copy(), state.phidot.copy()
+    kappa, saturated = np.zeros(nrows), np.zeros(nrows, dtype=np.bool_)
+    recon = mode == Mode.RECONFIGURING
+    if np.any(recon):
+        r = np.flatnonzero(recon)
+        bt = beta_target[r]
+        zr = zero_cmd[r]
+        if np.any(zr):
+            # hold: brake the steering to rest where it is (at full deceleration, so it stops
+            # short of where the reconfiguration was heading, inside the range); do not swing
+            br = state.beta_rate[r]
+            rate = np.sign(br) * np.maximum(np.abs(br) - limits.steer_accel_max * dt, 0.0)
+            bt = np.where(zr[:, None], state.beta[r] + rate * dt, bt)
+        use_meas = np.zeros(r.size, dtype=np.bool_)
+        measured_rate = np.zeros((r.size, n))
+        if config.coupling_from_measurement:
+            use_meas = state.has_beta_meas[r].copy()
+            measured_rate = _wrap_half(beta_meas[r] - state.beta_meas[r]) / dt
+        beta_c[r], rate_c[r], phidot_c[r] = _reconfigure_step(
+            state.beta[r], state.beta_rate[r], state.phidot[r], bt, geom, limits, dt, exact=zr,
+            measured_rate=measured_rate, use_measured=use_meas, rate_fraction=config.reconfig_rate_fraction,
+            accel_fraction=config.reconfig_accel_fraction)
+    moving = ~recon
+    if np.any(moving):
+        r = np.flatnonzero(moving)
+        stop_r = mode[r] == Mode.STOPPING
+        tgt_lam = np.where(stop_r[:, None], s_lam[r], lam_d[r])
+        tgt_mu = np.where(stop_r, 0.0, mu_d[r])
+        ln, mn, lr, bc, rcm, pc, kp, sat = _coordinated_step(
+            s_lam[r], s_mu[r], s_lam_rate[r], state.beta[r], state.beta_rate[r], state.phidot[r], tgt_lam, tgt_mu,
+            stop_r, geom, limits, config, dt)
+        mn = np.where(stop_r & (np.abs(mn) < 1e-9), 0.0, mn)
+        rest = stop_r & (np.abs(mn) < 1e-6 * np.maximum(1.0, np.abs(s_mu[r]))) & (np.linalg.norm(lr, axis=-1) < 1e-6)
+        mn = np.where(rest, 0.0, mn)
+        lr = np.where(rest[:, None], 0.0, lr)
+        lam_new[r], mu_new[r], lam_rate[r] = ln, mn, lr
+        beta_c[r], rate_c[r], phidot_c[r] = bc, rcm, pc
+        kappa[r], saturated[r] = kp, sat
+
+    accel = (rate_c - state.beta_rate) / dt
+    phiddot = (phidot_c - state.phidot) / dt
+    info.update(mode=mode.copy(), events=events.copy(), kappa=kappa, saturated=saturated, event=event,
+                held_at_stop=held)
+    new_state = ICRBatchState(mode=mode, lam=lam_new, mu=mu_new, lam_rate=lam_rate, beta=beta_c, beta_rate=rate_c,
+                              phidot=phidot_c, mode_time=mode_time,
+                              reconfig_lam=np.where(has_rl[:, None], reconfig_lam, 0.0), has_reconfig_lam=has_rl,
+                              events=events, beta_meas=beta_meas.copy(), has_beta_meas=np.ones(nrows, dtype=np.bool_),
+                              held_time=held_time)
+    cmd = BatchWheelCommand(beta=beta_c.copy(), phidot=phidot_c.copy(), beta_rate=rate_c.copy(), beta_accel=accel,
+                            phiddot=phiddot, info=info)
+    return new_state, cmd
 
 
 def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
                      geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig,
                      dt: float) -> tuple[ICRControllerState, WheelCommand]:
     """One control period of the ICR controller (pure: returns the new state and the command).
+
+    The N = 1 case of :func:`icr_control_step_batch`.
 
     Args:
         state: from :func:`initial_state` or the previous step.
@@ -556,106 +900,27 @@ def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phid
     n = geom.n
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0, got {dt!r}")
-    lam_hat = _unit3(lam_hat, "lam_hat")
+    _unit3(lam_hat, "lam_hat")
+    lam_hat = np.asarray(lam_hat, dtype=np.float64)
     mu_hat = float(_finite(mu_hat, "mu_hat", ()))
     beta_meas = _finite(beta_meas, "beta_meas", (n,))
-    _finite(phidot_meas, "phidot_meas", (n,))
-    lam_d = _unit3(lam_d, "lam_d")
+    phidot_meas = _finite(phidot_meas, "phidot_meas", (n,))
+    _unit3(lam_d, "lam_d")
+    lam_d = np.asarray(lam_d, dtype=np.float64)
     mu_d = float(_finite(mu_d, "mu_d", ()))
-
-    info: dict = {"saturated": False, "event": None}
-    zero_cmd = abs(mu_d) < config.zero_mu_tol
-    if zero_cmd:
-        lam_d, mu_d = state.lam, 0.0  # a stop command holds λ: no wheel swings
-    lam_d, mu_d = nearer_target(state.lam, lam_d, mu_d)
-    lam_d, axis_k = project_off_axes(lam_d, state.lam, geom, config.axis_margin)
-    lam_d, mu_d = nearer_target(state.lam, lam_d, mu_d)
-    mu_d = float(clamp_mu(lam_d, mu_d, geom, limits, config.mu_headroom))
-    info.update(lam_target=lam_d, mu_target=mu_d, axis_cap=axis_k)
-
-    mode, mode_time, events, reconfig_lam = state.mode, state.mode_time + dt, state.events, state.reconfig_lam
-    held_time = 0.0
-
-    # a wheel knocked out of place (measured far from commanded) -> stop and reconfigure
-    kicked = bool(np.max(np.abs(_wrap_half(beta_meas - state.beta))) > config.kick_tol)
-    if mode == Mode.RUNNING:
-        blocked = None
-        if not zero_cmd:
-            blocked, free, theta = arc_check(state.lam, lam_d, geom, config.axis_margin, config.arc_step)
-            if blocked == "stop" and theta - free < config.stop_hysteresis:
-                held_time = state.held_time + dt
-                if held_time <= config.stop_hold_time + 1e-9:
-                    # only just past a steering stop: wait at the stop instead of turning wheels
-                    # by π; a target that keeps going (or stays past) reconfigures once, a
-                    # jittering one never does
-                    lam_d = slerp(state.lam, lam_d, free)
-                    blocked = None
-                    info["held_at_stop"] = True
-        if kicked or blocked is not None:
-            info["event"] = "kick" if kicked else blocked
-            events += 1
-            mode, mode_time = Mode.STOPPING, 0.0
-    if mode == Mode.STOPPING:
-        stopped = state.mu == 0.0 and np.linalg.norm(state.lam_rate) < 1e-9 and (
-            abs(mu_hat) < config.stop_mu_tol or mode_time > config.stop_timeout)
-        if stopped:
-            mode, mode_time = Mode.RECONFIGURING, 0.0
-    if mode == Mode.RECONFIGURING and reconfig_lam is None:
-        reconfig_lam = lam_d
-    if mode == Mode.RECONFIGURING:
-        if (not zero_cmd and np.max(np.abs(state.beta - steering_from_lambda(
-                reconfig_lam, geom, singular_fill=state.beta))) > config.reconfig_freeze
-                and _must_stop(reconfig_lam, lam_d, geom, config)):
-            # retarget only if the latest target could not be reached continuously from the
-            # configuration being reached (RUNNING does the rest); no chasing a jittery target
-            reconfig_lam = lam_d
-        beta_target = steering_from_lambda(reconfig_lam, geom, singular_fill=state.beta)
-        settled_cmd = np.max(np.abs(state.beta - beta_target)) < 1e-6 and np.max(np.abs(state.beta_rate)) < 1e-9
-        settled_meas = np.max(np.abs(_wrap_half(beta_meas - beta_target))) < config.reconfig_tol
-        if settled_cmd and (settled_meas or mode_time > config.reconfig_timeout) and not zero_cmd:
-            state = replace(state, lam=reconfig_lam, mu=0.0, lam_rate=np.zeros(3))
-            mode, mode_time, reconfig_lam = Mode.RUNNING, 0.0, None
-            lam_d, mu_d = nearer_target(state.lam, lam_d, mu_d)
-
-    if mode == Mode.RECONFIGURING:
-        if zero_cmd:
-            # hold: brake the steering to rest where it is (at full deceleration, so it stops
-            # short of where the reconfiguration was heading, inside the range); do not swing
-            rate = np.sign(state.beta_rate) * np.maximum(np.abs(state.beta_rate) - limits.steer_accel_max * dt, 0.0)
-            beta_target = state.beta + rate * dt
-        measured_rate = None
-        if config.coupling_from_measurement and state.beta_meas is not None:
-            measured_rate = _wrap_half(beta_meas - state.beta_meas) / dt
-        beta_c, rate_c, phidot_c = _reconfigure_step(state, beta_target, geom, limits, dt,
-                                                     exact=zero_cmd, measured_rate=measured_rate,
-                                                     rate_fraction=config.reconfig_rate_fraction,
-                                                     accel_fraction=config.reconfig_accel_fraction)
-        lam_new, mu_new, lam_rate = state.lam, 0.0, np.zeros(3)
-        info["kappa"] = 0.0
-    elif mode == Mode.STOPPING:
-        lam_new, mu_new, lam_rate, beta_c, rate_c, phidot_c, sinfo = _stop_step(state, geom, limits, config, dt)
-        info.update(sinfo)
-        if abs(mu_new) < 1e-9:
-            mu_new = 0.0
-    else:
-        lam_new, mu_new, lam_rate, beta_c, rate_c, phidot_c, sinfo = _coordinated_step(
-            state, lam_d, mu_d, geom, limits, config, dt)
-        info.update(sinfo)
-    if mode == Mode.STOPPING and abs(mu_new) < 1e-6 * max(1.0, abs(state.mu)) and np.linalg.norm(lam_rate) < 1e-6:
-        mu_new, lam_rate = 0.0, np.zeros(3)
-
-    accel = (rate_c - state.beta_rate) / dt
-    phiddot = (phidot_c - state.phidot) / dt
-    info["mode"] = mode
-    info["events"] = events
-    new_state = ICRControllerState(mode=mode, lam=lam_new, mu=float(mu_new), lam_rate=np.asarray(lam_rate),
-                                   beta=np.asarray(beta_c), beta_rate=np.asarray(rate_c),
-                                   phidot=np.asarray(phidot_c), mode_time=mode_time,
-                                   reconfig_lam=reconfig_lam, events=events, beta_meas=beta_meas.copy(),
-                                   held_time=held_time if info.get("held_at_stop") else 0.0)
-    cmd = WheelCommand(beta=new_state.beta.copy(), phidot=new_state.phidot.copy(), beta_rate=rate_c.copy(),
-                       beta_accel=accel, phiddot=phiddot, info=info)
-    return new_state, cmd
+    bstate, bcmd = icr_control_step_batch(ICRBatchState.stack([state]), lam_hat[None, :], np.array([mu_hat]),
+                                          beta_meas[None, :], phidot_meas[None, :], lam_d[None, :],
+                                          np.array([mu_d]), geom, limits, config, dt)
+    bi = bcmd.info
+    info: dict = {"saturated": bool(bi["saturated"][0]), "event": _EVENTS[int(bi["event"][0])],
+                  "lam_target": bi["lam_target"][0], "mu_target": float(bi["mu_target"][0]),
+                  "axis_cap": int(bi["axis_cap"][0]), "kappa": float(bi["kappa"][0]),
+                  "mode": Mode(int(bi["mode"][0])), "events": int(bi["events"][0])}
+    if bi["held_at_stop"][0]:
+        info["held_at_stop"] = True
+    cmd = WheelCommand(beta=bcmd.beta[0], phidot=bcmd.phidot[0], beta_rate=bcmd.beta_rate[0],
+                       beta_accel=bcmd.beta_accel[0], phiddot=bcmd.phiddot[0], info=info)
+    return bstate.robot(0), cmd
 
 
 class ICRController:
