@@ -26,6 +26,7 @@ from gymnasium.vector.utils import batch_space
 from estimation.hrep import eta_from_twist
 
 from .icr_controller import ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch
+from .wrappers import icr_target_from_action
 from .swerve import SwerveConfig, SwerveController
 
 __all__ = ["VectorControllerAction"]
@@ -117,11 +118,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         active = np.flatnonzero(~self._pending)
         if self._controller == "icr" and active.size:
             if self._kind == "icr_target":
-                norm = np.linalg.norm(a[active, :3], axis=1)
-                small = norm < self.min_norm
-                lam_d = np.where(small[:, None], np.array([0.0, 0.0, 1.0]),
-                                 a[active, :3] / np.where(small, 1.0, norm)[:, None])
-                mu_d = np.where(small, 0.0, a[active, 3] * self.mu_max)
+                lam_d, mu_d = icr_target_from_action(a[active], self.mu_max, self.min_norm)
             else:
                 lam_d, mu_d = eta_from_twist(a[active] * self.scale)
             sub, cmd = icr_control_step_batch(self._icr.take(active), lam_hat[active], mu_hat[active], beta[active],

@@ -27,7 +27,18 @@ from .icr_controller import ICRController, ICRControllerConfig
 from .limits import limit_violations
 from .swerve import SwerveConfig, SwerveController
 
-__all__ = ["ICRTargetAction", "TwistAction"]
+__all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
+
+
+def icr_target_from_action(action, mu_max: float, min_norm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Clipped ICR-target actions (..., 4) -> (λ_d (..., 3), μ_d (...)): λ_d = a[:3]/‖a[:3]‖ and
+    μ_d = a[3]·mu_max [m/s]; below ``min_norm`` the action means "hold": λ_d = (0, 0, 1), μ_d = 0."""
+    a = np.asarray(action, dtype=np.float64)
+    norm = np.linalg.norm(a[..., :3], axis=-1)
+    small = norm < min_norm
+    lam_d = np.where(small[..., None], np.array([0.0, 0.0, 1.0]), a[..., :3] / np.where(small, 1.0, norm)[..., None])
+    mu_d = np.where(small, 0.0, a[..., 3] * mu_max)
+    return lam_d, mu_d
 
 
 class _ControllerWrapper(gym.Wrapper):
@@ -99,13 +110,8 @@ class ICRTargetAction(_ControllerWrapper):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (4,) or not np.all(np.isfinite(a)):
             raise ValueError(f"action must be a finite (4,) array, got {action!r}")
-        a = np.clip(a, -1.0, 1.0)
-        norm = float(np.linalg.norm(a[:3]))
-        if norm < self.min_norm:
-            lam_d, mu_d = np.array([0.0, 0.0, 1.0]), 0.0
-        else:
-            lam_d, mu_d = a[:3] / norm, a[3] * self.mu_max
-        return self._drive(lam_d=lam_d, mu_d=mu_d)
+        lam_d, mu_d = icr_target_from_action(np.clip(a, -1.0, 1.0), self.mu_max, self.min_norm)
+        return self._drive(lam_d=lam_d, mu_d=float(mu_d))
 
 
 class TwistAction(_ControllerWrapper):
