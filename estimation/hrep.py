@@ -56,24 +56,18 @@ def normalize(lam: np.ndarray) -> np.ndarray:
     return lam / norm
 
 
-def _canonical_sign(lam: np.ndarray) -> np.ndarray:
+@njit(cache=True)
+def _hemisphere_sign(lam0: float, lam1: float, lam2: float) -> float:
     """+1 or −1 so that sign·λ has w > 0, or w = 0 and u > 0, or w = u = 0 and v > 0."""
-    u, v, w = lam[..., 0], lam[..., 1], lam[..., 2]
-    key = np.where(w != 0, w, np.where(u != 0, u, v))
-    return np.where(key < 0, -1.0, 1.0)
+    key = lam2 if lam2 != 0.0 else (lam0 if lam0 != 0.0 else lam1)
+    return -1.0 if key < 0 else 1.0
 
 
 @njit(cache=True)
 def _canonicalize_rows(lam) -> None:
-    """In place, for (N, 3) unit rows: the sign rule of :func:`_canonical_sign` (used by the
-    estimator kernels' hot path; a test checks both agree)."""
+    """In place, for (N, 3) rows: the hemisphere rule of :func:`canonical_lambda`."""
     for p in range(lam.shape[0]):
-        key = lam[p, 2]
-        if key == 0.0:
-            key = lam[p, 0]
-            if key == 0.0:
-                key = lam[p, 1]
-        if key < 0.0:
+        if _hemisphere_sign(lam[p, 0], lam[p, 1], lam[p, 2]) < 0.0:
             lam[p, 0] = -lam[p, 0]
             lam[p, 1] = -lam[p, 1]
             lam[p, 2] = -lam[p, 2]
@@ -83,7 +77,9 @@ def canonical_lambda(lam: np.ndarray) -> np.ndarray:
     """The canonical representative of λ ∈ Λ: the unit vector of the antipodal pair with w > 0
     (ties on the equator broken by u > 0, then v > 0)."""
     lam = normalize(lam)
-    return lam * _canonical_sign(lam)[..., None]
+    flat = np.ascontiguousarray(lam.reshape(-1, 3))  # normalize returned a new array
+    _canonicalize_rows(flat)
+    return flat.reshape(lam.shape)
 
 
 @njit(cache=True)
@@ -92,8 +88,7 @@ def _canonical_eta_sign(lam0: float, lam1: float, lam2: float, mu: float, mu_tol
     hemisphere rule of :func:`canonical_lambda`."""
     if abs(mu) > mu_tol:
         return -1.0 if mu < 0 else 1.0
-    key = lam2 if lam2 != 0.0 else (lam0 if lam0 != 0.0 else lam1)
-    return -1.0 if key < 0 else 1.0
+    return _hemisphere_sign(lam0, lam1, lam2)
 
 
 @njit(cache=True)
