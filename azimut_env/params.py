@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from estimation.geometry import RobotGeometry
 
@@ -79,6 +80,22 @@ class ActuatorLimits:
                              f"]{self.steer_min}, {self.steer_max}]")
 
 
+@njit(cache=True)
+def _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd):
+    """Set-points of the clipped action row a[i] (2n,) into cmd[i] (n, 2): β_cmd = a·β_max (not
+    below β_min) [rad], φ̇_cmd = a·φ̇_max [rad/s]. The one implementation of the action map; the
+    task's compiled step calls it too."""
+    for k in range(n):
+        cmd[i, k, 0] = max(a[i, k] * steer_max, steer_min)
+        cmd[i, k, 1] = a[i, n + k] * wheel_speed_max
+
+
+@njit(cache=True)
+def _setpoints_batch(a, n, steer_min, steer_max, wheel_speed_max, cmd):
+    for i in range(a.shape[0]):
+        _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
+
+
 def setpoints_from_action(action, limits: ActuatorLimits, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Normalised action (..., 2n) in [−1, 1] -> (β_cmd [rad], φ̇_cmd [rad/s]), each (..., n).
 
@@ -90,10 +107,11 @@ def setpoints_from_action(action, limits: ActuatorLimits, n: int) -> tuple[np.nd
         raise ValueError(f"action must have shape (..., {2 * n}) for {n} wheels, got {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action contains NaN or inf: {a}")
-    a = np.clip(a, -1.0, 1.0)
-    beta = a[..., :n] * limits.steer_max
-    beta = np.clip(beta, limits.steer_min, limits.steer_max)
-    return beta, a[..., n:] * limits.wheel_speed_max
+    flat = np.ascontiguousarray(np.clip(a, -1.0, 1.0).reshape(-1, 2 * n))
+    cmd = np.empty((flat.shape[0], n, 2))
+    _setpoints_batch(flat, n, float(limits.steer_min), float(limits.steer_max), float(limits.wheel_speed_max), cmd)
+    batch = a.shape[:-1]
+    return cmd[..., 0].reshape(batch + (n,)), cmd[..., 1].reshape(batch + (n,))
 
 
 def action_from_setpoints(beta_cmd, phidot_cmd, limits: ActuatorLimits) -> np.ndarray:

@@ -31,7 +31,7 @@ from numba.typed import List as NumbaList
 
 from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 
-from .params import RobotParams, SensorParams, action_from_setpoints
+from .params import RobotParams, SensorParams, _setpoints_row, action_from_setpoints
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import _measure_kernel
 from .tracks import Track, make_track, query_tracks
@@ -165,9 +165,7 @@ def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
         if rows[i]:
             for j in range(a.shape[1]):
                 a[i, j] = min(max(a[i, j], -1.0), 1.0)
-            for k in range(n):
-                cmd[i, k, 0] = max(a[i, k] * steer_max, steer_min)
-                cmd[i, k, 1] = a[i, n + k] * wheel_speed_max
+            _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
     return -1
 
 
