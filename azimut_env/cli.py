@@ -1,14 +1,20 @@
 """The ``azimut`` command line: one subcommand per job, each implemented next to what it runs.
 
-A subcommand lives in a module that defines ``add_arguments(parser)`` and ``run(args) -> int``.
-Modules are imported only when their subcommand runs, so ``azimut bench-estimators`` does not pay
-for pymunk or torch.
+A subcommand lives in a module that defines ``add_arguments(parser)`` and ``run(args) -> int``,
+and optionally ``check_args(args)``, which raises ``ValueError`` for argument combinations that
+``type=`` converters cannot see. Modules are imported only when their subcommand runs, so
+``azimut bench-estimators`` does not pay for pymunk or torch.
+
+Every argument and output path is checked before a command starts work (``type=`` converters of
+:mod:`azimut_env.validation`, then ``check_args``): a mistake is one line on stderr,
+``azimut CMD: error: ...``, and exit status 2, never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import sys
 
 #: name -> (module, one-line help)
@@ -20,6 +26,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record-d2": ("control.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
     "train": ("train.cli", "train an RL baseline (needs the [rl] extra)"),
 }
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line on stderr and exit status 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def _available() -> dict[str, tuple[str, str]]:
@@ -45,16 +58,21 @@ def main(argv: list[str] | None = None) -> int:
         sub.add_parser(name, help=help_, add_help=False)
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in commands:
         if argv and argv[0] not in ("-h", "--help"):
-            parser.print_usage(sys.stderr)
             print(f"azimut: error: unknown command {argv[0]!r} (choose from {', '.join(commands)})", file=sys.stderr)
             return 2
         parser.print_help()
         return 0
     name = argv[0]
     module = importlib.import_module(commands[name][0])
-    cmd_parser = argparse.ArgumentParser(prog=f"azimut {name}", description=commands[name][1])
+    cmd_parser = CommandParser(prog=f"azimut {name}", description=commands[name][1])
     module.add_arguments(cmd_parser)
     args = cmd_parser.parse_args(argv[1:])
+    check = getattr(module, "check_args", None)
+    if check is not None:
+        try:
+            check(args)
+        except (ValueError, TypeError) as exc:
+            cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     return int(module.run(args) or 0)
 
 

@@ -1,0 +1,250 @@
+"""Input checks shared by every entry point: constructors, config dataclasses, ``reset`` options
+and the ``azimut`` command line.
+
+The project's rule: every input is validated where it enters, with a clear ``ValueError`` (or
+``TypeError`` for a value of the wrong kind) naming the input, and a refused input changes no
+state. These helpers return the value converted to its canonical Python type, so a caller writes
+``self.n = check_int("substeps", substeps, min_value=1)`` and stores what they return.
+
+The ``arg_*`` functions are ``argparse`` ``type=`` converters: they raise
+``argparse.ArgumentTypeError``, which argparse reports as one line on stderr with exit status 2
+(``azimut X: error: argument --flag: ...``), before the command starts any work.
+:func:`check_output_path` checks a file the command will write (its directory exists and is
+writable, the path is not a directory and not under a file) for the same early refusal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import numbers
+import os
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    "check_finite", "check_range", "check_positive", "check_nonnegative", "check_int", "check_bool",
+    "check_choice", "check_real_array", "check_index_list",
+    "arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path",
+]
+
+
+def _is_real_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def check_finite(name: str, value: Any) -> float:
+    """A finite real number (int, float or NumPy scalar; not bool, str, complex) as ``float``."""
+    if not _is_real_number(value):
+        raise TypeError(f"{name} must be a real number, got {value!r} ({type(value).__name__})")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+                lo_open: bool = False, hi_open: bool = False) -> float:
+    """A finite real number in [lo, hi] (``lo_open``/``hi_open`` exclude the bound) as ``float``."""
+    v = check_finite(name, value)
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}, got {value!r}")
+    if hi is not None and (v > hi or (hi_open and v == hi)):
+        raise ValueError(f"{name} must be {'<' if hi_open else '<='} {hi}, got {value!r}")
+    return v
+
+
+def check_positive(name: str, value: Any) -> float:
+    """A finite real number > 0 as ``float``."""
+    return check_range(name, value, 0.0, lo_open=True)
+
+
+def check_nonnegative(name: str, value: Any) -> float:
+    """A finite real number >= 0 as ``float``."""
+    return check_range(name, value, 0.0)
+
+
+def check_int(name: str, value: Any, min_value: int | None = None, max_value: int | None = None) -> int:
+    """An integer (Python or NumPy int, or a float with an integral value; not bool, str) in
+    [min_value, max_value] as ``int``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, float, np.floating)):
+        raise TypeError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(value) or value != int(value):
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+    v = int(value)
+    if min_value is not None and v < min_value:
+        raise ValueError(f"{name} must be >= {min_value}, got {value!r}")
+    if max_value is not None and v > max_value:
+        raise ValueError(f"{name} must be <= {max_value}, got {value!r}")
+    return v
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """A bool (Python or NumPy) as ``bool``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {value!r} ({type(value).__name__})")
+    return bool(value)
+
+
+def check_choice(name: str, value: Any, choices: Iterable[Any]) -> Any:
+    """One of ``choices`` (same type and equal; ``True`` is not ``1``)."""
+    choices = tuple(choices)
+    for c in choices:
+        if isinstance(value, type(c)) and not (isinstance(value, (bool, np.bool_)) and not isinstance(c, bool)) \
+                and value == c:
+            return value
+    raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
+
+
+def check_real_array(name: str, value: Any, shape: Sequence[int | None] | None = None, *,
+                     finite: bool = False, dtype=np.float64) -> np.ndarray:
+    """An array of real numbers (bool, int or float dtype; never complex, object or strings),
+    converted to ``dtype``; ``shape`` with ``None`` for any length; ``finite`` refuses NaN/inf."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(dtype, copy=False)
+    if shape is not None:
+        if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
+            want = "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
+            raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    if finite and not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite")
+    return arr
+
+
+def check_index_list(name: str, value: Any, size: int, *, allow_empty: bool = True) -> list[int]:
+    """A sequence of distinct integer indices in [0, size) (ints or NumPy ints; never floats,
+    bools or strings) as a list of ``int``."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray, range)):
+        raise TypeError(f"{name} must be a sequence of integers in 0..{size - 1}, got {value!r}")
+    out = []
+    for k in value:
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, numbers.Integral):
+            raise TypeError(f"{name} must hold integers, got {k!r} ({type(k).__name__})")
+        if not 0 <= int(k) < size:
+            raise ValueError(f"{name}: index {int(k)} out of range 0..{size - 1}")
+        out.append(int(k))
+    if len(set(out)) != len(out):
+        raise ValueError(f"{name} must not repeat an index, got {out}")
+    if not out and not allow_empty:
+        raise ValueError(f"{name} must not be empty")
+    return out
+
+
+# ---------------------------------------------------------------------- argparse converters
+
+
+def arg_int(min_value: int | None = None, max_value: int | None = None) -> Callable[[str], int]:
+    """``type=`` for an integer flag in [min_value, max_value]."""
+
+    def convert(text: str) -> int:
+        try:
+            v = int(text, 10)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if min_value is not None and v < min_value:
+            raise argparse.ArgumentTypeError(f"must be >= {min_value}, got {v}")
+        if max_value is not None and v > max_value:
+            raise argparse.ArgumentTypeError(f"must be <= {max_value}, got {v}")
+        return v
+
+    convert.__name__ = "integer"
+    return convert
+
+
+def arg_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+              hi_open: bool = False) -> Callable[[str], float]:
+    """``type=`` for a finite real flag in [lo, hi] (``lo_open``/``hi_open`` exclude the bound)."""
+
+    def convert(text: str) -> float:
+        try:
+            v = float(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        try:
+            return check_range("value", v, lo, hi, lo_open=lo_open, hi_open=hi_open)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e).removeprefix("value ")) from None
+
+    convert.__name__ = "number"
+    return convert
+
+
+def arg_choice_list(choices: Sequence[str], *, allow_empty: bool = False) -> Callable[[str], list[str]]:
+    """``type=`` for a comma-separated subset of ``choices`` (order kept, duplicates refused)."""
+
+    def convert(text: str) -> list[str]:
+        items = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [t for t in items if t not in choices]
+        if bad:
+            raise argparse.ArgumentTypeError(f"unknown {', '.join(map(repr, bad))}; choose from {', '.join(choices)}")
+        if len(set(items)) != len(items):
+            raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+        if not items and not allow_empty:
+            raise argparse.ArgumentTypeError(f"give at least one of {', '.join(choices)}")
+        return items
+
+    convert.__name__ = "list"
+    return convert
+
+
+def check_output_path(path: str | os.PathLike, *, directory: bool = False) -> str:
+    """Check that ``path`` can be written before any work starts; return it as ``str``.
+
+    A file path must not be an existing directory, and its parent must be an existing, writable
+    directory (an existing file is overwritten if it is writable). With ``directory=True`` the
+    path is a directory to create or fill: it must not be a file, nothing on its way may be a
+    file, and its first existing ancestor must be writable. Raises ``ValueError`` with one line.
+    """
+    text = os.fspath(path)
+    if not text or "\0" in text:
+        raise ValueError(f"invalid path {text!r}")
+    p = os.path.abspath(text)
+    if directory:
+        if os.path.exists(p) and not os.path.isdir(p):
+            raise ValueError(f"{text}: exists and is not a directory")
+        anc = p
+        while not os.path.exists(anc):
+            parent = os.path.dirname(anc)
+            if parent == anc:
+                break
+            anc = parent
+        if not os.path.isdir(anc):
+            raise ValueError(f"{text}: {anc} is not a directory")
+        if not os.access(anc, os.W_OK | os.X_OK):
+            raise ValueError(f"{text}: directory {anc} is not writable")
+        return text
+    if os.path.isdir(p):
+        raise ValueError(f"{text}: is a directory")
+    parent = os.path.dirname(p)
+    anc = parent
+    while not os.path.exists(anc):
+        up = os.path.dirname(anc)
+        if up == anc:
+            break
+        anc = up
+    if not os.path.isdir(anc):
+        raise ValueError(f"{text}: {anc} is not a directory")
+    if anc != parent:
+        raise ValueError(f"{text}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{text}: directory {parent} is not writable")
+    if os.path.exists(p) and not os.access(p, os.W_OK):
+        raise ValueError(f"{text}: file is not writable")
+    return text
+
+
+def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
+    """``type=`` for an output file (or directory) flag, checked with :func:`check_output_path`."""
+
+    def convert(text: str) -> str:
+        try:
+            return check_output_path(text, directory=directory)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    convert.__name__ = "path"
+    return convert
