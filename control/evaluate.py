@@ -8,7 +8,10 @@ actuator limits and control period):
 
 Per controller and track the report has (``metrics.md`` and ``metrics.json``): RMS and max lateral
 error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean internal force, mean
-and min qua of the measured steering configuration (eq. 28–29), the number of steps where a
+and min qua of the measured steering configuration (eq. 28–29) over all steps and **while moving**
+(see :func:`moving_mask`: the controller in its RUNNING mode and the true |μ| above
+:data:`MOVING_MU`; stops and in-place reconfigurations, where the wheels turn with the chassis at
+rest, are left out), the standstill share (the other steps), the number of steps where a
 commanded limit was exceeded, and the number of stop-and-reconfigure events; and PNG plots: the
 trajectory over the track (the paper's Fig. 9), pairwise β projections against the constraining
 surface (Fig. 10), qua over time (Fig. 11), the ICR's path on the sphere, and the wheel commands
@@ -36,9 +39,13 @@ from .limits import limit_violations
 from .path_follower import PathFollower, PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
 
-__all__ = ["CONTROLLERS", "EpisodeLog", "run_episode", "episode_metrics", "write_report", "add_arguments", "run"]
+__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_report",
+           "add_arguments", "run"]
 
 CONTROLLERS = ("icr", "twist")
+#: |μ| [m/s] of the true chassis motion above which a step counts as moving (5% of the paper
+#: track's nominal 1 m/s; μ = ‖ξ̇‖ of the twist, ξ̇ = μ (v, −u, w)).
+MOVING_MU = 0.05
 #: Default evaluation order: the paper track first.
 DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
 
@@ -63,6 +70,7 @@ class EpisodeLog:
     beta_rate: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     phiddot: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     lam_hat: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mu_true: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     violations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     events: int = 0
@@ -126,7 +134,7 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     steps = int(math.ceil(max_time / dt))
     rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
                                             "beta_meas", "beta_cmd", "phidot_cmd", "beta_rate", "phiddot",
-                                            "lam_hat", "mode", "violations")}
+                                            "lam_hat", "mu_true", "mode", "violations")}
     log = EpisodeLog(controller, env.track, dt)
     start = time.time()
     label = f"{controller}/{env.track.name}"
@@ -150,7 +158,7 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
                            ("internal_force", info["internal_force"]), ("qua", info["qua"]),
                            ("beta_meas", env.measured_beta), ("beta_cmd", cmd.beta), ("phidot_cmd", cmd.phidot),
                            ("beta_rate", cmd.beta_rate), ("phiddot", cmd.phiddot), ("lam_hat", lam_hat),
-                           ("mode", mode), ("violations", viol)):
+                           ("mu_true", abs(float(info["eta_true"][1]))), ("mode", mode), ("violations", viol)):
             rec[key].append(value)
         done = info["progress"] >= env.track.length - 0.01 or info.get("finished", False)
         if progress and k % 50 == 0:
@@ -171,11 +179,20 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     return log
 
 
+def moving_mask(log: EpisodeLog, min_mu: float = MOVING_MU) -> np.ndarray:
+    """(T,) bool: the steps where the robot moves: the controller is RUNNING (not stopping or
+    reconfiguring in place; the twist baseline always is) and the true |μ| > ``min_mu`` [m/s]."""
+    if log.mu_true.shape != log.qua.shape:
+        return np.zeros(log.qua.shape, dtype=bool)
+    return (log.mode == int(Mode.RUNNING)) & (log.mu_true > min_mu)
+
+
 def episode_metrics(log: EpisodeLog) -> dict:
     """The metrics table row of one run (see the module docstring); NaN where undefined."""
     t_end = float(log.t[-1]) if log.t.size else float("nan")
     lat = log.lateral if log.lateral.size else np.array([np.nan])
     head = log.heading if log.heading.size else np.array([np.nan])
+    moving = moving_mask(log)
     return {
         "controller": log.controller,
         "track": log.track.name,
@@ -189,6 +206,9 @@ def episode_metrics(log: EpisodeLog) -> dict:
         "mean_internal_force_N": float(np.mean(log.internal_force)) if log.internal_force.size else float("nan"),
         "mean_qua": float(np.mean(log.qua)) if log.qua.size else float("nan"),
         "min_qua": float(np.min(log.qua)) if log.qua.size else float("nan"),
+        "mean_qua_moving": float(np.mean(log.qua[moving])) if moving.any() else float("nan"),
+        "min_qua_moving": float(np.min(log.qua[moving])) if moving.any() else float("nan"),
+        "standstill_share": float(1.0 - np.mean(moving)) if log.qua.size else float("nan"),
         "limit_violation_steps": int(np.sum(log.violations)),
         "reconfigure_events": int(log.events),
     }
@@ -198,8 +218,9 @@ _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("comp
             ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100), ("max_lateral_m", "max lat [cm]", "{:.2f}", 100),
             ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180 / math.pi),
             ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
-            ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua", "{:.4f}"),
-            ("min_qua", "min qua", "{:.4f}"), ("limit_violation_steps", "limit-exceeded steps", "{}"),
+            ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
+            ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
+            ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"), ("limit_violation_steps", "limit-exceeded steps", "{}"),
             ("reconfigure_events", "stop+reconfig", "{}")]
 
 
@@ -398,7 +419,8 @@ def run(args: argparse.Namespace) -> int:
                 row["plots"] = write_plots(log, out, geom, limits)
             print(f"{controller:>6} {track:<8} RMS lat {100 * row['rms_lateral_m']:.2f} cm, max "
                   f"{100 * row['max_lateral_m']:.2f} cm, slip {row['slip_energy_J']:.2f} J, "
-                  f"int. force {row['mean_internal_force_N']:.2f} N, limit-exceeded steps "
+                  f"int. force {row['mean_internal_force_N']:.2f} N, qua moving {row['mean_qua_moving']:.4f} "
+                  f"(min {row['min_qua_moving']:.4f}, standstill {100 * row['standstill_share']:.0f}%), limit-exceeded steps "
                   f"{row['limit_violation_steps']}, stop+reconfig {row['reconfigure_events']}", flush=True)
     header = (f"seed {args.seed}, speed scale {args.speed_scale}, control period {env0.control_period} s, "
               f"limits {limits}")

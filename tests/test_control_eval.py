@@ -38,6 +38,21 @@ def test_icr_scrubs_less_than_the_twist_baseline(runs):
     assert icr["mean_internal_force_N"] < twist["mean_internal_force_N"]
 
 
+def test_qua_while_moving_leaves_out_stops_and_reconfigurations(runs):
+    from control.evaluate import MOVING_MU, moving_mask
+    from control.icr_controller import Mode
+
+    log = runs["icr"]
+    moving = moving_mask(log)
+    assert not moving[log.mode != int(Mode.RUNNING)].any()
+    assert not moving[log.mu_true <= MOVING_MU].any()
+    m = episode_metrics(log)
+    assert 0.0 < m["standstill_share"] < 1.0
+    assert m["standstill_share"] == pytest.approx(1.0 - moving.mean())
+    assert m["mean_qua_moving"] == pytest.approx(float(np.mean(log.qua[moving])))
+    assert m["min_qua_moving"] >= m["min_qua"]
+
+
 def test_report_and_plots(runs, tmp_path):
     from azimut_env.params import ActuatorLimits
     from estimation import RobotGeometry
@@ -46,7 +61,8 @@ def test_report_and_plots(runs, tmp_path):
     write_report(rows, tmp_path)
     data = json.loads((tmp_path / "metrics.json").read_text())
     assert [r["controller"] for r in data] == ["icr", "twist"]
-    assert "| icr | corner |" in (tmp_path / "metrics.md").read_text()
+    text = (tmp_path / "metrics.md").read_text()
+    assert "| icr | corner |" in text and "mean qua moving" in text and "standstill share" in text
     files = write_plots(runs["icr"], tmp_path, RobotGeometry.azimut3(), ActuatorLimits())
     assert len(files) == 5 and all((tmp_path / f).stat().st_size > 1000 for f in files)
 
