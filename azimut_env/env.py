@@ -36,6 +36,7 @@ from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpo
 from .physics import AzimutPhysics
 from .task import RESET_OPTIONS, AzimutTask, TaskConfig, observation_layout, resolve_params
 from .tracks import Track
+from .validation import ResetNeeded, check_finite, check_index_list, check_seed
 
 __all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_state_batch"]
 
@@ -262,19 +263,32 @@ class AzimutEnv(gym.Env):
         return out
 
     def kick(self, wheels, impulse: float) -> None:
-        """Knock the modules ``wheels`` with an angular impulse [N·m·s] about their steering axes."""
-        self.physics.kick(0, list(wheels), float(impulse))
+        """Knock the modules ``wheels`` (distinct indices in 0..n−1) with an angular impulse
+        [N·m·s] about their steering axes."""
+        wheels = check_index_list("wheels", wheels, self.n)
+        impulse = check_finite("impulse", impulse)
+        self._check_ready()
+        self.physics.kick(0, wheels, impulse)
+
+    def _check_ready(self) -> None:
+        if self._done_error is not None:
+            raise ResetNeeded(f"the episode ended with a physics failure ({self._done_error}); call reset()")
+        if not self.task.ready[0]:
+            raise ResetNeeded("call reset() first: the env has not been reset, or its last reset failed")
 
     # ------------------------------------------------------------------ gym API
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        seed = check_seed("seed", seed)
+        options = self.task.check_reset_options(options, fresh_space=True)  # before any state changes
+        previous = (self._np_random, self._np_random_seed)
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - RESET_OPTIONS
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}")
         self._done_error = None
-        self.task.reset_robot(0, self.np_random, options, fresh_space=True)
+        try:
+            self.task.reset_robot(0, self.np_random, options, fresh_space=True, checked=True)
+        except BaseException:
+            self._np_random, self._np_random_seed = previous  # as if this reset had not happened
+            raise
         pose = self.physics.summary[0]
         self._trail = [(float(pose[0]), float(pose[1]))]
         obs = self.task.obs[0].copy()
@@ -284,11 +298,14 @@ class AzimutEnv(gym.Env):
         return obs, info
 
     def step(self, action):
-        a = np.asarray(action, dtype=np.float32)
+        self._check_ready()
+        a = np.asarray(action)
+        if a.dtype.kind not in "biuf":
+            raise TypeError(f"action must hold real numbers, got dtype {a.dtype}")
+        with np.errstate(over="ignore"):  # beyond float32: inf, refused below
+            a = a.astype(np.float32)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
-        if self._done_error is not None:
-            raise RuntimeError(f"step() after the physics failed ({self._done_error}); call reset()")
         task = self.task
         try:
             a = task.apply_actions(a[None])

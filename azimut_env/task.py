@@ -34,10 +34,12 @@ from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 from .params import RobotParams, SensorParams, _setpoints_row, action_from_setpoints
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import _measure_kernel
-from .tracks import Track, make_track, query_tracks
+from .tracks import TRACK_NAMES, Track, make_track, query_tracks
+from .validation import (check_finite, check_index_list, check_int, check_nonnegative, check_positive,
+                         check_range)
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
-           "REWARD_TERMS", "RESET_OPTIONS"]
+           "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles"]
 
 #: the reward terms, in the order of the columns of ``AzimutTask.reward_terms``
 REWARD_TERMS = ("progress", "lateral", "heading", "slip", "action_rate", "off_track")
@@ -80,13 +82,17 @@ def observation_bounds(n: int, lookahead_count: int, wheel_speed_max: float) -> 
 def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:
     """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied."""
     params = params if params is not None else RobotParams()
+    if not isinstance(params, RobotParams):
+        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
     if sensors is not None:
-        sensors = SensorParams.ideal() if sensors == "ideal" else sensors
+        if isinstance(sensors, str):
+            if sensors != "ideal":
+                raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
+            sensors = SensorParams.ideal()
         if not isinstance(sensors, SensorParams):
-            raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
+            raise TypeError(f"sensors must be SensorParams or 'ideal', got {type(sensors).__name__}")
         params = replace(params, sensors=sensors)
-    if not (math.isfinite(noise_scale) and noise_scale >= 0):
-        raise ValueError(f"noise_scale must be finite and >= 0, got {noise_scale!r}")
+    noise_scale = check_nonnegative("noise_scale", noise_scale)
     if noise_scale != 1.0:
         sp = params.sensors
         params = replace(params, sensors=replace(sp, steer_noise=sp.steer_noise * noise_scale,
@@ -127,24 +133,38 @@ class TaskConfig:
     start_noise: float = 0.02
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.domain_randomization <= 0.5:
-            raise ValueError(f"domain_randomization must be in [0, 0.5], got {self.domain_randomization!r}")
+        # every field checked (and stored as its canonical type) here, once, with the field's name
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        fix("control_period", check_range("control_period", self.control_period, 0.0, 1.0, lo_open=True))
+        fix("substeps", check_int("substeps", self.substeps, min_value=1, max_value=10_000))
+        fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
+                                           max_value=10_000))
+        fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
         for name in ("progress_weight", "lateral_weight", "heading_weight", "slip_weight", "action_rate_weight",
                      "off_track_penalty", "start_noise"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
-        if not self.max_lateral_error > 0:
-            raise ValueError("max_lateral_error must be > 0 [m]")
-        k = self.lookahead_count
-        if int(k) != k or k < 1 or not self.lookahead_spacing > 0:
-            raise ValueError("lookahead_count must be a positive integer and lookahead_spacing > 0")
+            fix(name, check_nonnegative(name, getattr(self, name)))
+        fix("max_lateral_error", check_positive("max_lateral_error", self.max_lateral_error))
+        fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
+        fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
 
     @property
     def weights(self) -> dict[str, float]:
         """Reward weights by term name (``off_track`` is the penalty)."""
         return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
                     slip=self.slip_weight, action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+
+
+def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
+    """A sequence of obstacle specs (``Obstacle``, ``(x, y, radius)``, a dict of its fields or a
+    vertex list) as a tuple of :class:`~azimut_env.physics.Obstacle`; ``ValueError`` otherwise."""
+    if obstacles is None:
+        return ()
+    if isinstance(obstacles, (str, bytes, dict, Obstacle)) or not hasattr(obstacles, "__iter__"):
+        raise TypeError(f"{what} must be a sequence of obstacles, got {type(obstacles).__name__}")
+    try:
+        return tuple(Obstacle.coerce(o) for o in obstacles)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{what}: {exc}") from None
 
 
 # ---------------------------------------------------------------------- compiled stages
@@ -284,21 +304,26 @@ class AzimutTask:
 
     def __init__(self, params: RobotParams, config: TaskConfig, n_robots: int = 1, track: str | Track = "paper",
                  obstacles: Sequence = ()) -> None:
-        if isinstance(track, str):
-            make_track(track, rng=np.random.default_rng(0))  # validate the name now
-        elif not isinstance(track, Track):
-            raise ValueError(f"track must be a Track or a built-in name, got {track!r}")
+        if not isinstance(params, RobotParams):
+            raise TypeError(f"params must be RobotParams, got {type(params).__name__}")
+        if not isinstance(config, TaskConfig):
+            raise TypeError(f"config must be TaskConfig, got {type(config).__name__}")
+        self.n_robots = check_int("n_robots", n_robots, min_value=1)
+        self.n = params.n
+        self.params = params
+        track = self.check_track(track)
+        obstacles = coerce_obstacles(obstacles)
+        self._builtin: dict[str, Track] = {}
         self.params = params
         self.config = config
-        self.n = n = params.n
-        self.n_robots = N = int(n_robots)
+        n, N = self.n, self.n_robots
         self.physics = AzimutPhysics(params, n_robots=N, control_period=config.control_period,
                                      substeps=config.substeps, blowup=BlowUpLimits(),
                                      solver_iterations=config.solver_iterations)
         self.physics.set_obstacles(obstacles)
         self.default_obstacles = self.physics.obstacles
         self.track_spec = track
-        default = track if isinstance(track, Track) else make_track(track, rng=np.random.default_rng(0))
+        default = track if isinstance(track, Track) else self.builtin_track(track, np.random.default_rng(0))
         self.tracks: list[Track] = [default] * N
         self._default_wp = self.physics._default_wheel_params()
         K = config.lookahead_count
@@ -331,6 +356,7 @@ class AzimutTask:
         self.off_track = np.zeros(N, dtype=np.bool_)
         self.finished = np.zeros(N, dtype=np.bool_)
         self.steps = np.zeros(N, dtype=np.int64)
+        self.ready = np.zeros(N, dtype=np.bool_)  # robot i's last reset succeeded (step needs it)
         self.steer_bias = np.zeros((N, n))
         self.phi_prev = np.zeros((N, n))
         self.track_length = np.array([t.length for t in self.tracks])
@@ -346,24 +372,99 @@ class AzimutTask:
 
     # ------------------------------------------------------------------ reset
 
+    def check_reset_options(self, options: dict[str, Any] | None, fresh_space: bool = False) -> dict[str, Any]:
+        """Validate ``reset`` options without touching any state; return them normalised.
+
+        Keys (all optional): ``track`` (a :class:`Track` or a built-in name), ``obstacles`` (only
+        with ``fresh_space``: a Space of one's own), ``kick`` (a dict with ``step`` (int >= 0),
+        ``wheels`` (distinct wheel indices, ints in 0..n−1), ``impulse`` [N·m·s], finite) and
+        ``start_progress`` [m], finite. Raises ``ValueError``/``TypeError`` on anything else."""
+        if options is None:
+            return {}
+        if not isinstance(options, dict):
+            raise TypeError(f"reset options must be a dict or None, got {type(options).__name__}")
+        unknown = set(options) - RESET_OPTIONS
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(map(str, unknown))}; valid: {sorted(RESET_OPTIONS)}")
+        out: dict[str, Any] = {}
+        if "track" in options:
+            out["track"] = self.check_track(options["track"], "options['track']")
+        if "obstacles" in options:
+            if not fresh_space or self.n_robots != 1:
+                raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
+                                 "obstacles between sub-envs (pass obstacles= to the constructor)")
+            out["obstacles"] = coerce_obstacles(options["obstacles"], "options['obstacles']")
+        if "kick" in options:
+            out["kick"] = self.check_kick(options["kick"])
+        if "start_progress" in options:
+            out["start_progress"] = check_finite("options['start_progress']", options["start_progress"])
+        return out
+
+    def check_kick(self, kick: Any) -> dict[str, Any]:
+        """A validated ``kick`` option: ``{"step": int >= 0, "wheels": [int], "impulse": float}``."""
+        if not isinstance(kick, dict):
+            raise TypeError(f"options['kick'] must be a dict, got {type(kick).__name__}")
+        extra = set(kick) - {"step", "wheels", "impulse"}
+        if extra:
+            raise ValueError(f"options['kick'] takes keys 'step', 'wheels', 'impulse', got {sorted(map(str, extra))}")
+        return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0),
+                    wheels=check_index_list("options['kick']['wheels']", kick.get("wheels", range(self.n)), self.n),
+                    impulse=check_finite("options['kick']['impulse']", kick.get("impulse", 0.5)))
+
+    def check_track(self, track: Any, what: str = "track") -> str | Track:
+        """A built-in track name or a :class:`Track` that fits in the simulated world."""
+        if isinstance(track, str):
+            if track not in TRACK_NAMES:
+                raise ValueError(f"{what}: unknown track {track!r}; choose from {list(TRACK_NAMES)} or pass a Track")
+            return track
+        if not isinstance(track, Track):
+            raise TypeError(f"{what} must be a Track or a built-in name, got {type(track).__name__}")
+        reach, world = float(np.max(np.abs(track.xy))), 0.9 * BlowUpLimits().position
+        if reach > world:
+            raise ValueError(f"{what}: the track reaches {reach:.3g} m from the origin; the simulated world ends at "
+                             f"|x|, |y| = {BlowUpLimits().position:g} m (BlowUpLimits.position): translate it "
+                             f"within {world:g} m")
+        return track
+
+    def builtin_track(self, name: str, rng: np.random.Generator) -> Track:
+        """The built-in track ``name`` (built once; ``random`` draws a new one from ``rng``)."""
+        if name == "random":
+            return make_track(name, rng=rng)
+        track = self._builtin.get(name)
+        if track is None:
+            track = self._builtin[name] = make_track(name)
+        return track
+
     def reset_robot(self, i: int, rng: np.random.Generator, options: dict[str, Any] | None = None,
-                    fresh_space: bool = False) -> None:
+                    fresh_space: bool = False, checked: bool = False) -> None:
         """Start robot i's episode, drawing from ``rng`` (its generator) in the single env's order.
 
         ``fresh_space`` rebuilds the whole Space (the single env's bit-exact replay, N = 1 only);
         otherwise the robot gets fresh joints in the running Space, which replays the same
-        episode bit for bit as long as no obstacle contact is involved."""
-        options = dict(options or {})
-        unknown = set(options) - RESET_OPTIONS
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}")
+        episode bit for bit as long as no obstacle contact is involved.
+
+        The options are validated first (``checked``: they come from :meth:`check_reset_options`
+        already), so a refused option changes nothing. A reset that fails later (an obstacle over
+        the starting footprint) restores ``rng`` and leaves robot i not ready
+        (``ready[i]`` False) until a reset succeeds."""
+        if not checked:
+            options = self.check_reset_options(options, fresh_space)
+        options = options or {}
+        if fresh_space and self.n_robots != 1:
+            raise ValueError("fresh_space rebuilds every robot: only for a single robot")
+        state = rng.bit_generator.state
+        self.ready[i] = False
+        try:
+            self._reset_robot(i, rng, options, fresh_space)
+        except BaseException:
+            rng.bit_generator.state = state
+            raise
+        self.ready[i] = True
+
+    def _reset_robot(self, i: int, rng: np.random.Generator, options: dict[str, Any], fresh_space: bool) -> None:
         phys, cfg, n = self.physics, self.config, self.n
         spec = options.get("track", self.track_spec)
-        track = self.tracks[i]
-        if isinstance(spec, Track):
-            track = spec
-        elif spec == "random" or spec != getattr(track, "name", None):
-            track = make_track(spec, rng=rng)
+        track = spec if isinstance(spec, Track) else self.builtin_track(spec, rng)
         if track is not self.tracks[i]:
             self.tracks[i] = track
             self._packs[i] = track.packed()
@@ -372,33 +473,22 @@ class AzimutTask:
         self.track_closed[i] = track.closed
         self.track_rho[i] = track.progress_radius
         if "obstacles" in options:
-            if not fresh_space or self.n_robots != 1:
-                raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
-                                 "obstacles between sub-envs (pass obstacles= to the constructor)")
-            phys.obstacles = tuple(Obstacle.coerce(o) for o in options["obstacles"])
+            phys.obstacles = options["obstacles"]
         elif fresh_space:
             phys.obstacles = self.default_obstacles
         if fresh_space:
-            if self.n_robots != 1:
-                raise ValueError("fresh_space rebuilds every robot: only for a single robot")
             phys.rebuild()
         else:
             phys.renew_joints(i)
         self.kicks[i] = None
         self._kick_step[i] = -1
         if "kick" in options:
-            kick = dict(options["kick"])
-            if set(kick) - {"step", "wheels", "impulse"}:
-                raise ValueError("kick option takes keys 'step', 'wheels', 'impulse'")
-            self.kicks[i] = dict(step=int(kick.get("step", 0)), wheels=list(kick.get("wheels", range(n))),
-                                 impulse=float(kick.get("impulse", 0.5)))
+            self.kicks[i] = dict(options["kick"])
             self._kick_step[i] = self.kicks[i]["step"]
         self._randomize(i, rng)
         sb = self.params.sensors.steer_bias
         self.steer_bias[i] = rng.normal(0.0, sb, size=n) if sb > 0 else 0.0
         s0 = float(options.get("start_progress", 0.0))
-        if not math.isfinite(s0):
-            raise ValueError("start_progress must be finite")
         ref = track.sample(s0)
         noise = cfg.start_noise
         pose = ref[:3] + rng.uniform(-noise, noise, size=3)
@@ -465,7 +555,11 @@ class AzimutTask:
         """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all).
 
         Returns the clipped float32 copy. Raises ``ValueError`` (changing nothing) on NaN or inf."""
-        a = np.array(actions, dtype=np.float32)
+        a = np.asarray(actions)
+        if a.dtype.kind not in "biuf":
+            raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
+        with np.errstate(over="ignore"):  # beyond float32: inf, refused below
+            a = np.array(a, dtype=np.float32)
         if a.shape != (self.n_robots, 2 * self.n):
             raise ValueError(f"actions must have shape {(self.n_robots, 2 * self.n)}, got {np.shape(actions)}")
         rows = self._all if rows is None else rows

@@ -22,11 +22,13 @@ import os
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
+from gymnasium import error as gymnasium_error
 
 __all__ = [
     "check_finite", "check_range", "check_positive", "check_nonnegative", "check_int", "check_bool",
     "check_choice", "check_real_array", "check_index_list",
-    "arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path",
+    "arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_seed",
+    "ResetNeeded",
 ]
 
 
@@ -79,6 +81,15 @@ def check_int(name: str, value: Any, min_value: int | None = None, max_value: in
     if max_value is not None and v > max_value:
         raise ValueError(f"{name} must be <= {max_value}, got {value!r}")
     return v
+
+
+def check_seed(name: str, value: Any) -> int | None:
+    """A Gymnasium seed: ``None`` or an integer >= 0 (``seeding.np_random``'s rule)."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be None or an integer >= 0, got {value!r} ({type(value).__name__})")
+    return check_int(name, value, min_value=0)
 
 
 def check_bool(name: str, value: Any) -> bool:
@@ -248,3 +259,9 @@ def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
 
     convert.__name__ = "path"
     return convert
+
+
+class ResetNeeded(gymnasium_error.ResetNeeded, RuntimeError):
+    """``step`` (or ``kick``) before a successful ``reset``: Gymnasium's ``ResetNeeded`` (also a
+    ``RuntimeError``). Raised after no reset, after a reset that failed, and after a physics
+    failure that ended the episode."""

@@ -29,6 +29,7 @@ from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpo
 from .physics import AzimutPhysics
 from .task import REWARD_TERMS, AzimutTask, TaskConfig, resolve_params
 from .tracks import Track
+from .validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
 __all__ = ["AzimutVectorEnv"]
 
@@ -228,11 +229,16 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
 
     def kick(self, env_index: int, wheels, impulse: float) -> None:
         """Knock sub-env ``env_index``'s modules ``wheels`` with an angular impulse [N·m·s]."""
-        self.physics.kick(int(env_index), list(wheels), float(impulse))
+        i = check_int("env_index", env_index, min_value=0, max_value=self.num_envs - 1)
+        wheels = check_index_list("wheels", wheels, self.n)
+        impulse = check_finite("impulse", impulse)
+        if self._needs_reset or not self.task.ready[i]:
+            raise ResetNeeded(f"sub-env {i} has not been reset (or its last reset failed): call reset() first")
+        self.physics.kick(i, wheels, impulse)
 
     def sub_env_info(self, i: int) -> dict[str, Any]:
         """Sub-env i's info dict as the single env gives it (ground truth, estimate, terms)."""
-        return self.task.info(int(i))
+        return self.task.info(check_int("i", i, min_value=0, max_value=self.num_envs - 1))
 
     # ------------------------------------------------------------------ vector API
 
@@ -246,19 +252,23 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         N = self.num_envs
         if seed is None:
             return [None] * N
-        if isinstance(seed, (int, np.integer)):
-            return [int(seed) + i for i in range(N)]
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            seed = check_seed("seed", seed)
+            return [seed + i for i in range(N)]
+        if isinstance(seed, (str, bytes, dict)) or not hasattr(seed, "__iter__"):
+            raise TypeError(f"seed must be None, an int or a list of {N} ints/None, got {type(seed).__name__}")
         seeds = list(seed)
         if len(seeds) != N:
             raise ValueError(f"seed must be an int or a list of {N} seeds, got {len(seeds)}")
-        return seeds
+        return [check_seed(f"seed[{i}]", s) for i, s in enumerate(seeds)]
 
     def _options_list(self, options) -> tuple[list[dict], np.ndarray]:
-        N = self.num_envs
+        """Per-sub-env validated options (``AzimutTask.check_reset_options``) and the reset mask."""
+        N, task = self.num_envs, self.task
         mask = np.ones(N, dtype=np.bool_)
         if options is None:
-            return [{} for _ in range(N)], mask
-        if isinstance(options, dict):
+            per: list = [{}] * N
+        elif isinstance(options, dict):
             options = dict(options)
             if "reset_mask" in options:
                 m = np.asarray(options.pop("reset_mask"))
@@ -267,25 +277,42 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                 if not m.any():
                     raise ValueError("options['reset_mask'] must select at least one sub-env")
                 mask = m.copy()
-            return [dict(options) for _ in range(N)], mask
-        per = list(options)
-        if len(per) != N or not all(o is None or isinstance(o, dict) for o in per):
-            raise ValueError(f"options must be a dict or a sequence of {N} dicts (or None)")
-        return [dict(o or {}) for o in per], mask
+            checked = task.check_reset_options(options)
+            per = [checked] * N
+        elif isinstance(options, (str, bytes)) or not hasattr(options, "__iter__"):
+            raise TypeError(f"options must be a dict or a sequence of {N} dicts (or None), got {type(options).__name__}")
+        else:
+            per = list(options)
+            if len(per) != N or not all(o is None or isinstance(o, dict) for o in per):
+                raise ValueError(f"options must be a dict or a sequence of {N} dicts (or None)")
+            per = [task.check_reset_options(o) for o in per]
+        if self._needs_reset and not mask.all() and not task.ready[~mask].all():
+            never = np.flatnonzero(~mask & ~task.ready).tolist()
+            raise ValueError(f"options['reset_mask'] leaves out sub-envs {never}, which have not been reset "
+                             "(the first reset, and the one after a failed reset, must include them)")
+        return [dict(o) for o in per], mask
 
     def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict | Sequence[dict | None] | None = None):
-        """Reset all sub-envs (or those of ``options["reset_mask"]``); see the class docstring."""
+        """Reset all sub-envs (or those of ``options["reset_mask"]``); see the class docstring.
+
+        Seeds and every sub-env's options are validated before any sub-env is touched. If a
+        sub-env's reset fails (an obstacle over its start), the whole vector env refuses ``step``
+        until a reset that includes that sub-env succeeds."""
         seeds = self._seed_list(seed)
         opts, mask = self._options_list(options)
         task = self.task
+        self._needs_reset = True
         for i in np.flatnonzero(mask):
+            rng, seed_i = self._rngs[i], self._seeds[i]
             if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
+                rng, seed_i = seeding.np_random(seeds[i])
+            task.reset_robot(int(i), rng, opts[i], checked=True)
+            if rng is not self._rngs[i]:
+                self._rngs[i], self._seeds[i] = rng, seed_i
                 self._rng_list = None
-            task.reset_robot(int(i), self._rngs[i], opts[i])
             self._errors[i] = None
         self._autoreset[mask] = False
-        self._needs_reset = False
+        self._needs_reset = not bool(task.ready.all())
         self._start_trail()
         obs = task.obs.copy()
         return obs, self._vector_info(np.zeros(self.num_envs, dtype=np.bool_))
@@ -293,7 +320,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     def step(self, actions):
         """Step every sub-env (autoresetting those that ended, in NEXT_STEP mode)."""
         if self._needs_reset:
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeeded("call reset() before step(): the vector env has not been reset, or a sub-env's "
+                              "last reset failed")
         task, N = self.task, self.num_envs
         resetting = self._autoreset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():
@@ -334,8 +362,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
             task.finished[errored] = False
         if any_reset:
             for i in np.flatnonzero(resetting):
-                task.reset_robot(int(i), self._rngs[i])
-                self._errors[i] = None
+                self._autoreset_robot(int(i))
             reward[resetting] = 0.0
             terminated[resetting] = False
             truncated[resetting] = False
@@ -348,8 +375,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                 final_obs[i] = obs[i].copy()
             final_info = infos
             for i in np.flatnonzero(done):
-                task.reset_robot(int(i), self._rngs[i])
-                self._errors[i] = None
+                self._autoreset_robot(int(i))
             obs = task.obs.copy()
             infos = self._vector_info(None)
             infos["final_obs"] = final_obs
@@ -366,6 +392,15 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, truncated, infos
+
+    def _autoreset_robot(self, i: int) -> None:
+        """Reset sub-env i inside ``step``; if that fails, the env refuses ``step`` until reset."""
+        try:
+            self.task.reset_robot(i, self._rngs[i])
+        except BaseException:
+            self._needs_reset = True
+            raise
+        self._errors[i] = None
 
     def _vector_info(self, errored: np.ndarray | None) -> dict[str, Any]:
         """The batched info (arrays with masks) of the current state."""
