@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,10 +27,25 @@ IT_PAPER = ITParams()
 IT_BEST = ITParams(n_starts=6, race_iter=2, accept_rms=0.25)
 
 
+def _real_array(x, name: str) -> np.ndarray:
+    """x as a float64 array; complex, object and string inputs raise ``TypeError`` (NumPy would
+    drop an imaginary part silently)."""
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr.astype(np.float64, copy=False)
+
+
 def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:
-    """Validate q ((n,) or (N, n), finite) and return it as contiguous (N, n) in the steering
-    range, plus the batch shape. Kept lean: it is on the single-call hot path."""
-    arr = np.asarray(q, dtype=np.float64)
+    """Validate q ((n,) or (N, n), real, finite) and return it as contiguous (N, n) in the
+    steering range, plus the batch shape. Kept lean: it is on the single-call hot path.
+
+    Only the angles outside the steering range are wrapped (β and β + π are the same axis): an
+    angle in range is never touched, so each row's result is independent of the rest of its
+    batch, bit for bit."""
+    if not isinstance(geom, RobotGeometry):
+        raise TypeError(f"geom must be a RobotGeometry, got {type(geom).__name__}")
+    arr = _real_array(q, "q")
     if arr.ndim not in (1, 2) or arr.shape[-1] != geom.n:
         raise ValueError(f"q must have shape ({geom.n},) or (N, {geom.n}) for this robot, got {arr.shape}")
     if not np.isfinite(arr).all():
@@ -37,7 +53,8 @@ def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:
     batch = arr.shape[:-1]
     flat = arr.reshape(-1, geom.n)
     if flat.size and (flat.max() > geom.steer_max or flat.min() <= geom.steer_min):
-        flat = geom.wrap_steering(flat)  # β and β + π are the same propulsion axis
+        outside = (flat > geom.steer_max) | (flat <= geom.steer_min)
+        flat = np.where(outside, geom.wrap_steering(flat), flat)  # β and β + π: the same propulsion axis
     elif not flat.flags.c_contiguous:
         flat = np.ascontiguousarray(flat)
     return flat, batch
@@ -77,6 +94,10 @@ def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams):
 def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params: ITParams | None,
                    oracle_params: OracleParams) -> np.ndarray:
     """Every method on validated (N, n) angles: λ (N, 3), not yet canonical."""
+    if it_params is not None and not isinstance(it_params, ITParams):
+        raise TypeError(f"it_params must be ITParams or None, got {type(it_params).__name__}")
+    if not isinstance(oracle_params, OracleParams):
+        raise TypeError(f"oracle_params must be OracleParams, got {type(oracle_params).__name__}")
     if method in ("IT", "IT+"):
         params = it_params if it_params is not None else (IT_PAPER if method == "IT" else IT_BEST)
         return _it_flat(flat, geom, params)[0]
@@ -108,6 +129,8 @@ def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnos
     Returns:
         λ̂ (3,) or (N, 3), canonical sign (:func:`canonical_lambda`), and the diagnostics if asked.
     """
+    if not isinstance(params, ITParams):
+        raise TypeError(f"params must be ITParams, got {type(params).__name__}")
     flat, batch = _prepare(q, geom)
     lam, d2, iters, starts, conv = _it_flat(flat, geom, params)
     _canonicalize_rows(lam)
@@ -119,7 +142,7 @@ def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnos
 
 
 def _check_method(method: str) -> None:
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
 
 
@@ -165,8 +188,11 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         the ICR.
     """
     _check_method(method)
+    if isinstance(mu_tol, (bool, np.bool_)) or not isinstance(mu_tol, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(mu_tol) and mu_tol >= 0):
+        raise ValueError(f"mu_tol must be a finite number >= 0 [m/s], got {mu_tol!r}")
     flat, batch = _prepare(q, geom)
-    ph = np.array(phidot, dtype=np.float64)  # a private copy: the kernel scales it in place
+    ph = np.array(_real_array(phidot, "phidot"), dtype=np.float64)  # a private copy: the kernel scales it in place
     if ph.shape != np.shape(q):
         raise ValueError(f"phidot must have the shape of q {np.shape(q)}, got {ph.shape}")
     if not np.isfinite(ph).all():

@@ -20,8 +20,9 @@ def _quality_from_d2(d2: float, n: int, f: float) -> float:
 
 
 @njit(cache=True)
-def _metric_kernel(beta, q, out) -> bool:
-    """m of eq. (28) per row into ``out``; returns False if any value is not finite."""
+def _metric_kernel(beta, q, out) -> int:
+    """m of eq. (28) per row into ``out``; returns 1 if any value is not finite, 2 if some
+    |q_k − β_k| > π (angles not in one steering range of width π), else 0."""
     n = q.shape[1]
     scale = 1.0 / (n * math.pi * math.pi)
     for i in range(q.shape[0]):
@@ -30,23 +31,36 @@ def _metric_kernel(beta, q, out) -> bool:
             a = beta[i, k]
             b = q[i, k]
             if not (math.isfinite(a) and math.isfinite(b)):
-                return False
+                return 1
             diff = b - a
+            if abs(diff) > math.pi:
+                return 2
             d += diff * diff
         out[i] = d * scale
-    return True
+    return 0
+
+
+def _real(x, name: str) -> np.ndarray:
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    return arr.astype(np.float64, copy=False)
 
 
 def _metric(beta_est, q) -> tuple[np.ndarray, tuple[int, ...]]:
-    beta_est = np.asarray(beta_est, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
+    beta_est = _real(beta_est, "beta_est")
+    q = _real(q, "q")
     if beta_est.shape != q.shape or beta_est.ndim == 0:
         raise ValueError(f"beta_est and q must have the same shape (n,) or (N, n), got {beta_est.shape} and {q.shape}")
     batch = q.shape[:-1]
     n = q.shape[-1]
     out = np.empty(int(np.prod(batch, dtype=np.int64)))
-    if not _metric_kernel(np.ascontiguousarray(beta_est.reshape(-1, n)), np.ascontiguousarray(q.reshape(-1, n)), out):
+    code = _metric_kernel(np.ascontiguousarray(beta_est.reshape(-1, n)), np.ascontiguousarray(q.reshape(-1, n)), out)
+    if code == 1:
         raise ValueError("beta_est and q must be finite")
+    if code == 2:
+        raise ValueError("beta_est and q must lie in one steering range of width π (|q_k − β_k| <= π): "
+                         "wrap them first (RobotGeometry.wrap_steering)")
     return out, batch
 
 
@@ -54,7 +68,8 @@ def joint_distance_metric(beta_est, q) -> np.ndarray:
     """m(β_e, q) = (q − β_e)·(q − β_e) / (n π²), eq. (28).
 
     q − β_e is a plain difference, both angles in the steering range: the wheel cannot cross its
-    stops, so |q_k − β_k| < π. Returns a scalar (0-d) or (N,)."""
+    stops, so |q_k − β_k| <= π and m <= 1; a larger difference raises ``ValueError``, as do
+    non-finite, complex or object inputs. Returns a scalar (0-d) or (N,)."""
     out, batch = _metric(beta_est, q)
     return out.reshape(batch)
 
@@ -69,7 +84,8 @@ def quality(beta_est, q, f: float = QUALITY_F) -> np.ndarray:
 
     Returns a 0-d array for one configuration, (N,) for a batch.
     """
-    if not (math.isfinite(f) and f >= 1):
-        raise ValueError(f"f must be >= 1, got {f}")
+    if isinstance(f, (bool, np.bool_)) or not isinstance(f, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(f) and f >= 1):
+        raise ValueError(f"f must be a finite number >= 1, got {f!r}")
     m, batch = _metric(beta_est, q)
-    return (1.0 - np.log1p(f * m) / math.log1p(f)).reshape(batch)
+    return np.clip(1.0 - np.log1p(f * m) / math.log1p(f), 0.0, 1.0).reshape(batch)
