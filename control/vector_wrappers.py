@@ -1,20 +1,46 @@
-"""ICR-target and twist action spaces for the vector env (``AzimutVectorEnv``).
+"""Controller action spaces for the vector env (``AzimutVectorEnv``), for RL.
 
-The batched counterpart of :mod:`control.wrappers`: the same actions (see
-:class:`~control.wrappers.ICRTargetAction` and :class:`~control.wrappers.TwistAction`), mapped the
-same way, with one controller per sub-env fed from the vector env's batched accessors
-(``estimated_eta``, ``measured_beta``, ``measured_phidot``) and one batched ``step`` of the vector
-env with all set-points. Sub-env i behaves as ``ICRTargetAction(AzimutEnv())`` (or
-``TwistAction``) seeded with ``seed + i``.
+Every action space here goes through a controller, batched over the N sub-envs (one
+:func:`~control.icr_controller.icr_control_step_batch` call per control step for all robots, and
+one batched ``step`` of the vector env with all set-points):
 
-The ICR controller runs batched: one :func:`~control.icr_controller.icr_control_step_batch` call
-per control step for all sub-envs (row i is exactly what a single
-:class:`~control.icr_controller.ICRController` would command). The swerve baseline
-(:class:`~control.swerve.SwerveController`) is still a per-robot Python object stepped in a loop.
+* ``"residual"`` ((N, 3)): the path follower (:class:`~control.path_follower.PathFollower`, one per
+  sub-env, on that sub-env's track) + the ICR controller, with the policy adding a bounded
+  correction to the follower's target (λ_f, μ_f): action[:2] · ``residual_angle`` [rad] turns λ_f
+  on the sphere (in a tangent frame carried with it) and action[2] · ``residual_mu`` [m/s] is added
+  to μ_f. A correction that would carry λ_f across a steering stop or into an axis cap is dropped
+  (the reference target is used), so the policy cannot cause a stop-and-reconfigure that the
+  reference would not make. The zero action *is* the reference controller of ``azimut eval`` (the
+  same follower, controller and stop mask). A correction bounded in angle rather than in twist
+  stays small at low speed too (a twist residual of 0.2 m/s swamps the target at rest, and the
+  controller then stopped and reconfigured half of the time under random actions).
+* ``"icr_rate"`` ((N, 3)): the action moves the ICR target: action[:2] · ``lambda_rate_max`` is the
+  rate [rad/s] of λ_d along the sphere (in a tangent frame carried with λ_d) and action[2] ·
+  ``mu_accel`` the rate of μ_d [m/s²] (μ_d ∈ [−``mu_max``, ``mu_max``]). λ_d moves continuously
+  and is held at a steering stop unless the policy keeps pushing across it
+  (:mod:`control.target_shaping`), so a stop-and-reconfigure happens only when λ really crosses
+  a steering limit.
+* ``"icr_target"`` ((N, 4)) and ``"twist"`` ((N, 3)): absolute targets, as
+  :class:`~control.wrappers.ICRTargetAction` and :class:`~control.wrappers.TwistAction` (sub-env i
+  behaves as that single-env wrapper seeded with ``seed + i``). Through the ICR controller, the
+  target is shaped (:mod:`control.target_shaping`): λ_d is one step of at most ``target_rate``
+  [rad/s] from the controller's reference λ toward the commanded direction (so the controller's
+  own arc is short and checked by the shaping) and crosses a steering stop or axis only when the
+  command stays across it,
+  so a policy whose target changes every step still drives (the unshaped controller sat in
+  RECONFIGURING for good under random targets). ``shape_targets=False`` restores the raw targets.
+  Twists may also go to the WPILib-style baseline (``controller="swerve"``, a per-robot Python
+  object).
+
+``info`` gains ``controller_mode`` (N,) (an ``icr_controller.Mode`` value, −1 for the baseline),
+``limit_exceeded`` (N,) (whether the commands exceeded a commanded actuator limit) and
+``target_held`` (N,) (the shaped target was held at a steering stop or axis cap this step: why the
+robot does not follow the action there).
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import gymnasium as gym
@@ -25,68 +51,115 @@ from gymnasium.vector.utils import batch_space
 
 from estimation.hrep import eta_from_twist
 
-from .icr_controller import ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch
-from .wrappers import icr_target_from_action
+from .icr_controller import (ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch,
+                             nearer_target, reference_stop_mask)
+from .limits import limit_violations
+from .path_follower import PathFollower, PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
+from .target_shaping import advance_target, exp_step, initial_frame, step_toward, transport_frame
+from .wrappers import icr_target_from_action
 
-__all__ = ["VectorControllerAction"]
+__all__ = ["VectorControllerAction", "ACTION_KINDS"]
+
+#: action kind -> action size
+ACTION_KINDS = {"icr_target": 4, "twist": 3, "residual": 3, "icr_rate": 3}
 
 
 class VectorControllerAction(gym.vector.VectorWrapper):
-    """ICR targets (``action="icr_target"``, (N, 4)) or chassis twists (``action="twist"``, (N, 3))
-    for an ``AzimutVectorEnv``, through the ICR controller or (twists only) the swerve baseline.
+    """Controller action spaces (see the module docstring) for an ``AzimutVectorEnv``.
 
     Args:
         env: an ``AzimutVectorEnv`` (or a vector wrapper of one).
-        action: ``"icr_target"`` or ``"twist"``. controller: ``"icr"`` or ``"swerve"``.
-        mu_max [m/s], min_norm: as :class:`~control.wrappers.ICRTargetAction`.
-        v_max [m/s], w_max [rad/s]: as :class:`~control.wrappers.TwistAction`.
-        icr_config, swerve_config: controller tuning.
-
-    ``info`` gains ``controller_mode`` (N,) (an ``icr_controller.Mode`` value, −1 for the baseline).
+        action: ``"residual"``, ``"icr_rate"``, ``"icr_target"`` or ``"twist"``.
+        controller: ``"icr"`` or (twists only) ``"swerve"``.
+        mu_max [m/s], min_norm: ICR targets (as :class:`~control.wrappers.ICRTargetAction`); mu_max
+            also bounds μ_d of ``icr_rate``.
+        v_max [m/s], w_max [rad/s]: twists at action ±1 (as :class:`~control.wrappers.TwistAction`).
+        residual_angle [rad], residual_mu [m/s]: the residual correction at action ±1.
+        lambda_rate_max [rad/s], mu_accel [m/s²]: ``icr_rate`` at action ±1.
+        shape_targets: shape absolute targets through the ICR controller (default True).
+        target_rate [rad/s]: fastest motion of a shaped absolute target on the sphere.
+        cross_push [rad]: arc a target must keep pushing past a steering stop before it crosses.
+        icr_config, swerve_config, follower_config: tuning of the controllers and the follower.
     """
 
     def __init__(self, env: gym.vector.VectorEnv, action: str = "icr_target", controller: str = "icr",
                  mu_max: float = 1.0, min_norm: float = 1e-3, v_max: float = 1.0, w_max: float = 2.0,
-                 icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None) -> None:
+                 residual_angle: float = 0.15, residual_mu: float = 0.1, lambda_rate_max: float = 1.5,
+                 mu_accel: float = 2.0, shape_targets: bool = True, target_rate: float = 3.0,
+                 cross_push: float = 0.6, icr_config: ICRControllerConfig | None = None,
+                 swerve_config: SwerveConfig | None = None, follower_config: PathFollowerConfig | None = None) -> None:
         super().__init__(env)
-        if action not in ("icr_target", "twist"):
-            raise ValueError(f"action must be 'icr_target' or 'twist', got {action!r}")
-        if controller not in ("icr", "swerve") or (action == "icr_target" and controller != "icr"):
+        if action not in ACTION_KINDS:
+            raise ValueError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
+        if controller not in ("icr", "swerve") or (action != "twist" and controller != "icr"):
             raise ValueError(f"controller must be 'icr' (or 'swerve' for twists), got {controller!r}")
         base = env.unwrapped
         for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
-                     "action_from_setpoints"):
+                     "action_from_setpoints", "tracks", "true_pose"):
             if not hasattr(base, attr):
                 raise ValueError(f"the wrapped env must be AzimutVectorEnv (missing {attr!r})")
-        for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max).items():
+        for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max, residual_angle=residual_angle, residual_mu=residual_mu,
+                                lambda_rate_max=lambda_rate_max, mu_accel=mu_accel, target_rate=target_rate,
+                                cross_push=cross_push).items():
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value!r}")
         self._kind, self._controller = action, controller
         self.mu_max, self.min_norm = float(mu_max), float(min_norm)
         self.scale = np.array([v_max, v_max, w_max], dtype=np.float64)
-        self._icr_config, self._swerve_config = icr_config, swerve_config
-        size = 4 if action == "icr_target" else 3
-        self.single_action_space = spaces.Box(-1.0, 1.0, (size,), dtype=np.float32)
+        self.residual_angle, self.residual_mu = float(residual_angle), float(residual_mu)
+        self.lambda_rate_max, self.mu_accel = float(lambda_rate_max), float(mu_accel)
+        self.shape_targets = bool(shape_targets) and controller == "icr" and action in ("icr_target", "twist")
+        self.target_rate, self.cross_push = float(target_rate), float(cross_push)
+        self._icr_config = icr_config or ICRControllerConfig()
+        self._swerve_config = swerve_config
+        self._follower_config = follower_config or PathFollowerConfig()
+        self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_KINDS[action],), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._ctls: list[SwerveController | None] = [None] * self.num_envs  # swerve baseline only
+        N = self.num_envs
+        self._ctls: list[SwerveController | None] = [None] * N  # swerve baseline only
         self._icr: ICRBatchState | None = None  # the batched ICR controllers' state
-        self._icr_ready = np.zeros(self.num_envs, dtype=np.bool_)
-        self._pending = np.zeros(self.num_envs, dtype=np.bool_)
+        self._icr_ready = np.zeros(N, dtype=np.bool_)
+        self._pending = np.zeros(N, dtype=np.bool_)
+        # shaped targets (icr_rate, shaped absolute targets): λ_s, μ_s, tangent frame, push past a stop
+        self._lam_s = np.tile([0.0, 0.0, 1.0], (N, 1))
+        self._mu_s = np.zeros(N)
+        self._e1 = initial_frame(self._lam_s)
+        self._push = np.zeros(N)
+        self._followers: list[PathFollower | None] = [None] * N  # residual only
+        geom = base.geometry
+        self._stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=self._icr_config.axis_margin)
+        self.last_command = None  #: the last BatchWheelCommand of the ICR controllers (diagnostics)
+
+    @property
+    def followers(self) -> list[PathFollower | None]:
+        """The residual action space's path followers, one per sub-env (None otherwise)."""
+        return list(self._followers)
 
     def _reset_controllers(self, which: np.ndarray) -> None:
         base = self.env.unwrapped
-        lam_hat, _ = base.estimated_eta
-        beta, phidot = base.measured_beta, base.measured_phidot
         idx = np.flatnonzero(which)
         if idx.size == 0:
             return
+        lam_hat, _ = base.estimated_eta
+        beta, phidot = base.measured_beta, base.measured_phidot
         if self._controller == "icr":
             fresh = initial_state_batch(lam_hat[idx], beta[idx], phidot[idx], base.geometry, self._icr_config)
             if self._icr is None:  # rows not reset yet stay marked so until they are
                 self._icr = initial_state_batch(lam_hat, beta, phidot, base.geometry, self._icr_config)
             self._icr = self._icr.put(idx, fresh)
             self._icr_ready[idx] = True
+            self._lam_s[idx] = fresh.lam
+            self._mu_s[idx] = 0.0
+            self._e1[idx] = initial_frame(fresh.lam)
+            self._push[idx] = 0.0
+            if self._kind == "residual":
+                tracks, progress = base.tracks, base.progress
+                for i in idx:
+                    f = PathFollower(tracks[i], self._follower_config, stop_mask=self._stop_mask,
+                                     dt=base.control_period)
+                    f.reset(float(progress[i]))
+                    self._followers[i] = f
             return
         for i in idx:
             ctl = SwerveController(base.geometry, base.limits, base.control_period, self._swerve_config)
@@ -102,6 +175,40 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         self._pending[mask] = False
         return obs, info
 
+    def _targets(self, a: np.ndarray, rows: np.ndarray, base) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(λ_d, μ_d, held) of the ICR controllers of ``rows`` for the clipped actions ``a``."""
+        geom, cfg, dt = base.geometry, self._icr_config, base.control_period
+        held = np.zeros(rows.size, dtype=np.bool_)
+        if self._kind == "residual":
+            pose = base.true_pose
+            twist = np.empty((rows.size, 3))
+            for j, i in enumerate(rows):
+                twist[j] = self._followers[i].step(pose[i]).twist
+            lam_f, mu_f = eta_from_twist(twist)
+            prop = exp_step(lam_f, initial_frame(lam_f), a[:, :2] * self.residual_angle, 1.0)
+            lam_d, _, held = advance_target(lam_f, prop, np.zeros(rows.size), geom, cfg.axis_margin, np.inf)
+            return lam_d, mu_f + a[:, 2] * self.residual_mu, held
+        if self._kind == "icr_rate":
+            lam, e1 = self._lam_s[rows], self._e1[rows]
+            prop = exp_step(lam, e1, a[:, :2] * self.lambda_rate_max, dt)
+            lam_new, push, held = advance_target(lam, prop, self._push[rows], geom, cfg.axis_margin, self.cross_push)
+            self._lam_s[rows], self._push[rows] = lam_new, push
+            self._e1[rows] = transport_frame(e1, lam_new)
+            self._mu_s[rows] = np.clip(self._mu_s[rows] + a[:, 2] * self.mu_accel * dt, -self.mu_max, self.mu_max)
+            return lam_new, self._mu_s[rows].copy(), held
+        if self._kind == "icr_target":
+            lam_t, mu_t = icr_target_from_action(a, self.mu_max, self.min_norm)
+        else:
+            lam_t, mu_t = eta_from_twist(a * self.scale)
+        if not self.shape_targets:
+            return lam_t, mu_t, held
+        lam = self._icr.lam[rows]  # one bounded step ahead of the controller's own reference λ
+        lam_t, mu_t = nearer_target(lam, lam_t, mu_t)
+        prop = step_toward(lam, lam_t, self.target_rate * dt)
+        lam_new, push, held = advance_target(lam, prop, self._push[rows], geom, cfg.axis_margin, self.cross_push)
+        self._lam_s[rows], self._push[rows] = lam_new, push
+        return lam_new, mu_t, held
+
     def step(self, actions) -> tuple[Any, ...]:
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != self.action_space.shape or not np.all(np.isfinite(a)):
@@ -110,27 +217,31 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             raise RuntimeError("call reset() before step()")
         a = np.clip(a, -1.0, 1.0)
         base = self.env.unwrapped
-        lam_hat, mu_hat = base.estimated_eta
         beta, phidot = base.measured_beta, base.measured_phidot
-        n = beta.shape[1]
-        beta_c, phidot_c = beta.copy(), np.zeros((self.num_envs, n))  # autoreset this step: the action is ignored
-        modes = np.full(self.num_envs, -1, dtype=np.int64)
+        N, n = beta.shape
+        beta_c, phidot_c = beta.copy(), np.zeros((N, n))  # autoreset this step: the action is ignored
+        modes = np.full(N, -1, dtype=np.int64)
+        exceeded = np.zeros(N, dtype=np.bool_)
+        held = np.zeros(N, dtype=np.bool_)
         active = np.flatnonzero(~self._pending)
         if self._controller == "icr" and active.size:
-            if self._kind == "icr_target":
-                lam_d, mu_d = icr_target_from_action(a[active], self.mu_max, self.min_norm)
-            else:
-                lam_d, mu_d = eta_from_twist(a[active] * self.scale)
+            lam_hat, mu_hat = base.estimated_eta
+            lam_d, mu_d, held[active] = self._targets(a[active], active, base)
             sub, cmd = icr_control_step_batch(self._icr.take(active), lam_hat[active], mu_hat[active], beta[active],
                                               phidot[active], lam_d, mu_d, base.geometry, base.limits,
-                                              self._icr_config or ICRControllerConfig(), base.control_period)
+                                              self._icr_config, base.control_period)
             self._icr = self._icr.put(active, sub)
             beta_c[active], phidot_c[active] = cmd.beta, cmd.phidot
             modes[active] = cmd.info["mode"]
+            exceeded[active] = limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot,
+                                                base.limits).any(axis=-1)
+            self.last_command = cmd
         elif self._controller != "icr":
             for i in active:
                 cmd = self._ctls[i].step(a[i] * self.scale, beta[i])
                 beta_c[i], phidot_c[i] = cmd.beta, cmd.phidot
+                exceeded[i] = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot,
+                                                    base.limits).any())
         obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(beta_c, phidot_c))
         done = terminated | truncated
         if base.autoreset_mode == AutoresetMode.SAME_STEP:
@@ -139,5 +250,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             self._reset_controllers(self._pending)  # those the step just reset
             next_step = base.autoreset_mode == AutoresetMode.NEXT_STEP
             self._pending = done.copy() if next_step else np.zeros_like(done)
-        info = dict(info, controller_mode=modes, _controller_mode=np.ones(self.num_envs, dtype=np.bool_))
+        every = np.ones(N, dtype=np.bool_)
+        info = dict(info, controller_mode=modes, _controller_mode=every, limit_exceeded=exceeded,
+                    _limit_exceeded=every.copy(), target_held=held, _target_held=every.copy())
         return obs, reward, terminated, truncated, info

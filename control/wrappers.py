@@ -11,8 +11,17 @@ with a motion target that a controller turns into coordinated wheel set-points e
   (v_max, v_max, ω_max); it goes through the ICR controller (``controller="icr"``, via
   ``eta_from_twist``) or the WPILib-style baseline (``controller="swerve"``).
 
+Through the ICR controller the target is *shaped* (:mod:`control.target_shaping`, on by default,
+``shape_targets=False`` turns it off): λ_d is one step of at most ``target_rate`` [rad/s] from the
+controller's reference λ toward the commanded direction, and crosses a steering stop only when the command keeps pushing past it for
+``cross_push`` [rad] of arc, so a target that changes every step (an exploring policy) still drives
+instead of keeping the controller in RECONFIGURING.
+
 ``info`` gains ``controller_mode`` (an ``icr_controller.Mode`` value, or −1 for the baseline),
-``limit_exceeded`` (whether the set-points exceeded a commanded limit) and ``reconfigure_events``.
+``limit_exceeded`` (whether the set-points exceeded a commanded limit), ``reconfigure_events`` and
+``target_held`` (the shaped target was held at a steering stop or axis cap this step).
+For the batched versions and the residual and ICR-rate action spaces see
+:mod:`control.vector_wrappers`.
 """
 
 from __future__ import annotations
@@ -23,9 +32,10 @@ from gymnasium import spaces
 
 from estimation.hrep import eta_from_twist
 
-from .icr_controller import ICRController, ICRControllerConfig
+from .icr_controller import ICRController, ICRControllerConfig, nearer_target
 from .limits import limit_violations
 from .swerve import SwerveConfig, SwerveController
+from .target_shaping import advance_target, step_toward
 
 __all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
 
@@ -45,8 +55,15 @@ class _ControllerWrapper(gym.Wrapper):
     """Common part: holds a controller, resets it with the env, steps it with the measurements."""
 
     def __init__(self, env: gym.Env, controller: str, icr_config: ICRControllerConfig | None,
-                 swerve_config: SwerveConfig | None) -> None:
+                 swerve_config: SwerveConfig | None, shape_targets: bool = True, target_rate: float = 3.0,
+                 cross_push: float = 0.6) -> None:
         super().__init__(env)
+        if not (np.isfinite(target_rate) and target_rate > 0 and np.isfinite(cross_push) and cross_push > 0):
+            raise ValueError(f"target_rate and cross_push must be finite and > 0, got {target_rate!r}, {cross_push!r}")
+        self.shape_targets = bool(shape_targets) and controller == "icr"
+        self.target_rate, self.cross_push = float(target_rate), float(cross_push)
+        self._lam_s = np.array([0.0, 0.0, 1.0])
+        self._push = 0.0
         if controller not in ("icr", "swerve"):
             raise ValueError(f"controller must be 'icr' or 'swerve', got {controller!r}")
         base = env.unwrapped
@@ -64,6 +81,7 @@ class _ControllerWrapper(gym.Wrapper):
             self._ctl = ICRController(base.geometry, base.limits, base.control_period, self._icr_config)
             lam_hat, _ = base.estimated_eta
             self._ctl.reset(lam_hat, base.measured_beta, base.measured_phidot)
+            self._lam_s, self._push = self._ctl.state.lam.copy(), 0.0
         else:
             self._ctl = SwerveController(base.geometry, base.limits, base.control_period, self._swerve_config)
             self._ctl.reset(base.measured_beta, base.measured_phidot)
@@ -77,8 +95,18 @@ class _ControllerWrapper(gym.Wrapper):
         base = self.env.unwrapped
         if self._ctl is None:
             raise RuntimeError("call reset() before step()")
+        held = False
         if isinstance(self._ctl, ICRController):
             lam_hat, mu_hat = base.estimated_eta
+            if self.shape_targets:  # one bounded step ahead of the controller's reference λ
+                self._lam_s = self._ctl.state.lam
+                lam_t, mu_t = nearer_target(self._lam_s[None, :], np.asarray(lam_d, dtype=np.float64)[None, :],
+                                            np.array([mu_d], dtype=np.float64))
+                prop = step_toward(self._lam_s[None, :], lam_t, self.target_rate * base.control_period)
+                lam_new, push, h = advance_target(self._lam_s[None, :], prop, np.array([self._push]), base.geometry,
+                                                  self._ctl.config.axis_margin, self.cross_push)
+                self._lam_s, self._push, held = lam_new[0], float(push[0]), bool(h[0])
+                lam_d, mu_d = self._lam_s, float(mu_t[0])
             cmd = self._ctl.step(lam_hat, mu_hat, base.measured_beta, base.measured_phidot, lam_d, mu_d)
             mode, events = int(cmd.info["mode"]), self._ctl.state.events
         else:
@@ -86,7 +114,7 @@ class _ControllerWrapper(gym.Wrapper):
             mode, events = -1, 0
         exceeded = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, base.limits).any())
         obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(cmd.beta, cmd.phidot))
-        info = dict(info, controller_mode=mode, limit_exceeded=exceeded, reconfigure_events=events)
+        info = dict(info, controller_mode=mode, limit_exceeded=exceeded, reconfigure_events=events, target_held=held)
         return obs, reward, terminated, truncated, info
 
 
@@ -96,11 +124,13 @@ class ICRTargetAction(_ControllerWrapper):
     Args:
         env: an ``Azimut-v0`` env. mu_max: μ_d at action[3] = ±1 [m/s]. min_norm: below this norm
         of action[:3] the target is "hold" (μ_d = 0). icr_config: the controller's tuning.
+        shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (module docstring).
     """
 
     def __init__(self, env: gym.Env, mu_max: float = 1.0, min_norm: float = 1e-3,
-                 icr_config: ICRControllerConfig | None = None) -> None:
-        super().__init__(env, "icr", icr_config, None)
+                 icr_config: ICRControllerConfig | None = None, shape_targets: bool = True, target_rate: float = 3.0,
+                 cross_push: float = 0.6) -> None:
+        super().__init__(env, "icr", icr_config, None, shape_targets, target_rate, cross_push)
         if not (np.isfinite(mu_max) and mu_max > 0):
             raise ValueError(f"mu_max must be finite and > 0, got {mu_max!r}")
         self.mu_max, self.min_norm = float(mu_max), float(min_norm)
@@ -120,11 +150,13 @@ class TwistAction(_ControllerWrapper):
     Args:
         env: an ``Azimut-v0`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
         controller: ``"icr"`` (default) or ``"swerve"``. icr_config, swerve_config: tuning.
+        shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (ICR controller only).
     """
 
     def __init__(self, env: gym.Env, v_max: float = 1.0, w_max: float = 2.0, controller: str = "icr",
-                 icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None) -> None:
-        super().__init__(env, controller, icr_config, swerve_config)
+                 icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None,
+                 shape_targets: bool = True, target_rate: float = 3.0, cross_push: float = 0.6) -> None:
+        super().__init__(env, controller, icr_config, swerve_config, shape_targets, target_rate, cross_push)
         if not (np.isfinite(v_max) and v_max > 0 and np.isfinite(w_max) and w_max > 0):
             raise ValueError(f"v_max and w_max must be finite and > 0, got {v_max!r}, {w_max!r}")
         self.scale = np.array([v_max, v_max, w_max])
