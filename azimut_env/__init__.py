@@ -6,7 +6,8 @@ limits, action <-> set-point map), ``physics`` (N robots in one pymunk Space), `
 ``actuators``, ``sensors``, ``tracks``, ``task`` (the task over N robots), ``env`` (the single
 env, N = 1), ``vector_env`` (``AzimutVectorEnv``: N robots in one Space, also what
 ``gymnasium.make_vec("Azimut-v0", num_envs=N, vectorization_mode="vector_entry_point")`` returns),
-``sb3`` (an SB3 ``VecEnv`` over it), ``rendering``, ``bench``, ``paper_run``.
+``sb3`` (an SB3 ``VecEnv`` over it), ``rendering``, ``bench``. (``azimut sim-paper`` drives the
+ICR controller, so it lives in ``control.phenomenon``.)
 """
 
 from gymnasium.envs.registration import register, registry

@@ -22,7 +22,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("control.evaluate", "run controllers on tracks and write a report (the main job)"),
     "bench-estimators": ("estimation.bench", "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
     "bench-env": ("azimut_env.bench", "measure simulator throughput (steps/s) with a time breakdown"),
-    "sim-paper": ("azimut_env.paper_run", "drive the paper track with a kinematic feed-forward; report qua of the measured steering"),
+    "sim-paper": ("control.phenomenon", "the paper's phenomenon: qua while moving under the ICR controller at three "
+                  "speeds, split into motor lag and compliance, with a stiff-steering counterfactual"),
     "record-d2": ("control.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
     "train": ("train.cli", "train an RL baseline (needs the [rl] extra)"),
 }

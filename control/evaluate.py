@@ -65,6 +65,8 @@ class EpisodeLog:
     internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
     qua: np.ndarray = field(default_factory=lambda: np.zeros(0))
     beta_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    beta_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    motor_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     beta_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     phidot_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     beta_rate: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
@@ -133,7 +135,7 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     max_time = max_time if max_time is not None else 3.0 * nominal + 10.0
     steps = int(math.ceil(max_time / dt))
     rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
-                                            "beta_meas", "beta_cmd", "phidot_cmd", "beta_rate", "phiddot",
+                                            "beta_meas", "beta_true", "motor_true", "beta_cmd", "phidot_cmd", "beta_rate", "phiddot",
                                             "lam_hat", "mu_true", "mode", "violations")}
     log = EpisodeLog(controller, env.track, dt)
     start = time.time()
@@ -156,7 +158,8 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
         for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
                            ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
                            ("internal_force", info["internal_force"]), ("qua", info["qua"]),
-                           ("beta_meas", env.measured_beta), ("beta_cmd", cmd.beta), ("phidot_cmd", cmd.phidot),
+                           ("beta_meas", env.measured_beta), ("beta_true", info["beta_true"]),
+                           ("motor_true", env.physics.motor_angles()[0]), ("beta_cmd", cmd.beta), ("phidot_cmd", cmd.phidot),
                            ("beta_rate", cmd.beta_rate), ("phiddot", cmd.phiddot), ("lam_hat", lam_hat),
                            ("mu_true", abs(float(info["eta_true"][1]))), ("mode", mode), ("violations", viol)):
             rec[key].append(value)
