@@ -23,7 +23,8 @@ from numba import njit
 
 from .tire import tire_force_kernel
 
-__all__ = ["steer_motor_kernel", "spring_torque_kernel", "wheel_spin_kernel"]
+__all__ = ["steer_motor_kernel", "spring_torque_kernel", "wheel_spin_kernel", "rolling_resistance_kernel",
+           "wheel_spin_step_kernel"]
 
 
 @njit(cache=True, inline="always")
@@ -115,3 +116,41 @@ def wheel_spin_kernel(phidot: float, ref: float, v_roll: float, v_lat: float, en
         new = phidot + dt * (tau_m + tau_rr - bearing * phidot - r * f_long) / inertia
         s_long = v_roll - r * new
     return new, f_long, f_lat, s_long
+
+
+@njit(cache=True, inline="always")
+def rolling_resistance_kernel(phidot: float, r: float, rr_torque: float, rr_knee: float) -> float:
+    """Rolling resistance torque on the spin [N·m]: ``−C_rr N r · sat(r φ̇ / v_knee)``, i.e. the
+    Coulomb-like resistance C_rr N r faded linearly below the surface speed v_knee so that the
+    wheel can come to rest (rr_torque = C_rr N r)."""
+    x = phidot * r / rr_knee
+    if x > 1.0:
+        x = 1.0
+    elif x < -1.0:
+        x = -1.0
+    return -rr_torque * x
+
+
+@njit(cache=True, inline="always")
+def wheel_spin_step_kernel(phidot: float, ref: float, f_long: float, enabled: bool, r: float, inertia: float,
+                           kv: float, torque_max: float, bearing: float, rr_torque: float, rr_knee: float,
+                           dt: float) -> float:
+    """One substep of the wheel spin driven by its velocity-controlled motor and loaded by the
+    tire force ``f_long`` [N] (on the robot, along d) of :func:`azimut_env.tire.tire_step_kernel`.
+
+    ``I φ̇' = I φ̇ + dt (τ_m + τ_rr − b φ̇' − r F_long)`` with ``τ_m = clip(K_v (φ̇_ref − φ̇'), ±τ_max)``:
+    the motor gain and bearing are implicit (no bound on dt from K_v/I), the rolling resistance
+    and the tire force explicit. The tire is a spring-damper on the spin: its bound is
+    :func:`azimut_env.tire.stability_numbers` with the mass I/r² (longitudinal direction). The
+    tire force reacts on the spin with torque −r F_long (F_long > 0 pushes the robot forward and
+    brakes the wheel). Returns φ̇' [rad/s]."""
+    tau_rr = rolling_resistance_kernel(phidot, r, rr_torque, rr_knee)
+    load = tau_rr - r * f_long
+    if enabled:
+        new = (inertia * phidot + dt * (kv * ref + load)) / (inertia + dt * (kv + bearing))
+        tau_m = kv * (ref - new)
+        if tau_m > torque_max or tau_m < -torque_max:
+            tau_m = torque_max if tau_m > 0 else -torque_max
+            new = (inertia * phidot + dt * (tau_m + load)) / (inertia + dt * bearing)
+        return new
+    return (inertia * phidot + dt * load) / (inertia + dt * bearing)

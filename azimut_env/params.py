@@ -174,26 +174,60 @@ class WheelParams:
 
 @dataclass(frozen=True)
 class TireParams:
-    """Tire-ground contact: regularised Coulomb friction inside a friction circle.
+    """Tire-ground contact: the brush tire with relaxation lengths of :mod:`azimut_env.tire`.
 
-    The force on the robot at the contact point is ``−μ N v_slip / v_knee`` for slip speeds below
-    ``v_knee`` and ``−μ N v̂_slip`` above (saturation on the friction circle ‖F‖ ≤ μ N).
+    Defaults describe a 0.16 m solid-rubber-tread wheel carrying about 86 N (a quarter of the
+    35 kg robot). No tire data of AZIMUT-3 are published; the values are assumptions of the right
+    order, each with its reasoning below. Stiffnesses are per unit load (C = c N), so that the tire
+    follows the normal load when the mass is randomised.
 
     Attributes:
-        friction: friction coefficient μ [-].
-        slip_knee: slip speed at which the force saturates [m/s].
+        friction: friction coefficient μ [-] (rubber on dry indoor floors: 0.6–1.0; assumption).
+        cornering_stiffness: c_α = C_α/N [1/rad], slope of F_y against the slip angle. Pneumatic
+            car tires measure C_α/F_z ≈ 10–20 /rad (Pacejka 2012, Ch. 1); 12 /rad is an
+            assumption in that range. Full sliding starts at α_sl = 3μ/c_α (11.5° by default).
+        longitudinal_stiffness: c_κ = C_κ/N [-], slope of F_x against the slip ratio (15,
+            assumption; the brush model with isotropic bristles gives C_κ ≈ C_α, tires measure a
+            somewhat larger C_κ, Pacejka 2012, Ch. 1).
+        relaxation_length: lateral relaxation length σ_α [m]: the distance rolled to build
+            1 − 1/e of the steady lateral force; with C_α it sets the lateral contact stiffness
+            k_y = C_α/σ_α. Pneumatic tires measure σ_α of the order of the wheel radius (Pacejka
+            2012, Ch. 7); a solid tread on a rigid hub is much stiffer: 0.02 m (= r/4) is an
+            assumption (k_y ≈ 52 N/mm at the default load). Also relaxes the patch twist.
+        longitudinal_relaxation_length: σ_κ [m] (0.02, assumption, as σ_α).
+        contact_half_length: a [m], half-length (radius) of the contact patch: sets the pneumatic
+            trail a/3 at small slip, the scrub torque limit (2/3) μ N a and the torsional stiffness
+            k_y a²/2. 0.01 m (a 2 cm patch, a soft tread under 86 N) is an assumption: a Hertz line
+            contact of a 30 mm wide rubber tread (E ≈ 5 MPa) gives ≈ 7 mm (Johnson 1985, Ch. 4).
+        damping_time: τ_d [s], bristle damping per unit contact stiffness (c = k τ_d, the LuGre
+            σ₁ of Canudas de Wit et al. 1995): damps the stuck tread at rest (0.008 s: ζ ≈ 0.3 for
+            a quarter of the robot on one tire; assumption).
         rolling_resistance: rolling resistance coefficient C_rr [-] (torque C_rr N r on the spin).
         rolling_knee: spin surface speed below which rolling resistance fades linearly [m/s].
+        slip_knee: legacy viscous tire only (``tire.tire_force_kernel``): slip speed at which its
+            force saturates [m/s]. Unused by the brush tire.
     """
 
     friction: float = 0.8
-    slip_knee: float = 0.05
+    cornering_stiffness: float = 12.0
+    longitudinal_stiffness: float = 15.0
+    relaxation_length: float = 0.02
+    longitudinal_relaxation_length: float = 0.02
+    contact_half_length: float = 0.01
+    damping_time: float = 0.008
     rolling_resistance: float = 0.015
     rolling_knee: float = 0.02
+    slip_knee: float = 0.05
 
     def __post_init__(self) -> None:
-        _check_positive(self, "friction", "slip_knee", "rolling_knee")
-        _check_positive(self, "rolling_resistance", allow_zero=True)
+        _check_positive(self, "friction", "cornering_stiffness", "longitudinal_stiffness", "relaxation_length",
+                        "longitudinal_relaxation_length", "contact_half_length", "slip_knee", "rolling_knee")
+        _check_positive(self, "rolling_resistance", "damping_time", allow_zero=True)
+
+    @property
+    def saturation_slip_angle(self) -> float:
+        """Slip angle [rad] at which the brush tire slides fully: atan(3μ/c_α)."""
+        return math.atan(3.0 * self.friction / self.cornering_stiffness)
 
 
 @dataclass(frozen=True)
