@@ -24,6 +24,9 @@ import time
 
 import numpy as np
 
+from .tracks import TRACK_NAMES
+from .validation import arg_int
+
 __all__ = ["bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
 
 #: stages of the vector env's split, in print order
@@ -305,20 +308,31 @@ def _int_list(text: str) -> list[int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--steps", type=int, default=5000, help="single-env steps in the end-to-end loop")
-    parser.add_argument("--track", default="paper")
-    parser.add_argument("--substeps", type=int, default=8, help="physics substeps per control step")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,
+                        help="single-env steps in the end-to-end loop")
+    parser.add_argument("--track", default="paper", choices=TRACK_NAMES,
+                        help=f"built-in track among {', '.join(TRACK_NAMES)}")
+    parser.add_argument("--substeps", type=arg_int(1, 10_000), default=8, help="physics substeps per control step")
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0)
     parser.add_argument("--num-envs", type=_int_list, default=None, metavar="N[,N...]",
                         help="also time the vector env at these N (e.g. 1,16,64,256)")
-    parser.add_argument("--vector-steps", type=int, default=20000,
+    parser.add_argument("--vector-steps", type=arg_int(1, 100_000_000), default=20000,
                         help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
-    parser.add_argument("--episode-steps", type=int, default=6000,
+    parser.add_argument("--episode-steps", type=arg_int(1, 100_000_000), default=6000,
                         help="vector env time limit; short values put (timed) autoresets in the loop")
-    parser.add_argument("--solver-iterations", type=int, default=20,
+    parser.add_argument("--solver-iterations", type=arg_int(1, 10_000), default=20,
                         help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
     parser.add_argument("--reference", default="Pendulum-v1",
                         help="a Gymnasium env timed in the same run as a yardstick ('' to skip)")
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The reference env must exist before minutes of timing are spent."""
+    if args.reference:
+        import gymnasium as gym
+
+        if args.reference not in gym.registry:
+            raise ValueError(f"argument --reference: unknown Gymnasium env {args.reference!r} ('' to skip)")
 
 
 def run(args: argparse.Namespace) -> int:

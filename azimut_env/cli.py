@@ -67,13 +67,16 @@ def main(argv: list[str] | None = None) -> int:
     module = importlib.import_module(commands[name][0])
     cmd_parser = CommandParser(prog=f"azimut {name}", description=commands[name][1])
     module.add_arguments(cmd_parser)
-    args = cmd_parser.parse_args(argv[1:])
-    check = getattr(module, "check_args", None)
-    if check is not None:
-        try:
-            check(args)
-        except (ValueError, TypeError) as exc:
-            cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    try:
+        args = cmd_parser.parse_args(argv[1:])
+        check = getattr(module, "check_args", None)
+        if check is not None:
+            try:
+                check(args)
+            except (ValueError, TypeError) as exc:
+                cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     return int(module.run(args) or 0)
 
 

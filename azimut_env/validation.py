@@ -28,6 +28,7 @@ __all__ = [
     "check_finite", "check_range", "check_positive", "check_nonnegative", "check_int", "check_bool",
     "check_choice", "check_real_array", "check_index_list",
     "arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_seed",
+    "require_module",
     "ResetNeeded",
 ]
 
@@ -202,50 +203,86 @@ def arg_choice_list(choices: Sequence[str], *, allow_empty: bool = False) -> Cal
     return convert
 
 
+def _writable_dir(path: str) -> bool:
+    """Whether a file can be created in the directory ``path``: tried for real (a temporary file,
+    removed at once), since permission bits say nothing for root or a read-only mount."""
+    import tempfile
+
+    if not os.access(path, os.W_OK | os.X_OK):
+        return False
+    try:
+        fd, name = tempfile.mkstemp(dir=path, prefix=".azimut-write-check-")
+    except OSError:
+        return False
+    os.close(fd)
+    try:
+        os.unlink(name)
+    except OSError:
+        pass
+    return True
+
+
+def _first_existing(path: str) -> str:
+    while not os.path.exists(path):
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    return path
+
+
 def check_output_path(path: str | os.PathLike, *, directory: bool = False) -> str:
     """Check that ``path`` can be written before any work starts; return it as ``str``.
 
-    A file path must not be an existing directory, and its parent must be an existing, writable
-    directory (an existing file is overwritten if it is writable). With ``directory=True`` the
-    path is a directory to create or fill: it must not be a file, nothing on its way may be a
-    file, and its first existing ancestor must be writable. Raises ``ValueError`` with one line.
+    A file path must not be an existing directory, its parent must be an existing directory in
+    which a file can be created, and an existing file must be writable (it is overwritten). With
+    ``directory=True`` the path is a directory to create (with its parents) or fill: it must not
+    be a file, nothing on its way may be a file, and the directory (or its first existing
+    ancestor) must accept a new file. Raises ``ValueError`` with one line.
     """
-    text = os.fspath(path)
+    try:
+        text = os.fspath(path)
+    except TypeError:
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}") from None
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
     if not text or "\0" in text:
         raise ValueError(f"invalid path {text!r}")
     p = os.path.abspath(text)
     if directory:
         if os.path.exists(p) and not os.path.isdir(p):
             raise ValueError(f"{text}: exists and is not a directory")
-        anc = p
-        while not os.path.exists(anc):
-            parent = os.path.dirname(anc)
-            if parent == anc:
-                break
-            anc = parent
+        anc = _first_existing(p)
         if not os.path.isdir(anc):
             raise ValueError(f"{text}: {anc} is not a directory")
-        if not os.access(anc, os.W_OK | os.X_OK):
+        if not _writable_dir(anc):
             raise ValueError(f"{text}: directory {anc} is not writable")
         return text
     if os.path.isdir(p):
         raise ValueError(f"{text}: is a directory")
     parent = os.path.dirname(p)
-    anc = parent
-    while not os.path.exists(anc):
-        up = os.path.dirname(anc)
-        if up == anc:
-            break
-        anc = up
+    anc = _first_existing(parent)
     if not os.path.isdir(anc):
         raise ValueError(f"{text}: {anc} is not a directory")
     if anc != parent:
         raise ValueError(f"{text}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not _writable_dir(parent):
         raise ValueError(f"{text}: directory {parent} is not writable")
     if os.path.exists(p) and not os.access(p, os.W_OK):
         raise ValueError(f"{text}: file is not writable")
     return text
+
+
+def require_module(module: str, why: str) -> None:
+    """``ValueError`` (one line) if ``module`` cannot be imported, e.g. an optional extra."""
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise ValueError(f"{why} needs {module}, which is not installed")
 
 
 def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:

@@ -34,6 +34,8 @@ import numpy as np
 from azimut_env.env import AzimutEnv
 from azimut_env.tracks import TRACK_NAMES, Track, make_track
 
+from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
+
 from .icr_controller import ICRController, ICRControllerConfig, Mode, reference_stop_mask
 from .limits import limit_violations
 from .path_follower import PathFollower, PathFollowerConfig
@@ -346,22 +348,33 @@ def write_report(rows: list[dict], out: Path, header: str = "") -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--controllers", default="icr,twist",
+    parser.add_argument("--controllers", default="icr,twist", type=arg_choice_list(CONTROLLERS),
                         help=f"comma-separated controllers among {', '.join(CONTROLLERS)} (default: icr,twist)")
-    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS),
+    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_choice_list(TRACK_NAMES),
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
-    parser.add_argument("--seed", type=int, default=0, help="env seed (noise, start, random track); default 0")
-    parser.add_argument("--speed-scale", type=float, default=1.0,
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
+                        help="env seed (noise, start, random track); default 0")
+    parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
                         help="multiply every track's speed profile (default 1: the track's nominal speed)")
-    parser.add_argument("--out", default="reports/eval", help="report folder (default reports/eval)")
+    parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
+                        help="end each episode after this simulated time (default: 3 x the track's nominal "
+                             "duration + 10 s); a short value gives a quick smoke run")
+    parser.add_argument("--out", default="reports/eval", type=arg_output_path(directory=True),
+                        help="report folder (default reports/eval)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    parser.add_argument("--kick-runs", type=int, default=0,
+    parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
                         help="also run the robustness study: N trials per controller on 'paper' with random "
                              "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
 
 
-def _parse_list(text: str, allowed, what: str) -> list[str]:
-    items = [x.strip() for x in text.split(",") if x.strip()]
+def check_args(args: argparse.Namespace) -> None:
+    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra)."""
+    if not args.no_plots:
+        require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+
+
+def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
+    items = list(text) if isinstance(text, list) else [x.strip() for x in text.split(",") if x.strip()]
     bad = [x for x in items if x not in allowed]
     if not items or bad:
         raise ValueError(f"unknown {what} {bad or text!r}; choose from {', '.join(allowed)}")
@@ -415,7 +428,8 @@ def run(args: argparse.Namespace) -> int:
     geom, limits = env0.geometry, env0.limits
     for track in tracks:
         for controller in controllers:
-            log = run_episode(controller, track, seed=args.seed, speed_scale=args.speed_scale, progress=True)
+            log = run_episode(controller, track, seed=args.seed, speed_scale=args.speed_scale, progress=True,
+                              max_time=getattr(args, "max_time", None))
             row = episode_metrics(log)
             rows.append(row)
             if not args.no_plots:

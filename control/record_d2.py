@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from azimut_env.env import AzimutEnv
+from azimut_env.validation import arg_float, arg_int, arg_output_path
 
 from .icr_controller import ICRController, Mode
 from .path_follower import PathFollower, PathFollowerConfig
@@ -87,11 +88,13 @@ def save_d2(path: Path, q: np.ndarray, meta: dict, geom) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--points", type=int, default=2450, help="configurations to keep (default 2450)")
-    parser.add_argument("--seed", type=int, default=0, help="env seed (default 0)")
-    parser.add_argument("--speed-scale", type=float, default=D2_SPEED_SCALE,
+    parser.add_argument("--points", type=arg_int(1, 10_000_000), default=2450,
+                        help="configurations to keep (default 2450)")
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0, help="env seed (default 0)")
+    parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=D2_SPEED_SCALE,
                         help=f"multiply the paper track's speed (default {D2_SPEED_SCALE})")
-    parser.add_argument("--out", default=str(DEFAULT_OUT), help=f"output file (default {DEFAULT_OUT})")
+    parser.add_argument("--out", default=str(DEFAULT_OUT), type=arg_output_path(),
+                        help=f"output file (default {DEFAULT_OUT})")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -19,7 +19,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .datasets import dataset_d1, dataset_d2, dataset_d3
+from .datasets import dataset_d1, dataset_d2, dataset_d3, load_d2_recorded
 from .estimate import IT_BEST, estimate_icr, estimate_icr_it
 from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
 from .it import ITParams
@@ -158,7 +158,7 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
             table["IT+"]["cost_vs_IT"] = table["IT+"]["batched_us"] / table["IT"]["batched_us"]
         # per-point dominance: is IT at least as good as each other method at every point?
         dom = {}
-        for m in methods:
+        for m in methods if "IT" in table else ():
             if m not in ("IT", "ORACLE"):
                 dom[m] = float(np.mean(table["IT"]["_qua"] >= table[m]["_qua"] - 1e-9))
         for row in table.values():
@@ -229,24 +229,29 @@ def format_report(res: dict) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
-    parser.add_argument("--points", type=int, default=15000, help="points in D1 and D3 (paper: 15000)")
-    parser.add_argument("--random", type=int, default=1_000_000, help="random inputs of the robustness sweep")
-    parser.add_argument("--seed", type=int, default=0, help="dataset seed offset")
-    parser.add_argument("--single-calls", type=int, default=2000, help="single calls timed per method")
+    from azimut_env.validation import arg_choice_list, arg_int, arg_output_path
+
+    parser.add_argument("--json", metavar="PATH", type=arg_output_path(), help="also write the results as JSON")
+    parser.add_argument("--points", type=arg_int(10, 10_000_000), default=15000, help="points in D1 and D3 (paper: 15000)")
+    parser.add_argument("--random", type=arg_int(2, 100_000_000), default=1_000_000,
+                        help="random inputs of the robustness sweep")
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0, help="dataset seed offset")
+    parser.add_argument("--single-calls", type=arg_int(1, 10_000_000), default=2000, help="single calls timed per method")
     parser.add_argument("--d2", choices=["auto", "recorded", "standin"], default="auto", help="D2 source")
-    parser.add_argument("--methods", default=",".join(METHOD_ORDER), help="comma-separated subset (NE is required)")
+    parser.add_argument("--methods", default=",".join(METHOD_ORDER), type=arg_choice_list(METHOD_ORDER),
+                        help=f"comma-separated subset of {','.join(METHOD_ORDER)} (NE is required: the timing "
+                             "ratios are against it)")
+
+
+def check_args(args: argparse.Namespace) -> None:
+    if "NE" not in args.methods:
+        raise ValueError(f"argument --methods: must include NE (the timing ratios are against it), got {','.join(args.methods)}")
+    if args.d2 == "recorded" and load_d2_recorded(RobotGeometry.azimut3()) is None:
+        raise ValueError("argument --d2: no recorded D2 in this install (run azimut record-d2, or use auto/standin)")
 
 
 def run(args: argparse.Namespace) -> int:
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    bad = [m for m in methods if m not in METHOD_ORDER]
-    if bad or "NE" not in methods:
-        print(f"azimut bench-estimators: error: methods must be among {METHOD_ORDER} and include NE", file=sys.stderr)
-        return 2
-    if args.points < 10 or args.random < 2 or args.single_calls < 1:
-        print("azimut bench-estimators: error: --points >= 10, --random >= 2, --single-calls >= 1", file=sys.stderr)
-        return 2
+    methods = tuple(args.methods)
     geom = RobotGeometry.azimut3()
     res = run_benchmark(geom, n_points=args.points, n_random=args.random, seed=args.seed,
                         single_calls=args.single_calls, d2_source=args.d2, methods=methods,

@@ -1,0 +1,119 @@
+"""Regression tests of issue 10 for the ``azimut`` command line: every argument and output path is
+checked before work starts; a mistake is exit status 2 and one line on stderr, never a traceback."""
+
+from __future__ import annotations
+
+import os
+import site
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from azimut_env.cli import COMMANDS, main
+from azimut_env.validation import check_output_path
+
+ROOT = Path(__file__).resolve().parent.parent
+UNWRITABLE = "/proc"  # creating a file there fails, even for root
+
+
+def run_cli(argv, capsys):
+    t0 = time.perf_counter()
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err, time.perf_counter() - t0
+
+
+@pytest.fixture()
+def a_file(tmp_path):
+    f = tmp_path / "existing.txt"
+    f.write_text("x")
+    return str(f)
+
+
+BAD = [
+    # the issue's list
+    "eval --out {file}", "eval --out {file}/sub", "eval --seed -1", "bench-env --steps 0", "sim-paper --track nope",
+    "bench-estimators --json " + UNWRITABLE + "/x.json", "sim-paper --plot " + UNWRITABLE + "/p.png",
+    "eval --out " + UNWRITABLE + "/report", "bench-estimators --methods LS",
+    # more found the same way
+    "eval --tracks nope", "eval --tracks ''", "eval --controllers icr,icr", "eval --controllers ppo2",
+    "eval --speed-scale nan", "eval --speed-scale 0", "eval --speed-scale -1", "eval --speed-scale inf",
+    "eval --kick-runs -3", "eval --seed 1.5", "eval --seed x", "eval --max-time 0", "eval --max-time nan",
+    "eval --bogus", "bench-env --track nope", "bench-env --substeps 0", "bench-env --num-envs 0",
+    "bench-env --num-envs 1,x", "bench-env --vector-steps -1", "bench-env --episode-steps 0",
+    "bench-env --solver-iterations 0", "bench-env --reference Nope-v9", "bench-env --seed -2",
+    "sim-paper --seed -1", "sim-paper --max-steps 0", "sim-paper --plot {tmp}", "sim-paper --plot {file}/p.png",
+    "bench-estimators --points 5", "bench-estimators --random 1", "bench-estimators --single-calls 0",
+    "bench-estimators --methods NE,XX", "bench-estimators --methods NE,NE", "bench-estimators --d2 other",
+    "bench-estimators --json {tmp}", "bench-estimators --json {tmp}/missing/x.json", "bench-estimators --seed -1",
+    "record-d2 --points 0", "record-d2 --out {file}/x.npz", "record-d2 --speed-scale 0", "record-d2 --seed -5",
+    "record-d2 --out {tmp}", "nope", "eval --out ''",
+]
+
+
+@pytest.mark.parametrize("line", BAD)
+def test_bad_argument_is_one_line_and_exit_2_before_any_work(line, capsys, tmp_path, a_file):
+    import shlex
+
+    argv = [a.format(file=a_file, tmp=tmp_path) for a in shlex.split(line)]
+    if argv[0] not in COMMANDS and argv[0] != "nope":
+        pytest.skip(f"{argv[0]} not available")
+    code, out, err, dt = run_cli(argv, capsys)
+    assert code == 2, (line, code, err)
+    assert len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err and "error" in err
+    assert out == ""
+    assert dt < 20.0  # refused before the work (imports and numba cache loads only)
+    assert not (Path(a_file).parent / "missing").exists()
+
+
+def test_eval_out_existing_file_is_untouched(capsys, a_file):
+    code, *_ = run_cli(["eval", "--out", a_file], capsys)
+    assert code == 2 and Path(a_file).read_text() == "x"
+
+
+def test_check_output_path_accepts_good_paths(tmp_path, a_file):
+    assert check_output_path(a_file) == a_file  # overwriting an existing writable file is fine
+    assert check_output_path(tmp_path / "new.json") == str(tmp_path / "new.json")
+    assert check_output_path(tmp_path / "a" / "b", directory=True)  # created with its parents later
+    assert check_output_path(tmp_path, directory=True)
+    for bad in ("", "a\0b"):
+        with pytest.raises(ValueError):
+            check_output_path(bad)
+    with pytest.raises(TypeError):
+        check_output_path(3)
+
+
+def test_help_of_every_command_exits_0(capsys):
+    for name in COMMANDS:
+        code, out, err, _ = run_cli([name, "--help"], capsys) if name in _available() else (0, "x", "", 0)
+        assert code == 0 and out and not err
+
+
+def _available():
+    from azimut_env.cli import _available as av
+
+    return av()
+
+
+def test_cli_starts_without_importlib_util_preloaded():
+    """The wheel-install bug: ``importlib.util`` was used but never imported (an editable install
+    imports it at start-up, a plain one does not). ``python -S`` skips site's imports likewise."""
+    paths = [str(ROOT), *site.getsitepackages()]
+    code = (f"import sys; sys.path[:0] = {paths!r}; assert 'importlib.util' not in sys.modules; "
+            "from azimut_env.cli import main; sys.exit(main(['--help']))")
+    proc = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=os.sep, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "eval" in proc.stdout
+
+
+def test_subprocess_error_has_no_traceback(tmp_path, a_file):
+    proc = subprocess.run([sys.executable, "-m", "azimut_env.cli", "eval", "--out", a_file], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
