@@ -6,12 +6,13 @@
 * ``--num-envs 1,16,64,256`` also times ``AzimutVectorEnv`` at each N, in the same run: an
   uninstrumented loop of ``vec.step`` gives the steps/s (robot-steps per second: N per call) and
   the ratio against the single env; a second, instrumented loop splits the time per robot-step
-  into actions, batched read, force model (the compiled actuator/spring/tire kernel), write,
-  ``space.step``, the per-step state read and summary, sensors (noise draws and encoder models),
-  estimation (the batched IT), track queries, reward + observation, and the rest (Python glue,
-  info arrays). The instrumented physics loop mirrors ``AzimutPhysics.step``'s fast path with a
-  clock around each call. Memory: resident-set growth of a 512-robot vector env per robot, measured
-in a fresh process.
+  into actions, read of the pymunk bodies, force model (the compiled substep kernel: actuators,
+  spring, tires, module and chassis integration), write back to pymunk, ``space.step`` (only
+  with obstacles), the summary, sensors (noise draws and encoder models), estimation (the
+  batched IT), track queries, reward + observation, and the rest (Python glue, info arrays). The
+  physics stages come from ``AzimutPhysics.step``'s own timing hook (``step(times)``), so the
+  split times the code that runs. Memory: resident-set growth of a 512-robot vector env per
+  robot, measured in a fresh process.
 
 Compare ratios measured within one run: the machine may be shared.
 """
@@ -122,48 +123,6 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     }
 
 
-def _timed_physics_step(phys, acc: dict[str, float]) -> None:
-    """``AzimutPhysics.step`` (fast path) with a clock around each call of the substep loop."""
-    from .physics import _substep_kernel
-
-    clock = time.perf_counter
-    if phys._fast is None:
-        raise RuntimeError("the pymunk.batch fast path is unavailable: cannot split the physics time")
-    phys.acc[:] = 0.0
-    space, dt, n = phys.space, phys.dt, phys.n
-    ms, cmd, wp, en, accum, forces = phys.motor_state, phys.commands, phys.wheel_params, phys.enabled, phys.acc, \
-        phys._forces
-    lib, get_data, set_data, get_fn, set_fn = phys._fast
-    each, cstep, cspace = lib.cpSpaceEachBody, lib.cpSpaceStep, space._space
-    get_arr, set_arr = phys._get_buf._float_arr, phys._set_buf._float_arr
-    n_set = set_arr.num
-    t = clock()
-    space.step(0.0)
-    state = phys._state
-    t1 = clock()
-    acc["space_step"] += t1 - t
-    for _ in range(phys.substeps):
-        t0 = clock()
-        get_arr.num = 0
-        each(cspace, get_fn, get_data)
-        t1 = clock()
-        _substep_kernel(state, forces, ms, cmd, wp, en, accum, n, dt)
-        t2 = clock()
-        set_arr.num = 0
-        each(cspace, set_fn, set_data)
-        set_arr.num = n_set
-        t3 = clock()
-        cstep(cspace, dt)
-        t4 = clock()
-        acc["read"] += t1 - t0
-        acc["force"] += t2 - t1
-        acc["write"] += t3 - t2
-        acc["space_step"] += t4 - t3
-    t0 = clock()
-    phys._read_state()
-    acc["summary"] += clock() - t0
-
-
 def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "paper", seed: int = 0,
                      substeps: int = 8, split: bool = True, solver_iterations: int = 20,
                      max_episode_steps: int | None = 6000) -> dict[str, float]:
@@ -216,6 +175,7 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
     from . import task as task_module
+    from .physics import AzimutPhysics
 
     acc = {k: 0.0 for k in VECTOR_STAGES}
     clock = time.perf_counter
@@ -232,7 +192,7 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
         return wrapper
 
     task.apply_actions = timed(original[0], "actions")
-    phys.step = lambda: _timed_physics_step(phys, acc)
+    phys.step = lambda: AzimutPhysics.step(phys, acc)
     task._measure = timed(original[2], "sensors")
     task._estimate = timed(original[3], "estimation")
     task._query_tracks = timed(original[4], "track")
@@ -363,12 +323,13 @@ def run(args: argparse.Namespace) -> int:
                   f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
                   flush=True)
         print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
-              "env above, same run; bar 20000, goal 50000 and 15x)")
+              "env above, same run; bar 40000, goal 80000 at N = 64)")
         mb = memory_per_robot(512, args.track, args.substeps)
         print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env, fresh process)")
         print()
         print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
-              "control step, all substeps)")
+              "control step, all substeps; without obstacles pymunk is read and written once per step and not "
+              "stepped)")
         labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
         head = "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES)
         print(f"{'N':>5}{head}{'total':>9}")

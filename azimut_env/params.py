@@ -139,7 +139,10 @@ class SteeringParams:
         damping: damper c_s [N·m·s/rad] in parallel with the spring.
         position_gain: motor position loop gain [1/s] (desired rate = gain · error, before limits).
         module_mass: mass of one steering module with its wheel [kg].
-        module_inertia: moment of inertia of a module about its steering axis A_k [kg·m²].
+        module_inertia: moment of inertia of a module about its steering axis A_k [kg·m²] (the
+            module's centre of mass is on the axis).
+        stop_restitution: coefficient of restitution e ∈ [0, 1] of the hard steering stops (0: the
+            module stops dead at the stop, as a rubber-padded end stop; 1: elastic bounce).
     """
 
     stiffness: float = 60.0
@@ -147,10 +150,13 @@ class SteeringParams:
     position_gain: float = 20.0
     module_mass: float = 2.0
     module_inertia: float = 0.02
+    stop_restitution: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive(self, "stiffness", "position_gain", "module_mass", "module_inertia")
         _check_positive(self, "damping", allow_zero=True)
+        if not (math.isfinite(self.stop_restitution) and 0.0 <= self.stop_restitution <= 1.0):
+            raise ValueError(f"SteeringParams.stop_restitution must be in [0, 1], got {self.stop_restitution!r}")
 
 
 @dataclass(frozen=True)
@@ -234,17 +240,26 @@ class TireParams:
 class ChassisParams:
     """The chassis rigid body (a square plate).
 
+    The robot's centre of mass (chassis plus modules) is at the origin of the chassis frame R,
+    at height ``com_height`` above the ground.
+
     Attributes:
-        mass: chassis mass without the modules [kg] (total robot ≈ mass + n · module_mass).
+        mass: chassis mass without the modules [kg] (total robot = mass + n · module_mass).
         length: footprint along X_R [m]. width: footprint along Y_R [m].
+        com_height: height h of the centre of mass above the ground [m]. 0 (default) keeps the
+            normal loads static; h > 0 adds the load transfer of the chassis acceleration a
+            (Σ_k N_k x_k = −h M a_x, Σ_k N_k y_k = −h M a_y; Gillespie, *Fundamentals of Vehicle
+            Dynamics*, 1992, §2).
     """
 
     mass: float = 27.0
     length: float = 0.6
     width: float = 0.6
+    com_height: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive(self, "mass", "length", "width")
+        _check_positive(self, "com_height", allow_zero=True)
 
     @property
     def inertia(self) -> float:
@@ -328,13 +343,21 @@ class RobotParams:
         """Largest wheel surface speed r φ̇_max [m/s] (smallest wheel)."""
         return float(np.min(self.geometry.r) * self.limits.wheel_speed_max)
 
-    def static_normal_loads(self) -> np.ndarray:
-        """N_k [N]: least-norm loads on the steering axes balancing the weight (force and moments
-        about the chassis centre, centre of mass at the origin). Equal loads for a symmetric robot."""
+    def load_map(self) -> np.ndarray:
+        """(n, 3) matrix L with N = L (W, M_x, M_y): the least-norm normal loads N_k on the steering
+        axes carrying a vertical force W [N] with moments Σ N_k x_k = M_x and Σ N_k y_k = M_y
+        [N·m] about the chassis centre (L = Gᵀ(G Gᵀ)⁻¹, G = [1; x_k; y_k]). For four symmetric
+        wheels the weight alone gives W/4 each."""
         xy = self.geometry.axis_xy
         G = np.vstack([np.ones(self.n), xy[:, 0], xy[:, 1]])
-        w = np.array([self.total_mass * self.gravity, 0.0, 0.0])
-        loads = np.linalg.lstsq(G, w, rcond=None)[0]
+        return np.linalg.pinv(G)
+
+    def static_normal_loads(self, total_mass: float | None = None) -> np.ndarray:
+        """N_k [N]: least-norm loads on the steering axes balancing the weight of ``total_mass``
+        [kg] (default :attr:`total_mass`; centre of mass at the origin). Equal loads for a
+        symmetric robot."""
+        mass = self.total_mass if total_mass is None else float(total_mass)
+        loads = self.load_map()[:, 0] * mass * self.gravity
         if np.any(loads <= 0):
             raise ValueError(f"RobotParams: the static load of some wheel is not positive ({loads})")
         return loads

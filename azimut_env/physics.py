@@ -1,46 +1,93 @@
-"""Rigid-body physics of N AZIMUT-3-like robots in one pymunk Space (top-down 2D).
+"""Rigid-body physics of N AZIMUT-3-like robots (top-down 2D): one rigid body per robot in a
+pymunk Space, the steering modules as joint coordinates in a compiled substep.
 
 One :class:`AzimutPhysics` simulates ``n_robots`` robots (the single env is ``n_robots=1``; the
-vector env of issue 5 uses the same class with many). Robots do not collide with each other, only
-with static obstacles.
+vector env uses the same class with many). Robots do not collide with each other, only with
+static obstacles.
 
-Per robot, pymunk holds a chassis body and one module body per wheel. Module k's centre of mass is
-its steering axis A_k, where a ``PivotJoint`` holds it to the chassis; a ``RotaryLimitJoint`` is the
-hard stop at the steering range (module angle − chassis angle − α_k ∈ [β_min, β_max]). The module
-body's angle is ``θ + γ_k = θ + α_k + β_k``, so its local X axis is the propulsion axis and the
-contact point P_k sits at ``(b_k, 0)`` in module coordinates.
+Model (physics v2)
+------------------
+Per robot the generalised coordinates are the chassis pose (x, y, θ) and the steering angles
+β_k of the n modules, plus each wheel's spin φ_k and its motors' states. Module k's centre of mass
+lies on its steering axis A_k (fixed in the chassis frame R at ``axis_xy[k]``); its propulsion
+axis makes γ_k = α_k + β_k with X_R and its contact point is P_k = A_k + b_k (cos γ_k, sin γ_k).
 
-Everything else (steering motor, spring and damper, wheel spin, tires) is computed by one numba
-kernel per substep over all robots × wheels (:func:`_substep_kernel`), which reads the bodies'
-state with one ``pymunk.batch.get_space_bodies`` call and writes all forces and torques with one
-``pymunk.batch.set_space_bodies`` call. The tire force acts at P_k, so its lateral part, at offset
-b_k from A_k, twists the module against the compliant steering.
+pymunk holds **one body per robot**: the chassis carrying the module masses at their axes (mass
+M = m_c + n m_m, moment about the centre I = I_c + m_m Σ_k l_k², centre of mass at the origin of
+R). Each module's own rotational inertia I_m about A_k is a separate joint DOF. Eliminating the
+pivot reaction (it passes through A_k) gives the exact Newton–Euler equations of the system:
+
+    M v̇            = Σ_k F_k                                          (chassis translation)
+    I θ̈            = Σ_k (A_k − O) × F_k − Σ_k τ_s,k + τ_stop          (chassis rotation)
+    I_m (θ̈ + β̈_k)  = τ_s,k + (P_k − A_k) × F_k + M_z,k − τ_stop,k       (module k about A_k)
+
+with F_k the tire force at P_k, τ_s,k = k_s (θ_m,k − β_k) + c_s (θ̇_m,k − β̇_k) the series spring
+and damper to the motor angle θ_m,k (clipped to the motor's torque limit), M_z,k the tire's
+moment about the vertical at the contact (aligning and scrub torque; zero for the regularised
+Coulomb tire) and τ_stop the hard-stop impulses (equal and opposite on module and chassis). The
+module equation in β reads I_m β̈_k = τ_k − I_m θ̈: the −I_m θ̈ coupling. It is integrated in the
+absolute module rate ω_k = θ̇ + β̇_k, for which it is the plain I_m ω̇_k = τ_k, so the coupling is
+exact with no matrix to invert; β̇_k = ω_k − θ̇ is recovered from it. The tire force acts on the
+chassis at A_k; its moment about A_k (−b_k F_long,k for this tire) and M_z,k act on the module's
+steering DOF, where the series spring holds them and passes them to the chassis. The steering
+angle is a coordinate, so the contact point is exactly A_k + b_k (cos γ_k, sin γ_k): there is no
+pivot to drift (the error is zero by construction).
+
+Integration: semi-implicit (symplectic) Euler at the substep dt = control_period / substeps.
+All forces and torques are evaluated at the start of the substep (the wheel spin and propulsion
+loop implicitly, see ``actuators.wheel_spin_kernel``), then
+
+    ω_k' = ω_k + dt τ_k / I_m,   v' = v + dt ΣF / M,   θ̇' = θ̇ + dt τ_c / I,
+    β_k' = β_k + dt (ω_k' − θ̇'),  x' = x + dt v',  θ' = θ + dt θ̇'.
+
+**Hard stops**, exact: if β_k' leaves [β_min, β_max] it is set onto the stop and, if β̇_k' still
+points outward, an angular impulse J = −(1 + e) β̇_k' / (1/I_m + 1/I) acts on the module (+J) and
+the chassis (−J), leaving the rebound rate −e β̇_k' (e = ``stop_restitution``, default 0, an
+inelastic stop). Modules are resolved in order k = 0..n−1 (sequential impulses). The stop is
+never penetrated.
+
+**Normal loads** N_k follow the robot's current mass M: N = L (M g, −h M a_x, −h M a_y) with
+L = ``RobotParams.load_map()`` (least-norm loads on the axes: M g / 4 for four symmetric wheels)
+and h = ``ChassisParams.com_height`` (0: static loads; h > 0: load transfer from the chassis
+acceleration a, in R, of the previous substep), clipped at 0 (a lifted wheel).
+
+Without obstacles the whole control period (all substeps, all robots) is one compiled call
+(:func:`_step_kernel`) that integrates the chassis too; pymunk's bodies are read before it and
+written after it. With obstacles pymunk integrates the chassis: each substep the kernel's velocity
+change is handed to pymunk as a force and torque, and ``space.step`` integrates them and resolves
+the contacts (Chipmunk moves the position with the velocity of the start of the substep, then
+updates the velocity: explicit Euler for the chassis pose while in the presence of obstacles).
+Robots have collision shapes (the chassis box; the wheels lie within its footprint up to 2 cm)
+only when there are obstacles.
+
+Stability budget (default parameters, 8 substeps of 2.5 ms at the 20 ms control period), enforced
+by :meth:`AzimutPhysics._check_stability` at construction (``ValueError`` past a bound):
+
+* the tire acts on a module's steering DOF like a damper of rate ``μ N b² / (v_knee I_m)`` (the
+  contact point moves b β̇ along the rolling direction): 439 1/s, rate·dt = 1.10 (explicit
+  damping is stable below 2; refused above 1.5);
+* the tire on the chassis: translation rate ``n μ N / (v_knee M)`` = 157 1/s (0.39), rotation
+  ``μ N Σ|P_k|² / (v_knee I)`` = 123 1/s (0.31) (refused above 1.5);
+* the series spring on the module: ω = sqrt(k_s / I_m) = 55 rad/s, ω·dt = 0.14 (symplectic Euler
+  is stable below 2; refused above 0.5), its damper c_s dt / I_m = 0.075 (refused above 1);
+* the wheel spin on the tire (rate μ N r² / (v_knee I_w) ≈ 290 1/s) and the propulsion velocity
+  loop are integrated implicitly: no bound on dt;
+* the hard stops are exact projections (no stiffness, no bound on dt);
+* load transfer (h > 0) closes a loop N → F → a → N; its gain is at most 2 μ h / ℓ (ℓ the
+  shorter wheelbase, between the axes along x or y; the worst case has the front and rear wheels
+  saturated in opposite directions). It is explicit with a one-substep lag: refused at gain ≥ 1
+  (h ≥ 0.27 m for the default robot).
 
 Per-robot parameters live in arrays (``wheel_params``) so that domain randomisation can vary them
 robot by robot. After each step, ``summary`` (N, 11) and ``wheel_summary`` (N, n, 6) hold the
 derived per-robot quantities (pose, twists, slip power, internal force, blow-up code; β, β̇, tire
 forces and contact points in the chassis frame), computed by one compiled call for all robots.
-
-Stability (default parameters, 8 substeps of 2.5 ms at the 20 ms control period):
-
-* the tire acts on a module's steering DOF like a damper of rate ``μ N b² / (v_knee I_mod)``:
-  439 1/s, so rate·dt = 1.1 (explicit damping is stable below 2; :meth:`_check_stability`
-  refuses substeps above 1.5);
-* the series spring: ω = sqrt(k_s / I_mod) = 55 rad/s, ω·dt = 0.14 (refused above 0.5);
-* the wheel spin on the tire (rate c r² / I_w ≈ 290 1/s) and the propulsion velocity loop are
-  integrated implicitly, so they put no bound on dt;
-* pivot joints and hard stops are pymunk constraints (solver iterations: 20).
-
-Robots have collision shapes only when there are obstacles (collisions cost about half of each
-pymunk step). pymunk keeps solver state (warm-start impulses) between steps: :meth:`rebuild`
-gives a fresh Space, which the single env does at each reset for bit-exact replay; a vector env
-resetting one robot with :meth:`reset_robot` alone is deterministic but not bit-identical to a
-fresh start.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -52,7 +99,7 @@ from numba import njit
 from .actuators import spring_torque_kernel, steer_motor_kernel, wheel_spin_kernel
 from .params import RobotParams
 
-__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP"]
+__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS"]
 
 _STATE_FIELDS = (pb.BodyFields.POSITION | pb.BodyFields.ANGLE | pb.BodyFields.VELOCITY
                  | pb.BodyFields.ANGULAR_VELOCITY)
@@ -67,8 +114,8 @@ class WP:
     """Column indices of the per-wheel parameter array ``wheel_params`` (N, n, WP.COUNT)."""
 
     B, R, ALPHA, LOAD, MU, KNEE, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
-        STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX = range(21)
-    COUNT = 21
+        STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD = range(22)
+    COUNT = 22
 
 
 class MS:
@@ -76,6 +123,14 @@ class MS:
 
     THETA, OMEGA, PHIDOT_REF, PHIDOT, PHI = range(5)
     COUNT = 5
+
+
+class JS:
+    """Column indices of the per-wheel joint state array ``joint_state`` (N, n, JS.COUNT): the
+    steering angle β [rad] and the module's absolute angular velocity ω = θ̇ + β̇ [rad/s]."""
+
+    BETA, OMEGA = range(2)
+    COUNT = 2
 
 
 @dataclass(frozen=True)
@@ -121,9 +176,9 @@ class BlowUpLimits:
     """Thresholds beyond which the state is declared absurd (a numerical blow-up).
 
     Attributes:
-        speed: chassis or module speed [m/s]. spin: |φ̇| [rad/s]. yaw_rate: body angular speed
-        [rad/s]. position: |x|, |y| [m]. joint_gap: distance between a module and its axis on the
-        chassis [m] (a torn pivot joint).
+        speed: chassis speed [m/s]. spin: |φ̇| [rad/s]. yaw_rate: chassis or module angular speed
+        [rad/s]. position: |x|, |y| [m]. joint_gap: kept for compatibility: the steering pivots
+        are exact since physics v2, so blow-up code 6 (a torn pivot) no longer occurs.
     """
 
     speed: float = 20.0
@@ -134,78 +189,125 @@ class BlowUpLimits:
 
 
 @njit(cache=True)
-def _substep_kernel(state, forces, ms, cmd, wp, enabled, acc, n, dt):
-    """One physics substep for all robots × wheels: actuators, spring, wheel spin and tires.
+def _step_kernel(state, js, ms, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
+                 n, dt, substeps, integrate):
+    """``substeps`` substeps of every robot (see the module docstring for the equations).
 
-    state: (rows, 6) bodies' (x, y, angle, vx, vy, ω) from pymunk.batch, robot i's chassis at row
-    i·(n+1) and its modules after it. Writes forces (rows, 3) = (Fx, Fy, τ) in world coordinates,
-    updates ms (N, n, MS) in place, and accumulates acc (N, n, 4) = (ΣFx, ΣFy, Σ slip power, ΣF_lat).
+    state: (rows, 6) chassis (x, y, θ, vx, vy, θ̇) in the world, robot i at row i, updated in
+    place (velocities always; positions too when ``integrate``, else pymunk moves the bodies).
+    js (N, n, JS), ms (N, n, MS): joint and motor states, updated. cmd (N, n, 2): set-points.
+    wp (N, n, WP): parameters. en (N,): motors on. acc (N, n, 4): accumulates (ΣFx, ΣFy, Σ slip
+    power, ΣF_lat) per wheel. body (N, 2): (M, I). accel (N, 2): chassis acceleration in R from
+    the tire forces at the last substep (load transfer), updated. lmap (n, 3): the load map.
     """
     n_robots = ms.shape[0]
+    omega_new = np.empty(n)
     for i in range(n_robots):
-        rc = i * (n + 1)
-        th_c = state[rc, 2]
-        w_c = state[rc, 5]
-        on = enabled[i]
-        tau_c = 0.0
-        for k in range(n):
-            rm = rc + 1 + k
-            p = wp[i, k]
-            b = p[0]
-            r = p[1]
-            th_m = state[rm, 2]
-            w_m = state[rm, 5]
-            beta = th_m - th_c - p[2]
-            if beta > math.pi:  # wrapped by branches: atan2(sin, cos) costs ~30% of the kernel
-                beta -= 2.0 * math.pi
-            elif beta < -math.pi:
-                beta += 2.0 * math.pi
-            beta_dot = w_m - w_c
-            # steering motor and series spring
-            theta, omega = steer_motor_kernel(ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, on,
-                                              p[8], p[14], p[15], p[16], p[6], dt)
-            tau_s = spring_torque_kernel(theta, omega, beta, beta_dot, on, p[6], p[7], p[16])
-            ms[i, k, 0] = theta
-            ms[i, k, 1] = omega
-            # contact point velocity
-            cth = math.cos(th_m)
-            sth = math.sin(th_m)
-            vpx = state[rm, 3] - w_m * b * sth
-            vpy = state[rm, 4] + w_m * b * cth
-            v_roll = vpx * sth - vpy * cth
-            v_lat = vpx * cth + vpy * sth
-            # propulsion set-point ramp
-            ref = ms[i, k, 2]
-            if on:
-                dref = cmd[i, k, 1] - ref
-                lim = p[17] * dt
-                if dref > lim:
-                    dref = lim
-                elif dref < -lim:
-                    dref = -lim
-                ref += dref
-            else:
-                ref = ms[i, k, 3]
-            mu_n = p[4] * p[3]
-            phidot, f_long, f_lat, s_long = wheel_spin_kernel(
-                ms[i, k, 3], ref, v_roll, v_lat, on, r, p[9], p[10], p[18], p[11],
-                p[12] * p[3] * r, p[13], mu_n, p[5], dt)
-            ms[i, k, 2] = ref
-            ms[i, k, 3] = phidot
-            ms[i, k, 4] += phidot * dt
-            fx = f_long * sth + f_lat * cth
-            fy = -f_long * cth + f_lat * sth
-            forces[rm, 0] = fx
-            forces[rm, 1] = fy
-            forces[rm, 2] = b * (cth * fy - sth * fx) + tau_s
-            tau_c -= tau_s
-            acc[i, k, 0] += fx
-            acc[i, k, 1] += fy
-            acc[i, k, 2] += -(f_long * s_long + f_lat * v_lat)
-            acc[i, k, 3] += f_lat
-        forces[rc, 0] = 0.0
-        forces[rc, 1] = 0.0
-        forces[rc, 2] = tau_c
+        mass = body[i, 0]
+        inertia = body[i, 1]
+        on = en[i]
+        x, y, th = state[i, 0], state[i, 1], state[i, 2]
+        vx, vy, w = state[i, 3], state[i, 4], state[i, 5]
+        ax_r, ay_r = accel[i, 0], accel[i, 1]
+        for _ in range(substeps):
+            c = math.cos(th)
+            s = math.sin(th)
+            fx_sum = 0.0
+            fy_sum = 0.0
+            tau_c = 0.0
+            for k in range(n):
+                p = wp[i, k]
+                b = p[0]
+                r = p[1]
+                beta = js[i, k, 0]
+                wm = js[i, k, 1]
+                beta_dot = wm - w
+                # steering motor and series spring
+                theta, omega = steer_motor_kernel(ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, on,
+                                                  p[8], p[14], p[15], p[16], p[6], dt)
+                tau_s = spring_torque_kernel(theta, omega, beta, beta_dot, on, p[6], p[7], p[16])
+                ms[i, k, 0] = theta
+                ms[i, k, 1] = omega
+                # steering axis A_k (relative to the chassis centre, world axes) and contact point
+                axw = c * axis_xy[k, 0] - s * axis_xy[k, 1]
+                ayw = s * axis_xy[k, 0] + c * axis_xy[k, 1]
+                gam = th + p[2] + beta
+                cg = math.cos(gam)
+                sg = math.sin(gam)
+                vpx = vx - w * ayw - wm * b * sg
+                vpy = vy + w * axw + wm * b * cg
+                v_roll = vpx * sg - vpy * cg
+                v_lat = vpx * cg + vpy * sg
+                # propulsion set-point ramp
+                ref = ms[i, k, 2]
+                if on:
+                    dref = cmd[i, k, 1] - ref
+                    lim = p[17] * dt
+                    if dref > lim:
+                        dref = lim
+                    elif dref < -lim:
+                        dref = -lim
+                    ref += dref
+                else:
+                    ref = ms[i, k, 3]
+                # normal load: static share of the current mass plus load transfer
+                load = p[3]
+                if com_h > 0.0:
+                    load -= com_h * mass * (lmap[k, 1] * ax_r + lmap[k, 2] * ay_r)
+                    if load < 0.0:
+                        load = 0.0
+                mu_n = p[4] * load
+                phidot, f_long, f_lat, s_long = wheel_spin_kernel(
+                    ms[i, k, 3], ref, v_roll, v_lat, on, r, p[9], p[10], p[18], p[11],
+                    p[12] * load * r, p[13], mu_n, p[5], dt)
+                ms[i, k, 2] = ref
+                ms[i, k, 3] = phidot
+                ms[i, k, 4] += phidot * dt
+                fx = f_long * sg + f_lat * cg
+                fy = -f_long * cg + f_lat * sg
+                fx_sum += fx
+                fy_sum += fy
+                tau_c += axw * fy - ayw * fx - tau_s
+                tau_m = tau_s + b * (cg * fy - sg * fx)
+                omega_new[k] = wm + dt * tau_m / p[21]
+                acc[i, k, 0] += fx
+                acc[i, k, 1] += fy
+                acc[i, k, 2] += -(f_long * s_long + f_lat * v_lat)
+                acc[i, k, 3] += f_lat
+            # chassis velocities (symplectic Euler: positions move with the new velocities)
+            vx += dt * fx_sum / mass
+            vy += dt * fy_sum / mass
+            w += dt * tau_c / inertia
+            ax_r = (c * fx_sum + s * fy_sum) / mass
+            ay_r = (-s * fx_sum + c * fy_sum) / mass
+            # steering angles, exact hard stops by projection and a stop impulse
+            for k in range(n):
+                i_m = wp[i, k, 21]
+                wm = omega_new[k]
+                beta = js[i, k, 0] + dt * (wm - w)
+                lo = wp[i, k, 19]
+                hi = wp[i, k, 20]
+                if beta > hi or beta < lo:
+                    beta = hi if beta > hi else lo
+                    rel = wm - w
+                    if (beta == hi and rel > 0.0) or (beta == lo and rel < 0.0):
+                        j = -(1.0 + restitution) * rel / (1.0 / i_m + 1.0 / inertia)
+                        wm += j / i_m
+                        w -= j / inertia
+                js[i, k, 0] = beta
+                js[i, k, 1] = wm
+            if integrate:
+                x += dt * vx
+                y += dt * vy
+                th += dt * w
+        state[i, 0] = x
+        state[i, 1] = y
+        state[i, 2] = th
+        state[i, 3] = vx
+        state[i, 4] = vy
+        state[i, 5] = w
+        accel[i, 0] = ax_r
+        accel[i, 1] = ay_r
 
 
 #: robot summary columns (``AzimutPhysics.summary``): pose, world velocity, body velocity, slip
@@ -225,7 +327,7 @@ BLOWUP_MESSAGES = {
 
 
 @njit(cache=True)
-def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
+def _summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
     """Per-step derived quantities for all robots (see the column constants), one call.
 
     Internal force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
@@ -233,12 +335,11 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
     lim = (speed, yaw_rate, spin, position, joint_gap).
     """
     n_robots = ms.shape[0]
-    G = np.zeros((3, 2 * n))
-    F = np.zeros(2 * n)
+    P = np.zeros((n, 2))
+    F = np.zeros((n, 2))
     for i in range(n_robots):
-        rc = i * (n + 1)
-        x, y, th = state[rc, 0], state[rc, 1], state[rc, 2]
-        vx, vy, w = state[rc, 3], state[rc, 4], state[rc, 5]
+        x, y, th = state[i, 0], state[i, 1], state[i, 2]
+        vx, vy, w = state[i, 3], state[i, 4], state[i, 5]
         c, s = math.cos(th), math.sin(th)
         out_r[i, 0] = x
         out_r[i, 1] = y
@@ -256,26 +357,18 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
         wmax = abs(w)
         pmax = max(abs(x), abs(y))
         spin = 0.0
-        gap = 0.0
         for k in range(n):
-            rm = rc + 1 + k
-            for j in range(6):
-                if not math.isfinite(state[rm, j]):
+            for j in range(js.shape[2]):
+                if not math.isfinite(js[i, k, j]):
                     finite = False
             for j in range(ms.shape[2]):
                 if not math.isfinite(ms[i, k, j]):
                     finite = False
-            vmax = max(vmax, math.hypot(state[rm, 3], state[rm, 4]))
-            wmax = max(wmax, abs(state[rm, 5]))
-            pmax = max(pmax, abs(state[rm, 0]), abs(state[rm, 1]))
+            wmax = max(wmax, abs(js[i, k, 1]))
             spin = max(spin, abs(ms[i, k, 3]))
-            ax = x + c * axis_xy[k, 0] - s * axis_xy[k, 1]
-            ay = y + s * axis_xy[k, 0] + c * axis_xy[k, 1]
-            gap = max(gap, math.hypot(state[rm, 0] - ax, state[rm, 1] - ay))
-            beta = state[rm, 2] - th - wp[i, k, 2]
-            beta = math.atan2(math.sin(beta), math.cos(beta))
+            beta = js[i, k, 0]
             out_w[i, k, 0] = beta
-            out_w[i, k, 1] = state[rm, 5] - w
+            out_w[i, k, 1] = js[i, k, 1] - w
             fxw = acc[i, k, 0] * inv_sub
             fyw = acc[i, k, 1] * inv_sub
             fx = c * fxw + s * fyw
@@ -288,12 +381,10 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
             out_w[i, k, 4] = px
             out_w[i, k, 5] = py
             slip += acc[i, k, 2] * inv_sub
-            G[0, 2 * k] = 1.0
-            G[1, 2 * k + 1] = 1.0
-            G[2, 2 * k] = -py
-            G[2, 2 * k + 1] = px
-            F[2 * k] = fx
-            F[2 * k + 1] = fy
+            P[k, 0] = px
+            P[k, 1] = py
+            F[k, 0] = fx
+            F[k, 1] = fy
         out_r[i, 8] = slip
         internal = 0.0
         if finite:
@@ -305,13 +396,13 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
             wy = 0.0
             wz = 0.0
             for k in range(n):
-                px, py = G[2, 2 * k + 1], -G[2, 2 * k]
+                px, py = P[k, 0], P[k, 1]
                 sx += px
                 sy += py
                 s2 += px * px + py * py
-                wx += F[2 * k]
-                wy += F[2 * k + 1]
-                wz += px * F[2 * k + 1] - py * F[2 * k]
+                wx += F[k, 0]
+                wy += F[k, 1]
+                wz += px * F[k, 1] - py * F[k, 0]
             a11 = float(n)
             a13 = -sy
             a23 = sx
@@ -322,9 +413,9 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
             x0 = (wx - a13 * x2) / a11
             x1 = (wy - a23 * x2) / a11
             for k in range(n):
-                px, py = G[2, 2 * k + 1], -G[2, 2 * k]
-                dx = F[2 * k] - (x0 - py * x2)
-                dy = F[2 * k + 1] - (x1 + px * x2)
+                px, py = P[k, 0], P[k, 1]
+                dx = F[k, 0] - (x0 - py * x2)
+                dy = F[k, 1] - (x1 + px * x2)
                 internal += dx * dx + dy * dy
             internal = math.sqrt(internal)
         out_r[i, 9] = internal
@@ -338,8 +429,6 @@ def _summary_kernel(state, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
             code = 4
         elif pmax > lim[3]:
             code = 5
-        elif gap > lim[4]:
-            code = 6
         out_r[i, 10] = code
 
 
@@ -348,16 +437,17 @@ class AzimutPhysics:
 
     Args:
         params: the robot's physical parameters (shared by all robots; per-robot variations go
-            through :meth:`set_wheel_params`).
+            through :meth:`set_wheel_params` and :meth:`set_chassis_mass`).
         n_robots: number of robots N (1 for the single env).
         control_period: duration of one :meth:`step` [s].
         substeps: physics substeps per step; the substep is ``control_period / substeps``.
         blowup: thresholds of :meth:`check`.
-        solver_iterations: pymunk solver iterations per substep (pivot joints and hard stops). The
-            joints converge in fewer: 10 gave the same observations as 20 in a bang-bang-and-kicks
-            stress run and within 1e-8 in random driving, for about 15% less time per step.
+        solver_iterations: pymunk solver iterations per substep (obstacle contacts only since the
+            steering modules left pymunk; kept as a knob).
 
-    State accessors return arrays with a leading robot axis N.
+    State accessors return arrays with a leading robot axis N. The state of record between steps
+    is the pymunk chassis bodies (pose, velocity) plus ``joint_state`` (β, module rates),
+    ``motor_state`` and ``chassis_accel``; all of it pickles.
     """
 
     def __init__(self, params: RobotParams | None = None, n_robots: int = 1, control_period: float = 0.02,
@@ -379,11 +469,20 @@ class AzimutPhysics:
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
         self._check_stability()
+        p = self.params
+        self._load_map = np.ascontiguousarray(p.load_map())
+        self._module_mass = float(p.steering.module_mass)
+        self._module_axis_moment = float(p.steering.module_mass * np.sum(p.geometry.l ** 2))
         self.wheel_params = self._default_wheel_params()
         self.motor_state = np.zeros((self.n_robots, self.n, MS.COUNT))
+        self.joint_state = np.zeros((self.n_robots, self.n, JS.COUNT))
         self.commands = np.zeros((self.n_robots, self.n, 2))
         self.enabled = np.ones(self.n_robots, dtype=np.bool_)
         self.acc = np.zeros((self.n_robots, self.n, 4))
+        #: (N, 2) body mass M [kg] and moment I [kg·m²] about the centre (modules at their axes)
+        self.body_inertia = np.tile(self._body_inertia(p.chassis.mass), (self.n_robots, 1))
+        #: (N, 2) chassis acceleration in R from the tire forces of the last substep [m/s²]
+        self.chassis_accel = np.zeros((self.n_robots, 2))
         self.obstacles: tuple[Obstacle, ...] = ()
         self.summary = np.zeros((self.n_robots, 11))
         self.wheel_summary = np.zeros((self.n_robots, self.n, 6))
@@ -394,19 +493,43 @@ class AzimutPhysics:
 
     # ------------------------------------------------------------------ construction
 
+    def stability_figures(self) -> dict[str, float]:
+        """The dimensionless rate·dt figures of the stability budget (module docstring) for these
+        parameters and this substep, each with its bound: ``{name: (value, bound)}``."""
+        p, g, dt = self.params, self.params.geometry, self.dt
+        loads = p.static_normal_loads()
+        c = p.tire.friction * loads.max() / p.tire.slip_knee  # tire damping [N·s/m] per wheel
+        i_m = p.steering.module_inertia
+        mass = p.total_mass
+        inertia = float(self._body_inertia(p.chassis.mass)[1])
+        reach2 = float(np.max((g.l + np.abs(g.b)) ** 2))
+        ext = [float(np.ptp(g.axis_xy[:, 0])), float(np.ptp(g.axis_xy[:, 1]))]
+        half = min(e for e in ext if e > 0) / 2.0
+        return {
+            "tire_on_steering": (c * max(float(np.max(g.b ** 2)), 1e-6) / i_m * dt, 1.5),
+            "tire_on_chassis_translation": (self.n * c / mass * dt, 1.5),
+            "tire_on_chassis_rotation": (self.n * c * reach2 / inertia * dt, 1.5),
+            "spring_omega_dt": (math.sqrt(p.steering.stiffness / i_m) * dt, 0.5),
+            "spring_damping_dt": (p.steering.damping / i_m * dt, 1.0),
+            "load_transfer_gain": (p.tire.friction * p.chassis.com_height / half, 1.0),
+        }
+
     def _check_stability(self) -> None:
-        """Refuse substeps at which the explicit parts (tire on the module's steering DOF, spring)
-        would be unstable."""
-        p = self.params
-        load = p.static_normal_loads().max()
-        c = p.tire.friction * load / p.tire.slip_knee
-        b2 = float(np.max(p.geometry.b ** 2))
-        rate_tire = c * max(b2, 1e-6) / p.steering.module_inertia
-        omega_s = math.sqrt(p.steering.stiffness / p.steering.module_inertia)
-        if rate_tire * self.dt > 1.5 or omega_s * self.dt > 0.5:
-            raise ValueError(
-                f"substep {self.dt:.4g} s too long for stability (tire rate·dt = {rate_tire * self.dt:.2f} "
-                f"must be <= 1.5, spring ω·dt = {omega_s * self.dt:.2f} must be <= 0.5): raise substeps")
+        """Refuse parameter/substep combinations past the stability budget (module docstring)."""
+        bad = {k: v for k, v in self.stability_figures().items() if not v[0] < v[1] * (1 + 1e-12)}
+        if bad:
+            what = ", ".join(f"{k} = {v:.3g} (must be <= {b})" for k, (v, b) in bad.items())
+            hint = "lower com_height" if set(bad) == {"load_transfer_gain"} else "raise substeps"
+            raise ValueError(f"substep {self.dt:.4g} s with these parameters is outside the stability budget: "
+                             f"{what}: {hint}")
+
+    def _body_inertia(self, chassis_mass: float) -> np.ndarray:
+        """(M, I) of the robot body with a chassis of mass ``chassis_mass`` (plate inertia scaled
+        with it) and the modules' masses at their steering axes."""
+        ch = self.params.chassis
+        return np.array([chassis_mass + self.n * self.params.steering.module_mass,
+                         ch.inertia * chassis_mass / ch.mass
+                         + self.params.steering.module_mass * float(np.sum(self.params.geometry.l ** 2))])
 
     def _default_wheel_params(self) -> np.ndarray:
         p, g = self.params, self.params.geometry
@@ -433,105 +556,62 @@ class AzimutPhysics:
         wp[..., WP.WHEEL_TORQUE] = lim.wheel_torque_max
         wp[..., WP.STEER_MIN] = lim.steer_min
         wp[..., WP.STEER_MAX] = lim.steer_max
+        wp[..., WP.I_MOD] = p.steering.module_inertia
         return wp
 
     def _build_space(self) -> None:
-        p, g = self.params, self.params.geometry
+        p = self.params
         space = pymunk.Space()
         space.iterations = self.solver_iterations
         space.gravity = (0.0, 0.0)
         robot_filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
         # Collision shapes only matter against obstacles; without obstacles the bodies carry their
-        # mass and inertia alone, which makes each pymunk step about twice as fast.
+        # mass and inertia alone and pymunk is not stepped at all.
         with_shapes = bool(self.obstacles)
         self.chassis: list[pymunk.Body] = []
-        self.modules: list[list[pymunk.Body]] = []
-        bodies: list[pymunk.Body] = []
-        self._joints: list[list[pymunk.Constraint]] = []
-        for _ in range(self.n_robots):
-            joints: list[pymunk.Constraint] = []
-            self._joints.append(joints)
-            ch = pymunk.Body(p.chassis.mass, p.chassis.inertia)
+        for i in range(self.n_robots):
+            mass, moment = self.body_inertia[i]
+            ch = pymunk.Body(float(mass), float(moment))
             space.add(ch)
             if with_shapes:
                 box = pymunk.Poly.create_box(ch, (p.chassis.length, p.chassis.width))
                 box.filter = robot_filter
                 box.friction = 0.5
                 space.add(box)
-            bodies.append(ch)
-            mods = []
-            for k in range(self.n):
-                m = pymunk.Body(p.steering.module_mass, p.steering.module_inertia)
-                m.position = tuple(g.axis_xy[k])
-                m.angle = float(g.alpha[k])
-                r = float(g.r[k])
-                space.add(m)
-                pivot, stop = self._make_joints(ch, m, k)
-                space.add(pivot, stop)
-                joints.extend((pivot, stop))
-                if with_shapes:
-                    wheel = pymunk.Poly(m, [(float(g.b[k]) + dx, dy) for dx, dy in
-                                            ((-0.025, -r), (0.025, -r), (0.025, r), (-0.025, r))])
-                    wheel.filter = robot_filter
-                    wheel.friction = 0.5
-                    space.add(wheel)
-                bodies.append(m)
-                mods.append(m)
             self.chassis.append(ch)
-            self.modules.append(mods)
         self.space = space
-        self._bodies = bodies
         self._obstacle_shapes: list[pymunk.Shape] = []
         for ob in self.obstacles:
             self._add_obstacle(ob)
         self._setup_buffers()
 
-    def _make_joints(self, ch: pymunk.Body, m: pymunk.Body, k: int) -> tuple[pymunk.Constraint, pymunk.Constraint]:
-        """Module k's pivot joint at its steering axis and its steering hard stop."""
-        g = self.params.geometry
-        pivot = pymunk.PivotJoint(ch, m, tuple(g.axis_xy[k]), (0.0, 0.0))
-        stop = pymunk.RotaryLimitJoint(ch, m, float(g.alpha[k] + g.steer_min), float(g.alpha[k] + g.steer_max))
-        pivot.collide_bodies = False
-        stop.collide_bodies = False
-        return pivot, stop
-
     def renew_joints(self, robot: int) -> None:
-        """Replace robot ``robot``'s joints by fresh ones (no accumulated impulses).
-
-        pymunk warm-starts each constraint with the impulse it accumulated at the previous step;
-        a fresh Space starts from zero. Fresh joints give a robot reset inside a running Space the
-        same solver state as a fresh Space, so its episode replays bit for bit (without obstacle
-        contacts). Chipmunk deletes a constraint by moving the array's last one into its slot and
-        solves constraints in array order: removing this robot's joints last-first moves the final
-        robot's block into its slots in order, and the new joints go at the end in order, so every
-        robot keeps its joints contiguous and in creation order."""
+        """Kept for compatibility: physics v1 replaced a robot's pymunk joints here (their
+        warm-start impulses). Since v2 the steering modules are joint coordinates, not pymunk
+        constraints, and a robot reset inside a running Space replays bit for bit as it is."""
         if not 0 <= robot < self.n_robots:
             raise ValueError(f"robot index {robot} out of range 0..{self.n_robots - 1}")
-        old = self._joints[robot]
-        for c in reversed(old):
-            self.space.remove(c)
-        ch, mods = self.chassis[robot], self.modules[robot]
-        new: list[pymunk.Constraint] = []
-        for k, m in enumerate(mods):
-            new.extend(self._make_joints(ch, m, k))
-        self.space.add(*new)
-        self._joints[robot] = new
 
     def _setup_buffers(self) -> None:
         """(Re)create the batch buffers; check that pymunk.batch lists our bodies first, in order."""
         self._get_buf = pb.Buffer()
         pb.get_space_bodies(self.space, pb.BodyFields.BODY_ID, self._get_buf)
         ids = list(memoryview(self._get_buf.int_buf()).cast("P"))
-        n_rows = len(ids)
-        ours = [b.id for b in self._bodies]
+        ours = [b.id for b in self.chassis]
         if ids[: len(ours)] != ours:
-            raise RuntimeError("pymunk.batch does not list the robot bodies in creation order")
-        self._n_rows = n_rows
-        self._forces = np.zeros((n_rows, 3))
+            raise RuntimeError("pymunk.batch does not list the robot bodies first, in creation order")
+        # rows beyond N (pymunk's static body, once it holds obstacle shapes) are read and written
+        # back unchanged
+        self._n_rows = len(ids)
+        self._state = np.zeros((self._n_rows, 6))
         self._set_buf = pb.Buffer()
-        self._set_buf.set_float_buf(self._forces)
+        self._set_buf.set_float_buf(self._state)
+        self._forces = np.zeros((self._n_rows, 3))
+        self._before = np.zeros((self.n_robots, 3))
+        self._force_buf = pb.Buffer()
+        self._force_buf.set_float_buf(self._forces)
         # Fast path: the same C iterators that pymunk.batch.get/set_space_bodies call, with their
-        # argument structs built once (saves ~40% of the per-substep Python overhead).
+        # argument structs built once (saves most of the per-call Python overhead).
         self._fast = None
         ffi, lib = getattr(pb, "ffi", None), getattr(pb, "lib", None)
         if ffi is not None and lib is not None and hasattr(lib, "cpSpaceEachBody"):
@@ -541,7 +621,7 @@ class AzimutPhysics:
                 get_data.floatArray = self._get_buf._float_arr
                 get_data.intArray = self._get_buf._int_arr
                 set_data = ffi.new("pmBatchedData *")
-                set_data.fields = _FORCE_FIELDS.value
+                set_data.fields = _STATE_FIELDS.value
                 set_data.floatArray = self._set_buf._float_arr
                 set_data.intArray = self._set_buf._int_arr
                 self._fast = (lib, get_data, set_data, ffi.addressof(lib, "pmSpaceBodyGetIteratorFuncBatched"),
@@ -550,34 +630,53 @@ class AzimutPhysics:
                 self._fast = None
         self._read_state()
 
-    def _read_state(self) -> np.ndarray:
+    def _get_bodies(self) -> None:
+        """Copy every chassis body's (x, y, θ, vx, vy, θ̇) from pymunk into ``_state``."""
         buf = self._get_buf
-        buf.clear()
-        pb.get_space_bodies(self.space, _STATE_FIELDS, buf)
-        self._state = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(self._n_rows, 6)
-        _summary_kernel(self._state, self.motor_state, self.acc, self.wheel_params, self._axis_xy, self.n,
-                        1.0 / self.substeps, self._lim, self.summary, self.wheel_summary)
+        if self._fast is None:
+            buf.clear()
+            pb.get_space_bodies(self.space, _STATE_FIELDS, buf)
+        else:
+            lib, get_data, _, get_fn, _ = self._fast
+            buf._float_arr.num = 0
+            lib.cpSpaceEachBody(self.space._space, get_fn, get_data)
+        self._state[:] = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(self._n_rows, 6)
+
+    def _put_bodies(self) -> None:
+        """Write ``_state`` into every chassis body."""
+        if self._fast is None:
+            pb.set_space_bodies(self.space, _STATE_FIELDS, self._set_buf)
+        else:
+            lib, _, set_data, _, set_fn = self._fast
+            arr = self._set_buf._float_arr
+            num = arr.num
+            arr.num = 0
+            lib.cpSpaceEachBody(self.space._space, set_fn, set_data)
+            arr.num = num
+
+    def _put_forces(self) -> None:
+        """Write ``_forces`` (N rows of Fx, Fy, τ, world frame) as the chassis bodies' force and torque."""
+        pb.set_space_bodies(self.space, _FORCE_FIELDS, self._force_buf)
+
+    def _summarize(self) -> None:
+        _summary_kernel(self._state, self.joint_state, self.motor_state, self.acc, self.wheel_params, self._axis_xy,
+                        self.n, 1.0 / self.substeps, self._lim, self.summary, self.wheel_summary)
+
+    def _read_state(self) -> np.ndarray:
+        self._get_bodies()
+        self._summarize()
         return self._state
 
     def _read_robot_state(self, robot: int) -> None:
-        """Re-read one robot's bodies and recompute its summary rows (after a reset or a kick), in
-        O(1) of the robot count where :meth:`_read_state` reads every body. Same values: the
-        body properties and ``pymunk.batch`` read the same fields."""
-        if self.n_robots == 1:
-            self._read_state()
-            return
-        rows = np.empty((self.n + 1, 6))
-        for j, b in enumerate((self.chassis[robot], *self.modules[robot])):
-            p, v = b.position, b.velocity
-            rows[j] = (p.x, p.y, b.angle, v.x, v.y, b.angular_velocity)
-        r0 = robot * (self.n + 1)
-        try:
-            self._state[r0:r0 + self.n + 1] = rows
-        except ValueError:  # a read-only buffer view: the next step reads the bodies anyway
-            pass
+        """Re-read one robot's body and recompute its summary row (after a reset or a kick), in
+        O(1) of the robot count."""
+        b = self.chassis[robot]
+        p, v = b.position, b.velocity
+        self._state[robot] = (p.x, p.y, b.angle, v.x, v.y, b.angular_velocity)
         sl = slice(robot, robot + 1)
-        _summary_kernel(rows, self.motor_state[sl], self.acc[sl], self.wheel_params[sl], self._axis_xy, self.n,
-                        1.0 / self.substeps, self._lim, self.summary[sl], self.wheel_summary[sl])
+        _summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl],
+                        self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self._lim,
+                        self.summary[sl], self.wheel_summary[sl])
 
     def _add_obstacle(self, ob: Obstacle) -> None:
         body = self.space.static_body
@@ -593,21 +692,19 @@ class AzimutPhysics:
 
     def _build_space_keep_state(self) -> None:
         """Rebuild the Space and copy every robot body's state over."""
-        saved = [[(b.position, b.angle, b.velocity, b.angular_velocity, b.mass, b.moment)
-                  for b in [self.chassis[i], *self.modules[i]]] for i in range(self.n_robots)]
+        saved = [(b.position, b.angle, b.velocity, b.angular_velocity) for b in self.chassis]
         self._build_space()
-        for i, bodies in enumerate(saved):
-            for body, (pos, ang, vel, w, mass, moment) in zip([self.chassis[i], *self.modules[i]], bodies):
-                body.mass, body.moment = mass, moment
-                body.position, body.angle, body.velocity, body.angular_velocity = pos, ang, vel, w
+        for body, (pos, ang, vel, w) in zip(self.chassis, saved):
+            body.angle = ang
+            body.position, body.velocity, body.angular_velocity = pos, vel, w
         self._read_state()
 
     def rebuild(self) -> None:
         """Recreate the pymunk Space (same robots and obstacles, bodies at the origin).
 
-        pymunk keeps solver state between steps (constraint impulses for warm starting, contact
-        caches), so two episodes reset to the same state only replay bit-for-bit from a fresh Space.
-        The single env rebuilds on every reset (about 0.2 ms); call :meth:`reset_robot` after."""
+        pymunk keeps contact caches between steps, so with obstacles two episodes reset to the
+        same state only replay bit-for-bit from a fresh Space. The single env rebuilds on every
+        reset; call :meth:`reset_robot` after."""
         self._build_space()
 
     def set_obstacles(self, obstacles: Sequence = ()) -> None:
@@ -629,13 +726,15 @@ class AzimutPhysics:
 
     def __getstate__(self) -> dict:
         d = self.__dict__.copy()
-        for key in ("_get_buf", "_set_buf", "_state", "_forces", "_fast"):
+        for key in ("_get_buf", "_set_buf", "_force_buf", "_fast"):
             d.pop(key, None)
         return d
 
     def __setstate__(self, d: dict) -> None:
         self.__dict__.update(d)
+        state = self._state.copy()
         self._setup_buffers()
+        self._state[:] = state
 
     # ------------------------------------------------------------------ reset and commands
 
@@ -647,17 +746,36 @@ class AzimutPhysics:
         self.wheel_params = np.ascontiguousarray(wp)
 
     def set_chassis_mass(self, robot: int, mass: float) -> None:
-        """Change robot ``robot``'s chassis mass [kg] (inertia scaled with it)."""
+        """Change robot ``robot``'s chassis mass [kg] (without the modules; the plate's inertia
+        scales with it). The body's mass and moment and the wheels' static normal loads follow."""
         if not (math.isfinite(mass) and mass > 0):
             raise ValueError(f"mass must be > 0, got {mass!r}")
+        if not 0 <= robot < self.n_robots:
+            raise ValueError(f"robot index {robot} out of range 0..{self.n_robots - 1}")
+        m_tot, moment = self._body_inertia(mass)
+        self.body_inertia[robot] = (m_tot, moment)
         ch = self.chassis[robot]
-        ch.moment = self.params.chassis.inertia * mass / self.params.chassis.mass
-        ch.mass = mass
+        ch.moment = float(moment)
+        ch.mass = float(m_tot)
+        self.wheel_params[robot, :, WP.LOAD] = self.params.static_normal_loads(m_tot)
+
+    def normal_loads(self) -> np.ndarray:
+        """(N, n) normal loads N_k now [N]: the static share of each robot's current mass plus,
+        with ``com_height`` > 0, the load transfer of the last substep's acceleration."""
+        loads = self.wheel_params[..., WP.LOAD].copy()
+        h = self.params.chassis.com_height
+        if h > 0:
+            m = self.body_inertia[:, 0:1]
+            a = self.chassis_accel
+            loads -= h * m * (self._load_map[None, :, 1] * a[:, 0:1] + self._load_map[None, :, 2] * a[:, 1:2])
+            np.maximum(loads, 0.0, out=loads)
+        return loads
 
     def reset_robot(self, robot: int, pose=(0.0, 0.0, 0.0), beta=None, twist=(0.0, 0.0, 0.0)) -> None:
         """Place robot ``robot`` at pose (x, y, θ) [m, m, rad] in the world, wheels at steering
-        angles ``beta`` (n,) [rad] (default 0), moving with the chassis twist (ẋ, ẏ, θ̇) given in
-        the chassis frame, wheels rolling without slip and motors at rest on their set-points."""
+        angles ``beta`` (n,) [rad] (default 0, clipped into the steering range), moving with the
+        chassis twist (ẋ, ẏ, θ̇) given in the chassis frame, wheels rolling without slip and motors
+        at rest on their set-points."""
         g = self.params.geometry
         pose = np.asarray(pose, dtype=np.float64)
         twist = np.asarray(twist, dtype=np.float64)
@@ -678,15 +796,9 @@ class AzimutPhysics:
         ch.angular_velocity = w
         ch.force = (0.0, 0.0)
         ch.torque = 0.0
-        for k, m in enumerate(self.modules[robot]):
-            ax, ay = g.axis_xy[k]
-            wx, wy = x + c * ax - s * ay, y + s * ax + c * ay
-            m.angle = float(th + g.alpha[k] + beta[k])
-            m.position = (wx, wy)
-            m.velocity = (v_world[0] - w * (wy - y), v_world[1] + w * (wx - x))
-            m.angular_velocity = w
-            m.force = (0.0, 0.0)
-            m.torque = 0.0
+        self.joint_state[robot, :, JS.BETA] = beta
+        self.joint_state[robot, :, JS.OMEGA] = w
+        self.chassis_accel[robot] = 0.0
         # wheel spins that roll without slip: r φ̇ = v(P)·d
         gam = th + g.alpha + beta
         px = x + c * g.axis_xy[:, 0] - s * g.axis_xy[:, 1] + g.b * np.cos(gam)
@@ -707,16 +819,14 @@ class AzimutPhysics:
         self._read_robot_state(robot)
 
     def overlapping_obstacles(self, robot: int = 0) -> list[int]:
-        """Indices of the obstacles that overlap robot ``robot``'s chassis or wheels now."""
+        """Indices of the obstacles that overlap robot ``robot``'s chassis now."""
         if not self.obstacles:
             return []
-        bodies = {self.chassis[robot], *self.modules[robot]}
         hits = set()
-        for shape in self.space.shapes:
-            if shape.body in bodies:
-                for info in self.space.shape_query(shape):
-                    if info.shape in self._obstacle_shapes:
-                        hits.add(self._obstacle_shapes.index(info.shape))
+        for shape in self.chassis[robot].shapes:
+            for info in self.space.shape_query(shape):
+                if info.shape in self._obstacle_shapes:
+                    hits.add(self._obstacle_shapes.index(info.shape))
         return sorted(hits)
 
     def set_commands(self, beta_cmd, phidot_cmd) -> None:
@@ -742,52 +852,63 @@ class AzimutPhysics:
         for k in wheels:
             if not 0 <= int(k) < self.n:
                 raise ValueError(f"kick: wheel index {k} out of range 0..{self.n - 1}")
-            m = self.modules[robot][int(k)]
-            m.angular_velocity = m.angular_velocity + impulse / m.moment
+        for k in wheels:
+            self.joint_state[robot, int(k), JS.OMEGA] += impulse / self.wheel_params[robot, int(k), WP.I_MOD]
         self._read_robot_state(robot)
 
     # ------------------------------------------------------------------ stepping
 
-    def step(self) -> None:
-        """Advance all robots by one control period (``substeps`` substeps)."""
+    def step(self, times: dict[str, float] | None = None) -> None:
+        """Advance all robots by one control period (``substeps`` substeps).
+
+        ``times``: if given, the seconds spent in each stage are added to it under the keys
+        ``read``, ``force`` (the compiled kernel), ``write``, ``space_step`` and ``summary``
+        (``azimut bench-env``'s split)."""
         self.acc[:] = 0.0
-        space, dt, n = self.space, self.dt, self.n
-        ms, cmd, wp, en, acc, forces = self.motor_state, self.commands, self.wheel_params, self.enabled, self.acc, self._forces
-        get_buf, set_buf, n_rows = self._get_buf, self._set_buf, self._n_rows
-        if self._fast is None:
-            get, put = pb.get_space_bodies, pb.set_space_bodies
-            for _ in range(self.substeps):
-                get_buf.clear()
-                get(space, _STATE_FIELDS, get_buf)
-                state = np.frombuffer(get_buf.float_buf(), dtype=np.float64).reshape(n_rows, 6)
-                _substep_kernel(state, forces, ms, cmd, wp, en, acc, n, dt)
-                put(space, _FORCE_FIELDS, set_buf)
+        p = self.params
+        args = (self.joint_state, self.motor_state, self.commands, self.wheel_params, self.enabled, self.acc,
+                self.body_inertia, self.chassis_accel, self._axis_xy, self._load_map, float(p.chassis.com_height),
+                float(p.gravity), float(p.steering.stop_restitution), self.n, self.dt)
+        tm = times
+        t = time.perf_counter() if tm is not None else 0.0
+        self._get_bodies()
+        if tm is not None:
+            t = _lap(tm, "read", t)
+        state = self._state
+        if not self.obstacles:  # the whole control period in one compiled call
+            _step_kernel(state, *args, self.substeps, True)
+            if tm is not None:
+                t = _lap(tm, "force", t)
+            self._put_bodies()
+            if tm is not None:
+                t = _lap(tm, "write", t)
+        else:  # pymunk integrates the bodies (forces from the kernel's velocity change) and resolves contacts
+            space, dt, N = self.space, self.dt, self.n_robots
+            forces, before = self._forces, self._before
+            for j in range(self.substeps):
+                if j:
+                    self._get_bodies()
+                    if tm is not None:
+                        t = _lap(tm, "read", t)
+                before[:] = state[:N, 3:6]
+                _step_kernel(state, *args, 1, False)
+                # the same velocity change, as the force and torque pymunk applies in its step
+                forces[:N, 0:2] = (state[:N, 3:5] - before[:, 0:2]) * (self.body_inertia[:, 0:1] / dt)
+                forces[:N, 2] = (state[:N, 5] - before[:, 2]) * (self.body_inertia[:, 1] / dt)
+                self._put_forces()
+                if tm is not None:
+                    t = _lap(tm, "force", t)
                 space.step(dt)
-        else:
-            lib, get_data, set_data, get_fn, set_fn = self._fast
-            each, cstep, cspace = lib.cpSpaceEachBody, lib.cpSpaceStep, space._space
-            get_arr, set_arr = get_buf._float_arr, set_buf._float_arr
-            n_set = set_arr.num
-            space.step(0.0)  # pymunk's own bookkeeping (body checks, deferred adds) once per step
-            state, ptr = self._state, get_arr.arr
-            for _ in range(self.substeps):
-                get_arr.num = 0
-                each(cspace, get_fn, get_data)
-                if get_arr.arr != ptr:  # the C array moved (never for a fixed body count)
-                    state = np.frombuffer(get_buf.float_buf(), dtype=np.float64).reshape(n_rows, 6)
-                    ptr = get_arr.arr
-                _substep_kernel(state, forces, ms, cmd, wp, en, acc, n, dt)
-                set_arr.num = 0
-                each(cspace, set_fn, set_data)
-                set_arr.num = n_set
-                cstep(cspace, dt)
-        self._read_state()
+                if tm is not None:
+                    t = _lap(tm, "space_step", t)
+            self._get_bodies()
+            if tm is not None:
+                t = _lap(tm, "read", t)
+        self._summarize()
+        if tm is not None:
+            _lap(tm, "summary", t)
 
     # ------------------------------------------------------------------ state
-
-    def _robot_rows(self) -> np.ndarray:
-        st = self._state[: self.n_robots * (self.n + 1)]
-        return st.reshape(self.n_robots, self.n + 1, 6)
 
     def chassis_pose(self) -> np.ndarray:
         """(N, 3) chassis pose (x, y, θ) in the world [m, m, rad]."""
@@ -821,11 +942,18 @@ class AzimutPhysics:
         """(N, n) accumulated wheel angles φ [rad] (what the encoders count)."""
         return self.motor_state[..., MS.PHI].copy()
 
+    def axis_points(self) -> np.ndarray:
+        """(N, n, 2) steering axes A_k in the world [m]."""
+        x, y, th = self.summary[:, 0:1], self.summary[:, 1:2], self.summary[:, 2:3]
+        c, s = np.cos(th), np.sin(th)
+        a = self._axis_xy
+        return np.stack([x + c * a[:, 0] - s * a[:, 1], y + s * a[:, 0] + c * a[:, 1]], axis=-1)
+
     def contact_points(self) -> np.ndarray:
-        """(N, n, 2) contact points P_k in the world [m]."""
-        rows = self._robot_rows()[:, 1:]
+        """(N, n, 2) contact points P_k = A_k + b_k (cos γ, sin γ) in the world [m]."""
+        gam = self.summary[:, 2:3] + self.wheel_params[..., WP.ALPHA] + self.joint_state[..., JS.BETA]
         b = self.wheel_params[..., WP.B]
-        return np.stack([rows[..., 0] + b * np.cos(rows[..., 2]), rows[..., 1] + b * np.sin(rows[..., 2])], axis=-1)
+        return self.axis_points() + b[..., None] * np.stack([np.cos(gam), np.sin(gam)], axis=-1)
 
     def tire_forces(self) -> np.ndarray:
         """(N, n, 2) tire forces on the robot in the world, averaged over the last step [N]."""
@@ -853,15 +981,16 @@ class AzimutPhysics:
         return self.summary[:, 9].copy()
 
     def energy(self) -> np.ndarray:
-        """(N,) kinetic energy of all bodies and wheel spins plus steering spring energy [J]."""
-        e = np.zeros(self.n_robots)
-        for i in range(self.n_robots):
-            for body in [self.chassis[i], *self.modules[i]]:
-                v = body.velocity
-                e[i] += 0.5 * body.mass * (v.x * v.x + v.y * v.y) + 0.5 * body.moment * body.angular_velocity ** 2
+        """(N,) kinetic energy (chassis with the module masses, module rotations, wheel spins)
+        plus steering spring energy [J]."""
+        st = self._state[: self.n_robots]
+        m, inertia = self.body_inertia[:, 0], self.body_inertia[:, 1]
+        e = 0.5 * m * (st[:, 3] ** 2 + st[:, 4] ** 2) + 0.5 * inertia * st[:, 5] ** 2
         wp = self.wheel_params
+        e += 0.5 * np.sum(wp[..., WP.I_MOD] * self.joint_state[..., JS.OMEGA] ** 2, axis=1)
         e += 0.5 * np.sum(wp[..., WP.I_W] * self.motor_state[..., MS.PHIDOT] ** 2, axis=1)
-        e += 0.5 * np.sum(wp[..., WP.K_S] * (self.motor_state[..., MS.THETA] - self.steering_angles()) ** 2, axis=1)
+        e += 0.5 * np.sum(wp[..., WP.K_S] * (self.motor_state[..., MS.THETA] - self.joint_state[..., JS.BETA]) ** 2,
+                          axis=1)
         return e
 
     def check(self) -> tuple[np.ndarray, list[str]]:
@@ -871,3 +1000,10 @@ class AzimutPhysics:
         if ok.all():
             return ok, [""] * self.n_robots
         return ok, [BLOWUP_MESSAGES.get(int(c), "") if c else "" for c in codes]
+
+
+def _lap(times: dict[str, float], key: str, t0: float) -> float:
+    """Add the time since ``t0`` to ``times[key]``; return now."""
+    t = time.perf_counter()
+    times[key] = times.get(key, 0.0) + t - t0
+    return t

@@ -531,16 +531,22 @@ class AzimutTask:
         return steering_from_lambda(lam, self.params.geometry)
 
     def _randomize(self, i: int, rng: np.random.Generator) -> None:
+        """Robot i's parameters for this episode: the defaults, scaled by factors drawn from
+        [1 − d, 1 + d] with d = ``domain_randomization`` (friction, spring, damper, chassis mass).
+        Everything that depends on the mass follows it: the body's mass and moment and the
+        wheels' normal loads (``AzimutPhysics.set_chassis_mass``)."""
         phys = self.physics
         wp = self._default_wp[i].copy()
         d = self.config.domain_randomization
+        mass = self.params.chassis.mass
         if d > 0:
             f = rng.uniform(1 - d, 1 + d, size=4)
             wp[..., WP.MU] *= f[0]
             wp[..., WP.K_S] *= f[1]
             wp[..., WP.C_S] *= f[2]
-            phys.set_chassis_mass(i, self.params.chassis.mass * f[3])
+            mass *= f[3]
         phys.wheel_params[i] = wp
+        phys.set_chassis_mass(i, mass)
 
     def park(self, i: int) -> None:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
