@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from .validation import check_bool, check_nonnegative, check_positive, check_real_array
+
 __all__ = ["Track", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle"]
 
 TRACK_NAMES = ("paper", "circle", "figure8", "square", "crab", "random")
@@ -207,9 +209,13 @@ class Track:
     length: float = field(init=False)
 
     def __post_init__(self) -> None:
-        xy = np.array(self.xy, dtype=np.float64)
-        th = np.array(self.heading, dtype=np.float64)
-        v = np.array(self.speed, dtype=np.float64)
+        if not isinstance(self.name, str):
+            raise TypeError(f"Track.name must be a str, got {type(self.name).__name__}")
+        object.__setattr__(self, "closed", check_bool("Track.closed", self.closed))
+        object.__setattr__(self, "progress_radius", check_positive("Track.progress_radius", self.progress_radius))
+        xy = check_real_array("Track.xy", self.xy)
+        th = check_real_array("Track.heading", self.heading)
+        v = check_real_array("Track.speed", self.speed)
         if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
             raise ValueError(f"Track.xy must have shape (M >= 2, 2), got {xy.shape}")
         m = xy.shape[0]
@@ -219,8 +225,6 @@ class Track:
             raise ValueError("Track samples must be finite")
         if np.any(v < 0):
             raise ValueError("Track.speed must be >= 0")
-        if not self.progress_radius > 0:
-            raise ValueError("Track.progress_radius must be > 0 [m]")
         th = np.unwrap(th)
         if self.closed:
             # append the closing sample so that interpolation runs over the full loop
@@ -292,13 +296,17 @@ class Track:
             ramp: for open tracks, the speed ramps up from 0 over the first and down to 0 over the
                 last ``ramp`` metres of progress (0: no ramps).
         """
-        wp = np.asarray(waypoints, dtype=np.float64)
+        wp = check_real_array("waypoints", waypoints)
+        spacing = check_positive("spacing", spacing)
+        ramp = check_nonnegative("ramp", ramp)
+        closed = check_bool("closed", closed)
         if wp.ndim != 2 or wp.shape[1] not in (2, 3) or wp.shape[0] < 2:
             raise ValueError(f"waypoints must have shape (W >= 2, 2 or 3), got {wp.shape}")
         if not np.all(np.isfinite(wp)):
             raise ValueError("waypoints must be finite")
-        if not spacing > 0:
-            raise ValueError("spacing must be > 0 [m]")
+        if np.ptp(wp[:, :2], axis=0).max() / spacing > 1e7:
+            raise ValueError(f"spacing {spacing} m is too fine for waypoints spanning {np.ptp(wp[:, :2]):.3g} m "
+                             "(more than 1e7 samples)")
         w = wp.shape[0]
         if isinstance(heading, str):
             if heading != "tangent":
@@ -307,8 +315,10 @@ class Track:
         elif heading is None:
             hd = wp[:, 2] if wp.shape[1] == 3 else np.zeros(w)
         else:
-            hd = np.broadcast_to(np.asarray(heading, dtype=np.float64), (w,))
-        sp = np.broadcast_to(np.asarray(speed, dtype=np.float64), (w,))
+            hd = np.broadcast_to(check_real_array("heading", heading, finite=True), (w,))
+        sp = np.broadcast_to(check_real_array("speed", speed, finite=True), (w,))
+        if np.any(sp < 0):
+            raise ValueError("speed must be >= 0 [m/s]")
         pts = wp[:, :2]
         if closed:
             pts = np.vstack([pts, pts[:1]])
@@ -344,6 +354,7 @@ class Track:
 
     def with_ramps(self, ramp: float) -> "Track":
         """A copy whose speed rises from 0 over the first and falls to 0 over the last ``ramp`` m."""
+        ramp = check_positive("ramp", ramp)
         scale = np.clip(np.minimum(self.s, self.length - self.s) / ramp, 0.0, 1.0)
         v = self.speed * np.sqrt(scale)
         v[0] = min(self.speed[0], 0.05)  # let the robot start

@@ -49,6 +49,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from azimut_env.validation import ResetNeeded, check_bool, check_positive, check_range, check_real_array
 from estimation.hrep import eta_from_twist
 
 from .icr_controller import (ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch,
@@ -90,9 +91,9 @@ class VectorControllerAction(gym.vector.VectorWrapper):
                  cross_push: float = 0.6, icr_config: ICRControllerConfig | None = None,
                  swerve_config: SwerveConfig | None = None, follower_config: PathFollowerConfig | None = None) -> None:
         super().__init__(env)
-        if action not in ACTION_KINDS:
+        if not isinstance(action, str) or action not in ACTION_KINDS:
             raise ValueError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
-        if controller not in ("icr", "swerve") or (action != "twist" and controller != "icr"):
+        if not isinstance(controller, str) or controller not in ("icr", "swerve") or (action != "twist" and controller != "icr"):
             raise ValueError(f"controller must be 'icr' (or 'swerve' for twists), got {controller!r}")
         base = env.unwrapped
         for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
@@ -102,8 +103,14 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max, residual_angle=residual_angle, residual_mu=residual_mu,
                                 lambda_rate_max=lambda_rate_max, mu_accel=mu_accel, target_rate=target_rate,
                                 cross_push=cross_push).items():
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+            check_positive(name, value)
+        min_norm = check_range("min_norm", min_norm, 0.0, 1.0, hi_open=True)
+        check_bool("shape_targets", shape_targets)
+        for name, value, kind in (("icr_config", icr_config, ICRControllerConfig),
+                                  ("swerve_config", swerve_config, SwerveConfig),
+                                  ("follower_config", follower_config, PathFollowerConfig)):
+            if value is not None and not isinstance(value, kind):
+                raise TypeError(f"{name} must be {kind.__name__} or None, got {type(value).__name__}")
         self._kind, self._controller = action, controller
         self.mu_max, self.min_norm = float(mu_max), float(min_norm)
         self.scale = np.array([v_max, v_max, w_max], dtype=np.float64)
@@ -210,11 +217,11 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         return lam_new, mu_t, held
 
     def step(self, actions) -> tuple[Any, ...]:
-        a = np.asarray(actions, dtype=np.float64)
+        a = check_real_array("actions", actions)
         if a.shape != self.action_space.shape or not np.all(np.isfinite(a)):
             raise ValueError(f"actions must be a finite {self.action_space.shape} array")
         if not self._icr_ready.all() if self._controller == "icr" else any(c is None for c in self._ctls):
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeeded("call reset() before step()")
         a = np.clip(a, -1.0, 1.0)
         base = self.env.unwrapped
         beta, phidot = base.measured_beta, base.measured_phidot

@@ -30,6 +30,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from azimut_env.validation import (ResetNeeded, check_bool, check_positive, check_range,
+                                   check_real_array)
 from estimation.hrep import eta_from_twist
 
 from .icr_controller import ICRController, ICRControllerConfig, nearer_target
@@ -58,8 +60,12 @@ class _ControllerWrapper(gym.Wrapper):
                  swerve_config: SwerveConfig | None, shape_targets: bool = True, target_rate: float = 3.0,
                  cross_push: float = 0.6) -> None:
         super().__init__(env)
-        if not (np.isfinite(target_rate) and target_rate > 0 and np.isfinite(cross_push) and cross_push > 0):
-            raise ValueError(f"target_rate and cross_push must be finite and > 0, got {target_rate!r}, {cross_push!r}")
+        target_rate, cross_push = check_positive("target_rate", target_rate), check_positive("cross_push", cross_push)
+        shape_targets = check_bool("shape_targets", shape_targets)
+        if icr_config is not None and not isinstance(icr_config, ICRControllerConfig):
+            raise TypeError(f"icr_config must be ICRControllerConfig or None, got {type(icr_config).__name__}")
+        if swerve_config is not None and not isinstance(swerve_config, SwerveConfig):
+            raise TypeError(f"swerve_config must be SwerveConfig or None, got {type(swerve_config).__name__}")
         self.shape_targets = bool(shape_targets) and controller == "icr"
         self.target_rate, self.cross_push = float(target_rate), float(cross_push)
         self._lam_s = np.array([0.0, 0.0, 1.0])
@@ -94,7 +100,7 @@ class _ControllerWrapper(gym.Wrapper):
     def _drive(self, lam_d=None, mu_d=None, twist=None):
         base = self.env.unwrapped
         if self._ctl is None:
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeeded("call reset() before step()")
         held = False
         if isinstance(self._ctl, ICRController):
             lam_hat, mu_hat = base.estimated_eta
@@ -131,13 +137,12 @@ class ICRTargetAction(_ControllerWrapper):
                  icr_config: ICRControllerConfig | None = None, shape_targets: bool = True, target_rate: float = 3.0,
                  cross_push: float = 0.6) -> None:
         super().__init__(env, "icr", icr_config, None, shape_targets, target_rate, cross_push)
-        if not (np.isfinite(mu_max) and mu_max > 0):
-            raise ValueError(f"mu_max must be finite and > 0, got {mu_max!r}")
-        self.mu_max, self.min_norm = float(mu_max), float(min_norm)
+        self.mu_max = check_positive("mu_max", mu_max)
+        self.min_norm = check_range("min_norm", min_norm, 0.0, 1.0, hi_open=True)
         self.action_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
 
     def step(self, action):
-        a = np.asarray(action, dtype=np.float64)
+        a = check_real_array("action", action)
         if a.shape != (4,) or not np.all(np.isfinite(a)):
             raise ValueError(f"action must be a finite (4,) array, got {action!r}")
         lam_d, mu_d = icr_target_from_action(np.clip(a, -1.0, 1.0), self.mu_max, self.min_norm)
@@ -157,13 +162,12 @@ class TwistAction(_ControllerWrapper):
                  icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None,
                  shape_targets: bool = True, target_rate: float = 3.0, cross_push: float = 0.6) -> None:
         super().__init__(env, controller, icr_config, swerve_config, shape_targets, target_rate, cross_push)
-        if not (np.isfinite(v_max) and v_max > 0 and np.isfinite(w_max) and w_max > 0):
-            raise ValueError(f"v_max and w_max must be finite and > 0, got {v_max!r}, {w_max!r}")
+        v_max, w_max = check_positive("v_max", v_max), check_positive("w_max", w_max)
         self.scale = np.array([v_max, v_max, w_max])
         self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
 
     def step(self, action):
-        a = np.asarray(action, dtype=np.float64)
+        a = check_real_array("action", action)
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise ValueError(f"action must be a finite (3,) array, got {action!r}")
         twist = np.clip(a, -1.0, 1.0) * self.scale
