@@ -6,7 +6,9 @@ actuator limits and control period):
 * ``icr``: :class:`~control.icr_controller.ICRController` on the IT-estimated (λ̂, μ̂);
 * ``twist``: :class:`~control.swerve.SwerveController`, the WPILib-style baseline.
 
-Per controller and track the report has (``metrics.md`` and ``metrics.json``): RMS and max lateral
+Per controller and track (and seed: ``azimut eval`` runs a campaign of (controller, track, seed)
+episodes, see :mod:`control.eval_campaign`, whose ``report.md`` and ``metrics.json`` give the
+mean and a bootstrap interval over seeds of each metric) the report has: RMS and max lateral
 error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean internal force, mean
 and min qua of the measured steering configuration (eq. 28–29) over all steps and **while moving**
 (see :func:`moving_mask`: the controller in its RUNNING mode and the true |μ| above
@@ -365,12 +367,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
                         help="also run the robustness study: N trials per controller on 'paper' with random "
                              "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
+    from .eval_campaign import add_arguments as add_campaign_arguments
+
+    add_campaign_arguments(parser)  # --seeds, --workers, --executor, --ray-address, --resume, ...
 
 
 def check_args(args: argparse.Namespace) -> None:
-    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra)."""
+    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra); the campaign flags
+    together (see :func:`control.eval_campaign.check_args`)."""
+    from .eval_campaign import check_args as check_campaign_args
+
     if not args.no_plots:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+    check_campaign_args(args)
 
 
 def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
@@ -421,28 +430,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"azimut eval: error: {exc}", file=sys.stderr)
         return 2
+    from .eval_campaign import seeds_of
+    from .eval_campaign import run_eval_campaign
+
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    env0 = AzimutEnv()
-    geom, limits = env0.geometry, env0.limits
-    for track in tracks:
-        for controller in controllers:
-            log = run_episode(controller, track, seed=args.seed, speed_scale=args.speed_scale, progress=True,
-                              max_time=getattr(args, "max_time", None))
-            row = episode_metrics(log)
-            rows.append(row)
-            if not args.no_plots:
-                row["plots"] = write_plots(log, out, geom, limits)
-            print(f"{controller:>6} {track:<8} RMS lat {100 * row['rms_lateral_m']:.2f} cm, max "
-                  f"{100 * row['max_lateral_m']:.2f} cm, slip {row['slip_energy_J']:.2f} J, "
-                  f"int. force {row['mean_internal_force_N']:.2f} N, qua moving {row['mean_qua_moving']:.4f} "
-                  f"(min {row['min_qua_moving']:.4f}, standstill {100 * row['standstill_share']:.0f}%), limit-exceeded steps "
-                  f"{row['limit_violation_steps']}, stop+reconfig {row['reconfigure_events']}", flush=True)
-    header = (f"seed {args.seed}, speed scale {args.speed_scale}, control period {env0.control_period} s, "
-              f"limits {limits}")
-    if args.kick_runs > 0:
-        header += "\n\n" + _kick_section(controllers, args.kick_runs, args.seed, out)
-    write_report(rows, out, header)
-    print(f"report written to {out}/metrics.md")
-    return 0
+    rc = run_eval_campaign(args, controllers, tracks, seeds_of(args))
+    if rc in (0, 1) and args.kick_runs > 0:
+        with open(out / "report.md", "a") as fh:
+            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds_of(args)[0], out) + "\n")
+    return rc

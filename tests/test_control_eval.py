@@ -83,7 +83,7 @@ def test_run_episode_rejects_unknown_names():
 
 def test_cli_eval_writes_a_report(tmp_path):
     assert main(["eval", "--tracks", "circle", "--controllers", "icr", "--no-plots", "--out", str(tmp_path)]) == 0
-    rows = json.loads((tmp_path / "metrics.json").read_text())
+    rows = json.loads((tmp_path / "metrics.json").read_text())["episodes"]
     assert rows[0]["completed"] and rows[0]["limit_violation_steps"] == 0
     assert np.isfinite(rows[0]["rms_lateral_m"])
 

@@ -1,0 +1,217 @@
+"""The campaign engine: same answers on every executor, retries, resume, statistics, and the
+``azimut eval`` campaign flags. The Ray tests use a local instance of 2 CPUs and skip where the
+``cluster`` extra (ray) is not installed."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from azimut_env.cli import main
+from control.campaign import (CampaignInterrupted, Task, TaskStore, bootstrap_ci, parse_seeds, run_tasks,
+                              summarize)
+from control.eval_campaign import draw_kick, episode_tasks
+
+EXECUTORS = ["process", "ray"]
+
+
+@pytest.fixture(scope="module")
+def ray_instance():
+    ray = pytest.importorskip("ray")
+    import logging
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+    yield ray
+    ray.shutdown()
+
+
+@pytest.fixture(params=EXECUTORS)
+def executor(request):
+    if request.param == "ray":
+        request.getfixturevalue("ray_instance")
+    return request.param
+
+
+def _metrics(records):
+    return [json.dumps(r["result"]["metrics"], sort_keys=True) for r in records]
+
+
+def _sum_tasks(seeds, **extra):
+    return [Task("campaign_tasks:seeded_sum", {"seed": s}, extra=extra, label=f"s{s}") for s in seeds]
+
+
+# --------------------------------------------------------------------------- seeds and stats
+
+
+def test_parse_seeds():
+    assert parse_seeds("0-9") == list(range(10))
+    assert parse_seeds("0,3,5") == [0, 3, 5]
+    assert parse_seeds("0-2, 7") == [0, 1, 2, 7]
+    for bad in ("3-1", "a", "1,,2", "-1", "1,1", "0-3,2", "1.5"):
+        with pytest.raises(ValueError):
+            parse_seeds(bad)
+
+
+def test_bootstrap_ci_is_seeded_and_matches_the_normal_interval():
+    x = np.random.default_rng(1).normal(10.0, 2.0, size=400)
+    a = bootstrap_ci(x, seed=3)
+    assert a == bootstrap_ci(x, seed=3)
+    assert a["mean"] == pytest.approx(np.mean(x)) and a["n"] == 400
+    half = 1.96 * np.std(x, ddof=1) / math.sqrt(x.size)  # the normal interval, which the bootstrap approaches
+    assert a["lo"] == pytest.approx(a["mean"] - half, abs=0.1 * half)
+    assert a["hi"] == pytest.approx(a["mean"] + half, abs=0.1 * half)
+    one = bootstrap_ci([2.0, float("nan")])
+    assert one == {"mean": 2.0, "lo": 2.0, "hi": 2.0, "n": 1}
+    assert bootstrap_ci([float("nan")])["n"] == 0
+
+
+def test_summarize_groups_and_counts_bools_as_shares():
+    rows = [{"controller": c, "track": "t", "seed": s, "err": float(s), "completed": s != 2}
+            for c in ("a", "b") for s in range(4)]
+    cells = summarize(rows, ("controller", "track"))
+    assert [(c["controller"], c["n"]) for c in cells] == [("a", 4), ("b", 4)]
+    assert cells[0]["metrics"]["err"]["mean"] == 1.5
+    assert cells[0]["metrics"]["completed"]["mean"] == 0.75
+    assert cells[0]["metrics"]["err"]["lo"] < 1.5 < cells[0]["metrics"]["err"]["hi"]
+
+
+def test_task_id_depends_on_the_key_only():
+    a = Task("m:f", {"seed": 1, "x": 2.0}, extra={"out": "here"}, label="a b/c")
+    b = Task("m:f", {"x": 2.0, "seed": 1}, extra={"out": "there"}, label="a b/c")
+    assert a.id == b.id and "/" not in a.id
+    assert Task("m:f", {"seed": 2, "x": 2.0}, label="a b/c").id != a.id
+    with pytest.raises(ValueError):
+        Task("nofunction", {})
+    with pytest.raises(TypeError):
+        Task("m:f", {"x": object()})
+
+
+def test_kick_is_drawn_from_the_seed():
+    assert draw_kick(3, "paper") == draw_kick(3, "paper")
+    k = draw_kick(3, "paper", max_time=4.0)
+    assert 1 <= len(k["wheels"]) <= 4 and 0.2 <= abs(k["impulse"]) <= 1.0 and 1 <= k["step"] <= 0.6 * 4.0 / 0.02
+
+
+# ---------------------------------------------------------------------------------- engine
+
+
+def test_serial_retries_an_exception_once_then_reports_failure(tmp_path):
+    tasks = [Task("campaign_tasks:raise_once", {"seed": 1}, extra={"marker_dir": str(tmp_path)}),
+             Task("campaign_tasks:does_not_exist", {"seed": 2})] + _sum_tasks([3])
+    recs = run_tasks(tasks, tmp_path / "store", retries=1)
+    assert [r["status"] for r in recs] == ["ok", "failed", "ok"]
+    assert [r["attempts"] for r in recs] == [2, 2, 1]
+    assert "AttributeError" in recs[1]["error"]
+    saved = json.loads(TaskStore(tmp_path / "store").path(tasks[1]).read_text())
+    assert saved["status"] == "failed"
+
+
+def test_episode_campaign_equals_serial(executor, tmp_path):
+    """4 episodes (2 controllers × 2 seeds, 1 s each) on 2 workers: bit-identical metrics."""
+    tasks = episode_tasks(["icr", "twist"], ["crab"], [0, 1], max_time=1.0, kicks=True, domain_randomization=0.2)
+    serial = run_tasks(tasks, tmp_path / "serial")
+    parallel = run_tasks(tasks, tmp_path / executor, executor=executor, workers=2)
+    assert all(r["status"] == "ok" for r in serial + parallel)
+    assert _metrics(parallel) == _metrics(serial)
+    assert len({r["worker"] for r in parallel}) >= 1
+
+
+def test_a_killed_worker_is_retried_and_a_dead_task_does_not_sink_the_others(executor, tmp_path):
+    tasks = ([Task("campaign_tasks:crash_once", {"seed": 1}, extra={"marker_dir": str(tmp_path)}),
+              Task("campaign_tasks:crash_once", {"seed": 2, "always": True}, extra={"marker_dir": str(tmp_path)})]
+             + _sum_tasks([3, 4, 5]))
+    recs = run_tasks(tasks, tmp_path / "store", executor=executor, workers=2, retries=1)
+    assert [r["status"] for r in recs] == ["ok", "failed", "ok", "ok", "ok"]
+    assert recs[0]["attempts"] == 2 and recs[1]["attempts"] == 2
+    assert all(r["attempts"] == 1 for r in recs[2:])
+    assert "worker lost" in recs[1]["error"]
+    serial = run_tasks(_sum_tasks([1]), tmp_path / "serial")
+    assert recs[0]["result"] == serial[0]["result"]
+
+
+def test_resume_after_an_interruption_recomputes_nothing_that_finished(executor, tmp_path):
+    log = tmp_path / "log"
+    log.mkdir()
+    tasks = _sum_tasks(range(6), log_dir=str(log))
+    store = tmp_path / "store"
+
+    def stop_after_two(done, total, task, rec):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(CampaignInterrupted):
+        run_tasks(tasks, store, executor=executor, workers=2, progress=stop_after_two)
+    finished = {p.name for p in store.glob("*.json")}
+    assert len(finished) >= 2
+    ran_before = {p.name: p.read_text().count("\n") for p in log.iterdir()}
+    recs = run_tasks(tasks, store, executor=executor, workers=2, resume=True)
+    for task in tasks:
+        runs = (log / f"ran-{task.key['seed']}").read_text().count("\n")
+        if f"{task.id}.json" in finished:  # saved before the interruption: not run again
+            assert runs == ran_before[f"ran-{task.key['seed']}"]
+    assert _results(recs) == _results(run_tasks(_sum_tasks(range(6)), tmp_path / "serial"))
+
+
+def _results(records):
+    return [json.dumps(r["result"], sort_keys=True) for r in records]
+
+
+def test_a_run_without_resume_starts_afresh(tmp_path):
+    log = tmp_path / "log"
+    log.mkdir()
+    tasks = _sum_tasks([0, 1], log_dir=str(log))
+    run_tasks(tasks, tmp_path / "store")
+    run_tasks(tasks, tmp_path / "store", resume=True)
+    assert (log / "ran-0").read_text().count("\n") == 1
+    run_tasks(tasks, tmp_path / "store")
+    assert (log / "ran-0").read_text().count("\n") == 2
+
+
+# ------------------------------------------------------------------------------------- CLI
+
+
+def test_cli_eval_campaign_with_seeds_resume_and_report(tmp_path):
+    out = tmp_path / "camp"
+    argv = ["eval", "--tracks", "crab", "--controllers", "icr,twist", "--seeds", "0,1", "--max-time", "1",
+            "--out", str(out)]
+    assert main(argv + ["--workers", "2", "--executor", "process", "--no-plots"]) == 0
+    data = json.loads((out / "metrics.json").read_text())
+    assert [(r["controller"], r["seed"]) for r in data["episodes"]] == [("icr", 0), ("icr", 1), ("twist", 0),
+                                                                        ("twist", 1)]
+    cell = data["summary"][0]["metrics"]["rms_lateral_m"]
+    assert cell["n"] == 2 and cell["lo"] <= cell["mean"] <= cell["hi"]
+    first = {r["seed"]: r for r in data["episodes"]}
+    assert main(argv + ["--resume"]) == 0  # serial, with plots: nothing recomputed, same rows
+    data2 = json.loads((out / "metrics.json").read_text())
+    assert data2["campaign"]["resumed"] == 4 and data2["campaign"]["computed"] == 0
+    assert {r["seed"]: r for r in data2["episodes"]} == first
+    report = (out / "report.md").read_text()
+    assert report.index("## Summary") < report.index("| icr | crab | 2/0 |")
+
+
+def test_cli_eval_plots_are_embedded_under_their_row(tmp_path):
+    out = tmp_path / "camp"
+    assert main(["eval", "--tracks", "crab", "--controllers", "icr,twist", "--seeds", "0", "--max-time", "1",
+                 "--out", str(out)]) == 0
+    report = (out / "report.md").read_text()
+    for f in ("plots/compare_crab_trajectory.png", "plots/compare_crab_slip_force.png",
+              "plots/icr_crab_trajectory.png", "plots/twist_crab_qua.png"):
+        assert f"]({f})" in report and (out / f).stat().st_size > 1000
+    assert report.index("#### icr on crab") < report.index("plots/icr_crab_trajectory.png") \
+        < report.index("#### twist on crab") < report.index("plots/twist_crab_trajectory.png")
+
+
+@pytest.mark.parametrize("flags", [["--seeds", "3-1"], ["--seeds", "x"], ["--workers", "0"], ["--max-time", "0"],
+                                   ["--domain-randomization", "0.9"], ["--retries", "-1"],
+                                   ["--ray-address", "auto", "--executor", "process"], ["--seed", "2", "--seeds", "0-1"],
+                                   ["--executor", "dask"], ["--bootstrap", "5"]])
+def test_cli_eval_refuses_bad_campaign_flags(flags, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", "--out", str(tmp_path / "x")] + flags)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error" in err[0]
+    assert not (tmp_path / "x").exists()
