@@ -14,8 +14,13 @@ from gymnasium.envs.registration import register, registry
 
 __all__ = ["ENV_ID"]
 
-ENV_ID = "Azimut-v0"
+#: The current version. ``Azimut-v0`` (the first reward and physics) is retired: ``gymnasium.make``
+#: of it raises ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1`` (Gymnasium's versioning:
+#: only the latest version of an env is registered). See ``AzimutEnv``'s "Version History".
+ENV_ID = "Azimut-v1"
 
 if ENV_ID not in registry:
+    # no registry-wide step limit: the env truncates each episode at time_limit_factor (3) × the
+    # nominal lap time of its track (gymnasium.make(..., max_episode_steps=K) adds a TimeLimit)
     register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv", vector_entry_point="azimut_env.vector_env:AzimutVectorEnv",
-             max_episode_steps=6000)  # 120 s: the paper track takes about 82 s
+             max_episode_steps=None)

@@ -298,7 +298,7 @@ def check_args(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     r = bench_env(args.steps, args.track, args.seed, args.substeps)
     per = r["us_per_step"]
-    print(f"Azimut-v0 single env, track {args.track}, {int(r['substeps'])} substeps, {int(r['steps'])} steps")
+    print(f"Azimut-v1 single env, track {args.track}, {int(r['substeps'])} substeps, {int(r['steps'])} steps")
     print(f"{'stage':<16}{'us/step':>10}{'share':>8}")
     for key, label in (("physics_us", "physics"), ("estimation_us", "estimation"), ("observation_us", "observation"),
                        ("sensors_us", "  sensors"), ("track_us", "  track"), ("obs_reward_info_us", "  obs+rew+info"),
@@ -338,7 +338,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
     if args.reference:
         ref = reference_steps_per_s(args.reference)
-        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v0 single env at "
+        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v1 single env at "
               f"{r['steps_per_s'] / ref:.2f}x of it)")
     return 0
 

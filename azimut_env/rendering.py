@@ -123,7 +123,7 @@ class Renderer:
             if self.window is None:
                 pg.display.init()  # display only: pygame.init() would also open audio
                 self.window = pg.display.set_mode((self.size, self.size))
-                pg.display.set_caption("Azimut-v0")
+                pg.display.set_caption("Azimut-v1")
                 self.clock = pg.time.Clock()
             pg.event.pump()
             self.window.blit(surf, (0, 0))

@@ -1,6 +1,10 @@
 """An SB3 ``VecEnv`` over :class:`~azimut_env.vector_env.AzimutVectorEnv`: Stable-Baselines3 trains on
 N robots in one pymunk Space directly, in-process (no subprocesses, no per-env Python loop).
 
+The vector env may be wrapped (Gymnasium vector wrappers, e.g. the controller action spaces of
+``control.vector_wrappers.VectorControllerAction``): the adapter steps the outermost wrapper and
+takes its spaces; the unwrapped env must run in ``AutoresetMode.SAME_STEP``.
+
 SB3's VecEnv semantics: ``step_wait`` resets a finished sub-env within the same step, returns its
 first observation, and puts its last one in ``infos[i]["terminal_observation"]`` with
 ``infos[i]["TimeLimit.truncated"]`` (truncated and not terminated). The adapter runs the vector
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
@@ -28,12 +33,17 @@ class AzimutSB3VecEnv(VecEnv):
 
     Args:
         num_envs: number of robots N (ignored when ``venv`` is given).
-        venv: an existing :class:`AzimutVectorEnv` in ``AutoresetMode.SAME_STEP`` (optional).
+        venv: an existing :class:`AzimutVectorEnv` in ``AutoresetMode.SAME_STEP``, or a vector wrapper
+            of one (optional).
         **kwargs: keyword arguments of :class:`AzimutVectorEnv` (track, substeps, reward weights,
             ``max_episode_steps``...) when it is built here.
 
     ``get_attr``/``set_attr``/``env_method`` act on the vector env, which all sub-envs share: a
     get returns the same value for every index.
+
+    Per-sub-env ``infos`` carry ``progress``, ``lateral_error``, ``heading_error``,
+    ``slip_power`` [W], ``internal_force`` [N], ``off_track``, ``finished``, ``stalled`` and, through a
+    controller wrapper, ``controller_mode`` (SB3 callbacks log them; see ``train``).
     """
 
     def __init__(self, num_envs: int = 1, venv: AzimutVectorEnv | None = None, **kwargs: Any) -> None:
@@ -41,9 +51,9 @@ class AzimutSB3VecEnv(VecEnv):
             venv = AzimutVectorEnv(num_envs=num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)
         elif kwargs:
             raise ValueError("pass either venv or AzimutVectorEnv keyword arguments, not both")
-        if not isinstance(venv, AzimutVectorEnv):
-            raise ValueError(f"venv must be an AzimutVectorEnv, got {type(venv).__name__}")
-        if venv.autoreset_mode != AutoresetMode.SAME_STEP:
+        if not isinstance(venv, gym.vector.VectorEnv) or not isinstance(venv.unwrapped, AzimutVectorEnv):
+            raise ValueError(f"venv must be an AzimutVectorEnv or a vector wrapper of one, got {type(venv).__name__}")
+        if venv.unwrapped.autoreset_mode != AutoresetMode.SAME_STEP:
             raise ValueError("the SB3 adapter needs the vector env in AutoresetMode.SAME_STEP")
         self.venv = venv
         self._actions: np.ndarray | None = None
@@ -80,7 +90,8 @@ class AzimutSB3VecEnv(VecEnv):
     def _split_info(self, info: dict[str, Any]) -> list[dict[str, Any]]:
         """Per-sub-env dicts of the few scalar infos SB3 users log (progress, errors...)."""
         out: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for key in ("progress", "lateral_error", "off_track", "finished"):
+        for key in ("progress", "lateral_error", "heading_error", "slip_power", "internal_force", "off_track",
+                    "finished", "stalled", "controller_mode"):
             values = info.get(key)
             if values is not None:
                 for i in range(self.num_envs):
@@ -100,7 +111,8 @@ class AzimutSB3VecEnv(VecEnv):
         venv = self.__dict__.get("venv")
         if venv is None:
             raise AttributeError(attr_name)
-        return [getattr(venv, attr_name)] * self._count(indices)
+        target = venv if hasattr(venv, attr_name) else venv.unwrapped
+        return [getattr(target, attr_name)] * self._count(indices)
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         setattr(self.venv, attr_name, value)
@@ -115,11 +127,12 @@ class AzimutSB3VecEnv(VecEnv):
     def get_images(self) -> Sequence[np.ndarray | None]:
         """One RGB image per sub-env (``render_mode="rgb_array"``)."""
         images = []
-        keep = self.venv.render_index
+        base = self.venv.unwrapped
+        keep = base.render_index
         try:
             for i in range(self.num_envs):
-                self.venv.render_index = i
-                images.append(self.venv.render())
+                base.render_index = i
+                images.append(base.render())
         finally:
-            self.venv.render_index = keep
+            base.render_index = keep
         return images

@@ -1,10 +1,10 @@
-"""The task of ``Azimut-v0`` over N robots at once: observation, reward, termination, resets.
+"""The task of ``Azimut-v1`` over N robots at once: observation, reward, termination, resets.
 
 :class:`AzimutTask` holds N robots in one :class:`~azimut_env.physics.AzimutPhysics` (one pymunk
 Space) and every per-robot task quantity as an array with a leading robot axis. Both envs are thin
 front ends over it, so there is one copy of the task and of the physics:
 
-* :class:`~azimut_env.env.AzimutEnv` (``Azimut-v0``) is the N = 1 case;
+* :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) is the N = 1 case;
 * :class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
 
 One control step is :meth:`AzimutTask.apply_actions` (a compiled check/clip/write of all
@@ -42,7 +42,7 @@ __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds
            "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles"]
 
 #: the reward terms, in the order of the columns of ``AzimutTask.reward_terms``
-REWARD_TERMS = ("progress", "lateral", "heading", "slip", "action_rate", "off_track")
+REWARD_TERMS = ("progress", "lateral", "heading", "overspeed", "slip", "internal_force", "action_rate", "off_track")
 #: the keys ``reset(options=...)`` accepts
 RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
 
@@ -110,8 +110,17 @@ class TaskConfig:
         solver_iterations: pymunk solver iterations per substep (see ``AzimutPhysics``).
         domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
             damping and chassis mass, drawn per reset.
-        progress_weight, lateral_weight [1/m²], heading_weight [1/rad²], slip_weight [1/W],
-        action_rate_weight, off_track_penalty: reward weights.
+        progress_weight, lateral_weight, heading_weight, overspeed_weight, slip_weight [1/W],
+        internal_force_weight [1/N], action_rate_weight, off_track_penalty: reward weights (the
+            terms are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
+        lateral_scale [m], heading_scale [rad]: scales of the bounded tracking terms
+            w·(1 − exp(−|e|/scale)).
+        antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
+        stall_time: end the episode (terminated, with the off-track penalty) after this long [s]
+            without ``stall_distance`` [m] of new progress; 0: never.
+        time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the time to drive the
+            track's reference speed profile exactly (:func:`nominal_duration`; 3 by default); 0: no
+            limit of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
         max_lateral_error: lateral error that ends the episode [m].
         lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
             [m of progress]. start_noise: uniform start pose noise [m, rad].
@@ -122,11 +131,19 @@ class TaskConfig:
     solver_iterations: int = 20
     domain_randomization: float = 0.0
     progress_weight: float = 1.0
-    lateral_weight: float = 5.0
-    heading_weight: float = 0.5
-    slip_weight: float = 0.002
+    lateral_weight: float = 0.5
+    heading_weight: float = 0.3
+    overspeed_weight: float = 2.0
+    slip_weight: float = 0.02
+    internal_force_weight: float = 0.01
     action_rate_weight: float = 0.05
     off_track_penalty: float = 10.0
+    lateral_scale: float = 0.05
+    heading_scale: float = 0.1
+    antagonism_cap: float = 2.0
+    stall_time: float = 0.0
+    stall_distance: float = 0.05
+    time_limit_factor: float = 3.0
     max_lateral_error: float = 0.5
     lookahead_count: int = 5
     lookahead_spacing: float = 0.3
@@ -140,9 +157,12 @@ class TaskConfig:
         fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
                                            max_value=10_000))
         fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
-        for name in ("progress_weight", "lateral_weight", "heading_weight", "slip_weight", "action_rate_weight",
-                     "off_track_penalty", "start_noise"):
+        for name in ("progress_weight", "lateral_weight", "heading_weight", "overspeed_weight", "slip_weight",
+                     "internal_force_weight", "action_rate_weight", "off_track_penalty", "start_noise", "stall_time",
+                     "time_limit_factor"):
             fix(name, check_nonnegative(name, getattr(self, name)))
+        for name in ("lateral_scale", "heading_scale", "antagonism_cap", "stall_distance"):
+            fix(name, check_positive(name, getattr(self, name)))
         fix("max_lateral_error", check_positive("max_lateral_error", self.max_lateral_error))
         fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
         fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
@@ -151,7 +171,13 @@ class TaskConfig:
     def weights(self) -> dict[str, float]:
         """Reward weights by term name (``off_track`` is the penalty)."""
         return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
-                    slip=self.slip_weight, action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+                    overspeed=self.overspeed_weight, slip=self.slip_weight, internal_force=self.internal_force_weight,
+                    action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+
+    @property
+    def reward_scales(self) -> np.ndarray:
+        """(lateral_scale, heading_scale, antagonism_cap) as the reward kernel takes them."""
+        return np.array([self.lateral_scale, self.heading_scale, self.antagonism_cap])
 
 
 def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
@@ -165,6 +191,12 @@ def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle,
         return tuple(Obstacle.coerce(o) for o in obstacles)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{what}: {exc}") from None
+
+
+def nominal_duration(track: Track, speed_scale: float = 1.0) -> float:
+    """The time [s] to drive ``track`` at its reference speed profile (speeds below 5 cm/s count as
+    5 cm/s, so a profile that starts or ends at rest has a finite duration)."""
+    return float(np.sum(np.diff(track.s) / np.maximum(track.speed[:-1] * speed_scale, 0.05)))
 
 
 # ---------------------------------------------------------------------- compiled stages
@@ -204,11 +236,17 @@ def _draw_normals_kernel(rngs, rows, out):
 
 @njit(cache=True)
 def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds, lam, mu, beta, phidot, motor,
-                       action, prev_action, weights, dt, max_lat, lo, hi, v_along, reward, terms, off_track,
+                       action, prev_action, weights, scales, dt, max_lat, lo, hi, v_along, reward, terms, off_track,
                        finished, obs):
     """For the robots where ``rows`` is True: speed along the path, reward terms and reward,
     off-track and finished flags, and the observation (layout of :func:`observation_layout`;
-    non-finite values become 0, all clipped to [lo, hi]); prev_action takes the action."""
+    non-finite values become 0, all clipped to [lo, hi]); prev_action takes the action.
+
+    The terms (columns of ``terms``, :data:`REWARD_TERMS`; the env docstring has their
+    magnitudes): progress w·clip(Δs, −v_max dt, v_ref dt)/(v_max dt) (backward jumps of the
+    projection clipped to one step at full speed); lateral and heading −w·(1 − exp(−|e|/scale));
+    overspeed −w·max(0, v_along − v_ref)/v_max; slip −min(w·P_slip, cap); internal force
+    −min(w·F_int, cap); action rate −w‖a − a_prev‖²; off-track −penalty."""
     n = beta.shape[1]
     for i in range(rows.shape[0]):
         if not rows[i]:
@@ -228,19 +266,24 @@ def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds,
         for j in range(action.shape[1]):
             d = action[i, j] - prev_action[i, j]  # float32, as the actions
             da2 += d * d
-        t0 = weights[0] * min(s - s_prev[i], v_ref * dt + 1e-3 * dt) / (v_max * dt)
-        t1 = -weights[1] * lat * lat
-        t2 = -weights[2] * head * head
-        t3 = -weights[3] * summ[i, 8]
-        t4 = -weights[4] * da2
-        t5 = -weights[5] if off else 0.0
+        ds = min(max(s - s_prev[i], -v_max * dt), v_ref * dt + 1e-3 * dt)
+        t0 = weights[0] * ds / (v_max * dt)
+        t1 = -weights[1] * (1.0 - math.exp(-abs(lat) / scales[0]))
+        t2 = -weights[2] * (1.0 - math.exp(-abs(head) / scales[1]))
+        t3 = -weights[3] * max(0.0, va - v_ref) / v_max
+        t4 = -min(weights[4] * summ[i, 8], scales[2])
+        t5 = -min(weights[5] * summ[i, 9], scales[2])
+        t6 = -weights[6] * da2
+        t7 = -weights[7] if off else 0.0
         terms[i, 0] = t0
         terms[i, 1] = t1
         terms[i, 2] = t2
         terms[i, 3] = t3
         terms[i, 4] = t4
         terms[i, 5] = t5
-        reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5
+        terms[i, 6] = t6
+        terms[i, 7] = t7
+        reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7
         for j in range(action.shape[1]):
             prev_action[i, j] = action[i, j]
         _fill_obs_row(obs[i], lam[i], mu[i], beta[i], phidot[i], motor[i], lat, head, va, v_ref, look[i],
@@ -298,8 +341,9 @@ class AzimutTask:
     ``motor_m`` (measurements, (N, n)); ``lam_hat`` (N, 3), ``mu_hat``, ``qua`` (N,), ``beta_est``
     (N, n) (the IT estimate); ``s``, ``lat``, ``head``, ``v_ref``, ``v_along`` (N,), ``look``
     (N, K, 3) (track state); ``prev_action`` (N, 2n) float32; ``obs`` (N, D) float32;
-    ``reward`` (N,), ``reward_terms`` (N, 6) (columns :data:`REWARD_TERMS`), ``off_track``,
-    ``finished`` (N,) bool of the last step; ``steps`` (N,) steps since the robot's reset.
+    ``reward`` (N,), ``reward_terms`` (N, 8) (columns :data:`REWARD_TERMS`), ``off_track``,
+    ``finished``, ``stalled`` (N,) bool of the last step; ``steps`` (N,) steps since the robot's
+    reset; ``step_limit`` (N,) the episode's step limit (``time_limit_factor``).
     """
 
     def __init__(self, params: RobotParams, config: TaskConfig, n_robots: int = 1, track: str | Track = "paper",
@@ -330,6 +374,7 @@ class AzimutTask:
         self.layout = observation_layout(n, K)
         self.obs_low, self.obs_high = observation_bounds(n, K, params.limits.wheel_speed_max)
         self._weights = np.array([config.weights[k] for k in REWARD_TERMS])
+        self._scales = config.reward_scales
         lim = params.limits
         self._lim = (float(lim.steer_min), float(lim.steer_max), float(lim.wheel_speed_max))
         sp = params.sensors
@@ -355,6 +400,11 @@ class AzimutTask:
         self.reward_terms = np.zeros((N, len(REWARD_TERMS)))
         self.off_track = np.zeros(N, dtype=np.bool_)
         self.finished = np.zeros(N, dtype=np.bool_)
+        self.stalled = np.zeros(N, dtype=np.bool_)
+        self.s_best = np.zeros(N)
+        self.best_step = np.zeros(N, dtype=np.int64)
+        #: per-robot step limit of the current episode (``time_limit_factor``; huge when off)
+        self.step_limit = np.full(N, np.iinfo(np.int64).max, dtype=np.int64)
         self.steps = np.zeros(N, dtype=np.int64)
         self.ready = np.zeros(N, dtype=np.bool_)  # robot i's last reset succeeded (step needs it)
         self.steer_bias = np.zeros((N, n))
@@ -507,6 +557,11 @@ class AzimutTask:
         self.reward_terms[i] = 0.0
         self.off_track[i] = False
         self.finished[i] = False
+        self.stalled[i] = False
+        self.best_step[i] = 0
+        factor = self.config.time_limit_factor
+        self.step_limit[i] = (int(math.ceil(factor * nominal_duration(track) / self.config.control_period))
+                              if factor > 0 else np.iinfo(np.int64).max)
         sl = slice(i, i + 1)
         rng.standard_normal(out=self._normals[i])
         self._measure(sl)
@@ -515,6 +570,7 @@ class AzimutTask:
         self.track_out[i] = s_[0]
         self.look[i] = look[0]
         self._unpack_track(sl)
+        self.s_best[i] = self.s[i]
         psi = self.track_out[i, 4]
         summ = phys.summary[i]
         self.v_along[i] = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
@@ -617,9 +673,26 @@ class AzimutTask:
                 a[keep] = v
         _reward_obs_kernel(rows, self.physics.summary, self.track_out, self.look, s_prev, self.track_length,
                            self.track_max_speed, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
-                           action, self.prev_action, self._weights, self.config.control_period,
+                           action, self.prev_action, self._weights, self._scales, self.config.control_period,
                            self.config.max_lateral_error, self.obs_low, self.obs_high, self.v_along, self.reward,
                            self.reward_terms, self.off_track, self.finished, self.obs)
+        self._check_stall(rows)
+
+    def _check_stall(self, rows: np.ndarray) -> None:
+        """Stall termination (``stall_time`` > 0): a robot without ``stall_distance`` of new progress
+        for ``stall_time`` is flagged ``stalled`` and pays the off-track penalty (once)."""
+        cfg = self.config
+        better = rows & (self.s > self.s_best + cfg.stall_distance)
+        self.s_best[better] = self.s[better]
+        self.best_step[better] = self.steps[better]
+        if cfg.stall_time <= 0:
+            return
+        stalled = rows & ~self.off_track & ((self.steps - self.best_step) * cfg.control_period >= cfg.stall_time)
+        self.stalled[:] = stalled
+        if stalled.any():
+            col = REWARD_TERMS.index("off_track")
+            self.reward[stalled] += -cfg.off_track_penalty - self.reward_terms[stalled, col]
+            self.reward_terms[stalled, col] = -cfg.off_track_penalty
 
     # ------------------------------------------------------------------ stages
 

@@ -1,4 +1,4 @@
-"""``AzimutVectorEnv``: N ``Azimut-v0`` robots in one pymunk Space, stepped as one batch.
+"""``AzimutVectorEnv``: N ``Azimut-v1`` robots in one pymunk Space, stepped as one batch.
 
 A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.AzimutTask`, the same task and
 physics code as the single env (which is its N = 1 case). Per control step: one compiled
@@ -8,8 +8,8 @@ forces and torques, one ``space.step``), then the compiled sensor model over all
 batched IT estimate (``estimation.estimate_eta``), one compiled track query for all robots (each on
 its own track) and one compiled reward/observation fill. Robots never collide with each other.
 
-``gymnasium.make_vec("Azimut-v0", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
-(keyword arguments as for ``gymnasium.make("Azimut-v0", ...)``).
+``gymnasium.make_vec("Azimut-v1", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
+(keyword arguments as for ``gymnasium.make("Azimut-v1", ...)``).
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ __all__ = ["AzimutVectorEnv"]
 class AzimutVectorEnv(gym.vector.VectorEnv):
     """
     ## Description
-    ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v0``) that share
+    ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) that share
     one pymunk Space (no robot-robot collisions) and run every stage batched. Sub-env i behaves
-    exactly as a single ``Azimut-v0`` seeded with ``seed + i`` and given the same actions: the
+    exactly as a single ``Azimut-v1`` seeded with ``seed + i`` and given the same actions: the
     same observations, rewards and terminations to the bit (its robot gets fresh joints at each
     reset, so the shared Space's solver state does not leak between episodes; with obstacle
     contacts this holds to floating-point tolerance only).
@@ -60,8 +60,9 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     ## Episode End
     As the single env, per sub-env: off the track or finished (terminated), a physics blow-up of
     that robot (terminated, reward ``−off_track_penalty``, the last finite observation, and
-    ``info["error"][i]``; the other robots go on), and ``max_episode_steps`` (truncated; default
-    6000 as registered, ``None`` for no limit).
+    ``info["error"][i]``; the other robots go on), a stall (``stall_time``, terminated), and the
+    step limits (truncated): the per-track limit of ``time_limit_factor`` (3 × the time of the track's
+    speed profile by default, see the single env) and ``max_episode_steps`` if given (default ``None``).
 
     ## Info
     ``step`` and ``reset`` return a dict of arrays with a leading ``num_envs`` axis and, per key,
@@ -72,7 +73,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     one sub-env.
 
     ## Arguments
-    ``num_envs``; ``max_episode_steps`` (default 6000); ``autoreset_mode``; ``render_index``
+    ``num_envs``; ``max_episode_steps`` (default None: the per-track limit only); ``autoreset_mode``; ``render_index``
     (the sub-env :meth:`render` draws; settable); and all the single env's keyword arguments:
     ``track`` (one for all sub-envs; ``"random"`` draws a track per sub-env and episode),
     ``control_period``, ``substeps``, ``solver_iterations``, ``params``, ``sensors``, ``noise_scale``,
@@ -99,10 +100,13 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     def __init__(self, num_envs: int = 1, track: str | Track = "paper", control_period: float = 0.02,
                  substeps: int = 8, params: RobotParams | None = None, sensors: SensorParams | str | None = None,
                  noise_scale: float = 1.0, domain_randomization: float = 0.0, progress_weight: float = 1.0,
-                 lateral_weight: float = 5.0, heading_weight: float = 0.5, slip_weight: float = 0.002,
+                 lateral_weight: float = 0.5, heading_weight: float = 0.3, slip_weight: float = 0.02,
+                 overspeed_weight: float = 2.0, internal_force_weight: float = 0.01, lateral_scale: float = 0.05,
+                 heading_scale: float = 0.1, antagonism_cap: float = 2.0, stall_time: float = 0.0,
+                 stall_distance: float = 0.05, time_limit_factor: float = 3.0,
                  action_rate_weight: float = 0.05, off_track_penalty: float = 10.0, max_lateral_error: float = 0.5,
                  lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = 6000,
+                 render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -118,6 +122,10 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
                             domain_randomization=domain_randomization, progress_weight=progress_weight,
                             lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
+                            overspeed_weight=overspeed_weight, internal_force_weight=internal_force_weight,
+                            lateral_scale=lateral_scale, heading_scale=heading_scale, antagonism_cap=antagonism_cap,
+                            stall_time=stall_time, stall_distance=stall_distance,
+                            time_limit_factor=time_limit_factor,
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
                             max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
                             lookahead_spacing=lookahead_spacing, start_noise=start_noise)
@@ -351,15 +359,17 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         else:
             task.observe(a, self._typed_rngs())
         reward = task.reward.copy()
-        terminated = task.off_track | task.finished
-        truncated = (task.steps >= self.max_episode_steps) if self.max_episode_steps is not None \
-            else np.zeros(N, dtype=np.bool_)
+        terminated = task.off_track | task.finished | task.stalled
+        truncated = task.steps >= task.step_limit
+        if self.max_episode_steps is not None:
+            truncated |= task.steps >= self.max_episode_steps
         if any_error:
             reward[errored] = -self.config.off_track_penalty
             terminated[errored] = True
             task.reward_terms[errored] = 0.0
             task.off_track[errored] = False
             task.finished[errored] = False
+            task.stalled[errored] = False
         if any_reset:
             for i in np.flatnonzero(resetting):
                 self._autoreset_robot(int(i))
@@ -416,6 +426,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
             "internal_force": summ[:, 9].copy(),
             "off_track": task.off_track.copy(),
             "finished": task.finished.copy(),
+            "stalled": task.stalled.copy(),
         }
         every = np.ones(N, dtype=np.bool_)
         for key in list(info):

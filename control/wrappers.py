@@ -1,4 +1,4 @@
-"""Higher-level action spaces for ``Azimut-v0`` (for RL): ICR targets and chassis twists.
+"""Higher-level action spaces for ``Azimut-v1`` (for RL): ICR targets and chassis twists.
 
 Both wrappers keep the env's observation and reward; they replace the per-wheel set-point action
 with a motion target that a controller turns into coordinated wheel set-points every step:
@@ -76,7 +76,7 @@ class _ControllerWrapper(gym.Wrapper):
         for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
                      "action_from_setpoints"):
             if not hasattr(base, attr):
-                raise ValueError(f"the wrapped env must be Azimut-v0 (missing {attr!r})")
+                raise ValueError(f"the wrapped env must be Azimut-v1 (missing {attr!r})")
         self._kind = controller
         self._icr_config, self._swerve_config = icr_config, swerve_config
         self._ctl: ICRController | SwerveController | None = None
@@ -128,7 +128,7 @@ class ICRTargetAction(_ControllerWrapper):
     """Action = ICR target (λ_d direction, μ_d); see the module docstring.
 
     Args:
-        env: an ``Azimut-v0`` env. mu_max: μ_d at action[3] = ±1 [m/s]. min_norm: below this norm
+        env: an ``Azimut-v1`` env. mu_max: μ_d at action[3] = ±1 [m/s]. min_norm: below this norm
         of action[:3] the target is "hold" (μ_d = 0). icr_config: the controller's tuning.
         shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (module docstring).
     """
@@ -153,7 +153,7 @@ class TwistAction(_ControllerWrapper):
     """Action = chassis-frame twist; see the module docstring.
 
     Args:
-        env: an ``Azimut-v0`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
+        env: an ``Azimut-v1`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
         controller: ``"icr"`` (default) or ``"swerve"``. icr_config, swerve_config: tuning.
         shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (ICR controller only).
     """

@@ -1,4 +1,4 @@
-"""Azimut-v0: Gymnasium and SB3 checks, determinism, pickling, action validation, observation layout,
+"""Azimut-v1: Gymnasium and SB3 checks, determinism, pickling, action validation, observation layout,
 the controller interface, rendering, obstacles and kicks."""
 
 from __future__ import annotations
@@ -10,24 +10,35 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import azimut_env  # noqa: F401  (registers Azimut-v0)
+import azimut_env  # noqa: F401  (registers Azimut-v1)
 from azimut_env.env import AzimutEnv, h_state_from_measurements, observation_layout
 from azimut_env.params import ActuatorLimits, action_from_setpoints, setpoints_from_action
 from estimation import canonical_eta, estimate_icr, mu_from_wheel_speeds, quality, steering_from_lambda
 
 
-def test_registered_with_time_limit():
-    env = gym.make("Azimut-v0")
-    assert env.spec.max_episode_steps == 6000
+def test_registered_with_per_track_time_limit():
+    env = gym.make("Azimut-v1", track="crab")
+    assert env.spec.max_episode_steps is None  # the env truncates per track (time_limit_factor)
     assert isinstance(env.unwrapped, AzimutEnv)
     assert env.metadata["render_fps"] == 50
+    env.reset(seed=0)
+    limit = int(env.unwrapped.task.step_limit[0])
+    assert 1000 < limit < 6000
+    env.unwrapped.task.steps[0] = limit - 1
+    _, _, _, truncated, _ = env.step(env.unwrapped.action_from_setpoints(env.unwrapped.measured_beta, np.zeros(4)))
+    assert truncated
     env.close()
+
+
+def test_retired_version_names_the_new_one():
+    with pytest.raises(gym.error.DeprecatedEnv, match="Azimut-v1"):
+        gym.make("Azimut-v0")
 
 
 def test_gymnasium_check_env_without_warnings():
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("Azimut-v0").unwrapped
+    env = gym.make("Azimut-v1").unwrapped
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env)
@@ -120,7 +131,8 @@ def test_observation_layout_and_bounds():
     assert np.allclose(dec["beta"], env.measured_beta, atol=1e-6)
     assert set(info["reward_terms"]) == set()
     _, rew, _, _, info = env.step(env.action_space.sample())
-    assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "slip", "action_rate", "off_track"}
+    assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "overspeed", "slip", "internal_force",
+                                         "action_rate", "off_track"}
     assert rew == pytest.approx(sum(info["reward_terms"].values()))
     for key in ("pose", "twist", "eta_true", "eta_hat", "tire_forces", "slip_power", "internal_force", "qua"):
         assert key in info
@@ -163,7 +175,7 @@ def test_h_state_matches_estimation():
 
 def test_rgb_array_rendering_headless():
     pytest.importorskip("pygame")
-    env = gym.make("Azimut-v0", render_mode="rgb_array")
+    env = gym.make("Azimut-v1", render_mode="rgb_array")
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (640, 640, 3) and frame.dtype == np.uint8 and frame.std() > 0
@@ -175,7 +187,7 @@ def test_record_video(tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(gym.make("Azimut-v0", render_mode="rgb_array"), str(tmp_path / "videos"),
+    env = RecordVideo(gym.make("Azimut-v1", render_mode="rgb_array"), str(tmp_path / "videos"),
                       episode_trigger=lambda e: True,
                       disable_logger=True)
     env.reset(seed=0)

@@ -1,4 +1,4 @@
-"""Fuzz Azimut-v0 with random and extreme actions over seeds and tracks: no exception, no
+"""Fuzz Azimut-v1 with random and extreme actions over seeds and tracks: no exception, no
 non-finite observation, blow-ups end the episode with an error instead of NaN."""
 
 from __future__ import annotations

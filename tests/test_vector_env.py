@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-import azimut_env  # noqa: F401  (registers Azimut-v0)
+import azimut_env  # noqa: F401  (registers Azimut-v1)
 from azimut_env.env import AzimutEnv
 from azimut_env.vector_env import AzimutVectorEnv
 
@@ -63,9 +63,9 @@ def test_equivalence_many_envs_paper_track():
 
 
 def test_make_vec_returns_the_vector_env():
-    venv = gym.make_vec("Azimut-v0", num_envs=3, vectorization_mode="vector_entry_point", track="circle")
+    venv = gym.make_vec("Azimut-v1", num_envs=3, vectorization_mode="vector_entry_point", track="circle")
     assert isinstance(venv.unwrapped, AzimutVectorEnv)
-    assert venv.num_envs == 3 and venv.unwrapped.max_episode_steps == 6000
+    assert venv.num_envs == 3 and venv.unwrapped.max_episode_steps is None  # per-track limit (time_limit_factor)
     assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
     obs, info = venv.reset(seed=0)
     assert obs.shape == (3, venv.single_observation_space.shape[0])
