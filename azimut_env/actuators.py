@@ -24,7 +24,7 @@ from numba import njit
 from .tire import tire_force_kernel
 
 __all__ = ["steer_motor_kernel", "spring_torque_kernel", "wheel_spin_kernel", "rolling_resistance_kernel",
-           "wheel_spin_step_kernel"]
+           "wheel_spin_step_kernel", "dc_torque_limits_kernel", "steer_dc_motor_kernel", "steer_actuator_kernel"]
 
 
 @njit(cache=True, inline="always")
@@ -154,3 +154,94 @@ def wheel_spin_step_kernel(phidot: float, ref: float, f_long: float, enabled: bo
             new = (inertia * phidot + dt * (tau_m + load)) / (inertia + dt * bearing)
         return new
     return (inertia * phidot + dt * load) / (inertia + dt * bearing)
+
+
+@njit(cache=True, inline="always")
+def dc_torque_limits_kernel(omega: float, stall_torque: float, no_load_speed: float, torque_max: float):
+    """Torque range (τ_lo, τ_hi) [N·m] of a voltage- and current-limited DC motor at output speed
+    ω [rad/s].
+
+    A DC motor at its supply voltage ±U gives ``τ = τ_stall (±1 − ω/ω₀)`` (back-EMF: the torque
+    falls linearly from the stall torque τ_stall at rest to 0 at the no-load speed ω₀; Hughes &
+    Drury, *Electric Motors and Drives*, 5th ed., Ch. 3), and its driver limits the current to
+    ``|τ| ≤ τ_max``. Motoring (τ ω > 0) the available torque is τ_stall (1 − |ω|/ω₀); braking it
+    is larger (the back-EMF helps), up to τ_max."""
+    x = omega / no_load_speed
+    hi = stall_torque * (1.0 - x)
+    lo = -stall_torque * (1.0 + x)
+    if hi > torque_max:
+        hi = torque_max
+    if lo < -torque_max:
+        lo = -torque_max
+    if hi < lo:  # beyond the no-load speed: driven by the load, the motor brakes at its limit
+        hi = lo = max(min(hi, torque_max), -torque_max)
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
+def steer_dc_motor_kernel(theta: float, omega: float, target: float, beta: float, beta_dot: float, enabled: bool,
+                          gain: float, rate_max: float, accel_max: float, torque_max: float, stiffness: float,
+                          damping: float, stall_torque: float, no_load_speed: float, inertia: float, dt: float):
+    """One substep of the steering motor as a torque source with inertia (the "dc" model).
+
+    The rate profile is that of :func:`steer_motor_kernel` (position loop, rate and acceleration
+    limits): it gives the rate v the motor should have after the substep. The drive asks the
+    torque that reaches it, and gets it only within :func:`dc_torque_limits_kernel` at the
+    current speed; the rotor (reflected inertia J at the output) carries the series spring and
+    damper::
+
+        J θ̇_m' = J θ̇_m + dt (τ − τ_s'),   θ_m' = θ_m + dt θ̇_m',   τ_s' = k_s (θ_m' − β) + c_s (θ̇_m' − β̇),
+        τ = clip(J (v − θ̇_m)/dt + τ_s'(v), τ_lo(θ̇_m), τ_hi(θ̇_m)).
+
+    The rotor feels the same spring torque τ_s' that the module receives over the substep
+    (action = reaction, no O(dt) offset between the two).
+
+    Unloaded it follows the kinematic model's profile exactly; under a load τ_L it slows to
+    ω₀ (1 − τ_L/τ_stall) where that is below the rate limit; against a stop it stalls at the
+    current limit. Spring and damper are implicit on the rotor side (the module side keeps its
+    bound √(k_s/I_mod) dt, the physics' stability budget). Motors off: braked (θ̇_m = 0).
+
+    Returns (θ_m', θ̇_m', τ_s), τ_s = k_s (θ_m' − β) + c_s (θ̇_m' − β̇) the torque on the module
+    (not clipped: the motor's torque limit is its own)."""
+    if enabled:
+        e = target - theta
+        ae = abs(e)
+        v = min(gain * ae, rate_max, math.sqrt(2.0 * accel_max * ae) * 0.9)
+        if e < 0:
+            v = -v
+        dv = v - omega
+        lim = accel_max * dt
+        if dv > lim:
+            dv = lim
+        elif dv < -lim:
+            dv = -lim
+        v = omega + dv
+        spring = stiffness * (theta - beta) - damping * beta_dot
+        tau = inertia * dv / dt + spring + (damping + dt * stiffness) * v
+        lo, hi = dc_torque_limits_kernel(omega, stall_torque, no_load_speed, torque_max)
+        if tau > hi or tau < lo:
+            tau = hi if tau > hi else lo
+            v = (inertia * omega + dt * (tau - spring)) / (inertia + dt * (damping + dt * stiffness))
+        omega = v
+        theta = theta + dt * omega
+    else:
+        omega = 0.0
+    return theta, omega, stiffness * (theta - beta) + damping * (omega - beta_dot)
+
+
+@njit(cache=True, inline="always")
+def steer_actuator_kernel(dc: bool, theta: float, omega: float, target: float, beta: float, beta_dot: float,
+                          enabled: bool, gain: float, rate_max: float, accel_max: float, torque_max: float,
+                          stiffness: float, damping: float, stall_torque: float, no_load_speed: float,
+                          inertia: float, dt: float):
+    """One substep of the series-elastic steering actuator, either model. Returns (θ_m', θ̇_m', τ_s).
+
+    ``dc`` False: the kinematic position source (:func:`steer_motor_kernel`, spring torque clipped
+    to τ_max by :func:`spring_torque_kernel`; the last three motor parameters are unused). True:
+    the DC motor with back-EMF (:func:`steer_dc_motor_kernel`)."""
+    if dc:
+        return steer_dc_motor_kernel(theta, omega, target, beta, beta_dot, enabled, gain, rate_max, accel_max,
+                                     torque_max, stiffness, damping, stall_torque, no_load_speed, inertia, dt)
+    theta, omega = steer_motor_kernel(theta, omega, target, beta, enabled, gain, rate_max, accel_max, torque_max,
+                                      stiffness, dt)
+    return theta, omega, spring_torque_kernel(theta, omega, beta, beta_dot, enabled, stiffness, damping, torque_max)

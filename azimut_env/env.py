@@ -172,6 +172,9 @@ class AzimutEnv(gym.Env):
     * ``obstacles``: static obstacles, ``(x, y, radius)`` or vertex lists (also
       ``reset(options={"obstacles": ...})``).
     * ``start_noise``: starting pose noise. ``render_mode``: ``None``, ``"human"``, ``"rgb_array"``.
+    * ``action_latency``: command latency k in control periods (default 0): the set-points of an
+      action drive the motors k steps later (the motors hold the reset set-points for the first k
+      steps of an episode); for sim-to-real work.
 
     ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode
     only), ``"start_progress"`` [m], ``"obstacles"`` (for this episode; one that overlaps the
@@ -202,7 +205,7 @@ class AzimutEnv(gym.Env):
                  stall_distance: float = 0.05, time_limit_factor: float = 3.0, action_rate_weight: float = 0.05,
                  off_track_penalty: float = 10.0, max_lateral_error: float = 0.5, lookahead_count: int = 5,
                  lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, solver_iterations: int = 20) -> None:
+                 render_mode: str | None = None, solver_iterations: int = 20, action_latency: int = 0) -> None:
         params = resolve_params(params, sensors, noise_scale)
         config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
                             domain_randomization=domain_randomization, progress_weight=progress_weight,
@@ -213,7 +216,8 @@ class AzimutEnv(gym.Env):
                             time_limit_factor=time_limit_factor,
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
                             max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
-                            lookahead_spacing=lookahead_spacing, start_noise=start_noise)
+                            lookahead_spacing=lookahead_spacing, start_noise=start_noise,
+                            action_latency=action_latency)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
         self.params = params

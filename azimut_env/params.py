@@ -28,6 +28,7 @@ from estimation.geometry import RobotGeometry
 __all__ = [
     "ActuatorLimits",
     "SteeringParams",
+    "SteeringMotorParams",
     "WheelParams",
     "TireParams",
     "ChassisParams",
@@ -157,6 +158,46 @@ class SteeringParams:
         _check_positive(self, "damping", allow_zero=True)
         if not (math.isfinite(self.stop_restitution) and 0.0 <= self.stop_restitution <= 1.0):
             raise ValueError(f"SteeringParams.stop_restitution must be in [0, 1], got {self.stop_restitution!r}")
+
+
+@dataclass(frozen=True)
+class SteeringMotorParams:
+    """How the steering motor is modelled (``model``) and its DC-motor data for the "dc" model.
+
+    * ``"kinematic"`` (default): a position source with rate and acceleration limits whose
+      spring torque is clipped at ``ActuatorLimits.steer_torque_max`` (the motor stalls there).
+    * ``"dc"``: a torque source with inertia that follows the same rate profile while its torque
+      allows, under the torque–speed line of a DC motor, τ ≤ τ_stall (1 − |ω|/ω₀) while motoring,
+      and the current limit ``ActuatorLimits.steer_torque_max``
+      (:func:`~azimut_env.actuators.steer_dc_motor_kernel`). Under a load τ_L the steering slows
+      to ω₀ (1 − τ_L/τ_stall); the kinematic model keeps its rate.
+
+    Defaults are an assumption of the class of a ~20 W brushed DC motor (e.g. a Maxon RE 25:
+    no-load speed ≈ 9,000–10,000 rpm, stall torque ≈ 0.3 N·m, rotor inertia ≈ 1e-6 kg·m²) behind a
+    1:150 planetary gearhead at ~70% efficiency, seen at the output: ω₀ ≈ 6.5 rad/s, τ_stall ≈
+    30 N·m, J ≈ 150² · 1.1e-6 ≈ 0.025 kg·m². The paper does not give AZIMUT-3's steering motors.
+
+    Attributes:
+        model: ``"kinematic"`` or ``"dc"``.
+        stall_torque: τ_stall, output torque at zero speed and full voltage [N·m].
+        no_load_speed: ω₀, output speed at zero torque and full voltage [rad/s].
+        rotor_inertia: J, motor and gearhead inertia reflected to the output [kg·m²].
+    """
+
+    model: str = "kinematic"
+    stall_torque: float = 30.0
+    no_load_speed: float = 6.5
+    rotor_inertia: float = 0.025
+
+    def __post_init__(self) -> None:
+        if self.model not in ("kinematic", "dc"):
+            raise ValueError(f"SteeringMotorParams.model must be 'kinematic' or 'dc', got {self.model!r}")
+        _check_positive(self, "stall_torque", "no_load_speed", "rotor_inertia")
+
+    @property
+    def is_dc(self) -> bool:
+        """True for the DC-motor model."""
+        return self.model == "dc"
 
 
 @dataclass(frozen=True)
@@ -307,13 +348,14 @@ class RobotParams:
 
     Attributes:
         geometry: wheel layout (``RobotGeometry``; default the AZIMUT-3 stand-in).
-        chassis, steering, wheel, tire, limits, sensors: see their classes.
+        chassis, steering, steer_motor, wheel, tire, limits, sensors: see their classes.
         gravity: g [m/s²], used only for the static normal loads N_k.
     """
 
     geometry: RobotGeometry = field(default_factory=RobotGeometry.azimut3)
     chassis: ChassisParams = field(default_factory=ChassisParams)
     steering: SteeringParams = field(default_factory=SteeringParams)
+    steer_motor: SteeringMotorParams = field(default_factory=SteeringMotorParams)
     wheel: WheelParams = field(default_factory=WheelParams)
     tire: TireParams = field(default_factory=TireParams)
     limits: ActuatorLimits = field(default_factory=ActuatorLimits)

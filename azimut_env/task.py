@@ -124,6 +124,12 @@ class TaskConfig:
         max_lateral_error: lateral error that ends the episode [m].
         lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
             [m of progress]. start_noise: uniform start pose noise [m, rad].
+        action_latency: command latency k [control periods] (default 0): the set-points of the
+            action given at step t drive the motors during step t + k (a per-robot FIFO, emptied
+            at each reset; for the first k steps of an episode the motors hold the reset
+            set-points). Models the transport delay of a real robot's command path for
+            sim-to-real work. The observation's ``prev_action`` is the action given, not the
+            one being applied.
     """
 
     control_period: float = 0.02
@@ -148,6 +154,7 @@ class TaskConfig:
     lookahead_count: int = 5
     lookahead_spacing: float = 0.3
     start_noise: float = 0.02
+    action_latency: int = 0
 
     def __post_init__(self) -> None:
         # every field checked (and stored as its canonical type) here, once, with the field's name
@@ -166,6 +173,7 @@ class TaskConfig:
         fix("max_lateral_error", check_positive("max_lateral_error", self.max_lateral_error))
         fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
         fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
+        fix("action_latency", check_int("action_latency", self.action_latency, min_value=0, max_value=1000))
 
     @property
     def weights(self) -> dict[str, float]:
@@ -219,6 +227,19 @@ def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
                 a[i, j] = min(max(a[i, j], -1.0), 1.0)
             _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
     return -1
+
+
+@njit(cache=True)
+def _shift_fifo_kernel(fifo, new, cmd, rows):
+    """Command latency, for the robots where ``rows`` is True: the oldest set-points fifo[i, 0]
+    go to cmd[i], the queue (N, k, n, 2) moves up by one and new[i] enters at its end."""
+    k = fifo.shape[1]
+    for i in range(fifo.shape[0]):
+        if rows[i]:
+            cmd[i] = fifo[i, 0]
+            for j in range(k - 1):
+                fifo[i, j] = fifo[i, j + 1]
+            fifo[i, k - 1] = new[i]
 
 
 @njit(cache=True)
@@ -418,6 +439,9 @@ class AzimutTask:
         self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
         self._normals = np.zeros((N, 3, n))
+        # command latency: set-points waiting to be applied, oldest first (N, k, n, 2)
+        self._cmd_fifo = np.zeros((N, config.action_latency, n, 2))
+        self._cmd_new = np.zeros((N, n, 2))
         self._meas = np.empty((N, 3, n))
 
     # ------------------------------------------------------------------ reset
@@ -546,6 +570,7 @@ class AzimutTask:
         geom = self.params.geometry
         beta = np.clip(beta, geom.steer_min + 1e-6, geom.steer_max)
         phys.reset_robot(i, pose, beta)
+        self._cmd_fifo[i] = phys.commands[i]  # latency: the reset set-points are held for k steps
         clash = phys.overlapping_obstacles(i)
         if clash:
             raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
@@ -609,6 +634,7 @@ class AzimutTask:
         its reset), so that no NaN stays in the Space (its joints' accumulated impulses included)."""
         self.physics.renew_joints(i)
         self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
+        self._cmd_fifo[i] = self.physics.commands[i]
         self.phi_prev[i] = 0.0
 
     # ------------------------------------------------------------------ step
@@ -616,7 +642,9 @@ class AzimutTask:
     def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all).
 
-        Returns the clipped float32 copy. Raises ``ValueError`` (changing nothing) on NaN or inf."""
+        With ``config.action_latency`` = k > 0 the set-points enter the rows' FIFOs and the ones
+        given k calls earlier go to the motors. Returns the clipped float32 copy. Raises
+        ``ValueError`` (changing nothing) on NaN or inf."""
         a = np.asarray(actions)
         if a.dtype.kind not in "biuf":
             raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
@@ -625,9 +653,13 @@ class AzimutTask:
         if a.shape != (self.n_robots, 2 * self.n):
             raise ValueError(f"actions must have shape {(self.n_robots, 2 * self.n)}, got {np.shape(actions)}")
         rows = self._all if rows is None else rows
-        bad = _apply_actions_kernel(a, self.physics.commands, rows, *self._lim)
+        fifo = self._cmd_fifo
+        delayed = fifo.shape[1] > 0
+        bad = _apply_actions_kernel(a, self._cmd_new if delayed else self.physics.commands, rows, *self._lim)
         if bad >= 0:
             raise ValueError(f"action contains NaN or inf (robot {bad}): {np.asarray(actions)[bad]}")
+        if delayed:
+            _shift_fifo_kernel(fifo, self._cmd_new, self.physics.commands, rows)
         return a
 
     def step_physics(self) -> np.ndarray:

@@ -79,7 +79,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     ``control_period``, ``substeps``, ``solver_iterations``, ``params``, ``sensors``, ``noise_scale``,
     ``domain_randomization`` (drawn per sub-env and reset), reward weights,
     ``max_lateral_error``, ``lookahead_count``, ``lookahead_spacing``, ``obstacles`` (shared by all
-    sub-envs, at the same world positions), ``start_noise``, ``render_mode``.
+    sub-envs, at the same world positions), ``start_noise``, ``render_mode``, ``action_latency``
+    (a FIFO per sub-env, emptied at its reset).
 
     ``reset(seed=..., options=...)``: ``seed`` an int (sub-env i gets ``seed + i``) or a list of
     ``num_envs`` ints/None; ``options`` a dict applied to every reset sub-env, or a sequence of
@@ -107,7 +108,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                  action_rate_weight: float = 0.05, off_track_penalty: float = 10.0, max_lateral_error: float = 0.5,
                  lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
                  render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = None,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0) -> None:
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
+                 action_latency: int = 0) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
@@ -128,7 +130,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                             time_limit_factor=time_limit_factor,
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
                             max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
-                            lookahead_spacing=lookahead_spacing, start_noise=start_noise)
+                            lookahead_spacing=lookahead_spacing, start_noise=start_noise,
+                            action_latency=action_latency)
         self.num_envs = N = int(num_envs)
         self.params = params
         self.config = config

@@ -96,3 +96,84 @@ def test_braking_on_a_light_load_locks_within_the_friction_limit():
     h = _drive(mass, 0.0, 2.0, v0=1.0, phidot0=1.0 / R, load=20.0)
     assert np.all(np.abs(h[:, 2]) <= TIRE.friction * 20.0 + 1e-9)
     assert abs(h[-1, 0]) < 0.02
+
+
+# ---------------------------------------------------------------------- steering motor models
+
+from azimut_env.actuators import dc_torque_limits_kernel, steer_actuator_kernel  # noqa: E402
+from azimut_env.params import SteeringMotorParams  # noqa: E402
+
+SM = SteeringMotorParams(model="dc")
+LIM = P.limits
+K_S, C_S, KP = P.steering.stiffness, P.steering.damping, P.steering.position_gain
+I_MOD = P.steering.module_inertia
+
+
+def _steer(dc, load_torque, seconds=1.2, beta0=-1.5, target=1.5):
+    """A module (inertia I_mod) against a constant torque −τ_L, driven through the series spring
+    toward ``target``: returns the history of (β, β̇, θ_m, θ̇_m, τ_s)."""
+    theta, omega, beta, beta_dot = beta0, 0.0, beta0, 0.0
+    out = []
+    for _ in range(int(round(seconds / DT))):
+        theta, omega, tau_s = steer_actuator_kernel(dc, theta, omega, target, beta, beta_dot, True, KP,
+                                                    LIM.steer_rate_max, LIM.steer_accel_max, LIM.steer_torque_max,
+                                                    K_S, C_S, SM.stall_torque, SM.no_load_speed, SM.rotor_inertia, DT)
+        beta_dot += DT * (tau_s - load_torque) / I_MOD
+        beta += DT * beta_dot
+        out.append((beta, beta_dot, theta, omega, tau_s))
+    return np.array(out)
+
+
+def test_dc_torque_speed_line():
+    ts, w0, tmax = 30.0, 6.5, 15.0
+    assert dc_torque_limits_kernel(0.0, ts, w0, tmax) == (-15.0, 15.0)  # current-limited at rest
+    lo, hi = dc_torque_limits_kernel(4.0, ts, w0, tmax)
+    assert hi == pytest.approx(ts * (1 - 4.0 / w0)) and lo == -15.0  # motoring on the line, braking at the limit
+    lo, hi = dc_torque_limits_kernel(-4.0, ts, w0, tmax)
+    assert lo == pytest.approx(-ts * (1 - 4.0 / w0)) and hi == 15.0
+    assert dc_torque_limits_kernel(w0, ts, w0, tmax)[1] == pytest.approx(0.0)
+    assert dc_torque_limits_kernel(3 * w0, ts, w0, tmax) == (-15.0, -15.0)  # overdriven: brakes at the limit
+
+
+def test_dc_motor_follows_the_kinematic_profile_when_unloaded():
+    kin = _steer(False, 0.0, 0.6, beta0=0.0, target=0.8)
+    dc = _steer(True, 0.0, 0.6, beta0=0.0, target=0.8)
+    assert np.max(np.abs(kin[:, 2] - dc[:, 2])) < 1e-12
+    assert np.max(np.abs(kin[:, 0] - dc[:, 0])) < 1e-12
+
+
+def test_back_emf_limits_the_steering_rate_under_load():
+    """Against τ_L = 14 N·m the DC motor slows to ω₀ (1 − τ_L/τ_stall) = 3.47 rad/s; the kinematic
+    position source keeps its 4 rad/s (its spring torque stays below its 15 N·m clip)."""
+    tau_l = 14.0
+    for dc, rate in ((False, LIM.steer_rate_max), (True, SM.no_load_speed * (1 - tau_l / SM.stall_torque))):
+        h = _steer(dc, tau_l)
+        mid = (h[:, 0] > -0.3) & (h[:, 0] < 0.3)
+        assert mid.sum() > 20
+        assert h[mid, 1] == pytest.approx(rate, rel=2e-3)
+        assert h[mid, 4] == pytest.approx(tau_l, rel=2e-3)
+    assert SM.no_load_speed * (1 - tau_l / SM.stall_torque) < 0.9 * LIM.steer_rate_max
+    # no load: both at the rate limit
+    h = _steer(True, 0.0)
+    mid = (h[:, 0] > -0.3) & (h[:, 0] < 0.3)
+    assert h[mid, 1] == pytest.approx(LIM.steer_rate_max, rel=5e-3)  # the module still rings (ζ ≈ 0.27)
+
+
+def test_dc_motor_against_a_blocked_module_stalls_at_the_current_limit():
+    theta, omega = 0.0, 0.0
+    for _ in range(800):
+        theta, omega, tau_s = steer_actuator_kernel(True, theta, omega, 1.0, 0.0, 0.0, True, KP, LIM.steer_rate_max,
+                                                    LIM.steer_accel_max, LIM.steer_torque_max, K_S, C_S,
+                                                    SM.stall_torque, SM.no_load_speed, SM.rotor_inertia, DT)
+    assert tau_s == pytest.approx(LIM.steer_torque_max, rel=1e-6)
+    assert abs(omega) < 1e-6
+
+
+def test_motor_params_are_validated():
+    with pytest.raises(ValueError, match="model"):
+        SteeringMotorParams(model="servo")
+    with pytest.raises(ValueError):
+        SteeringMotorParams(no_load_speed=0.0)
+    with pytest.raises(ValueError):
+        SteeringMotorParams(rotor_inertia=math.nan)
+    assert not SteeringMotorParams().is_dc and SM.is_dc
