@@ -91,9 +91,12 @@ scheme is stable iff (see :func:`stability_numbers`)::
 
        c dt / m < 2   and   k dt² / m + 2 c dt / m < 4,
 
-with m the *smallest* effective mass that contact direction drives: the lateral direction moves
-the module about its steering axis (I_mod/b², with the chassis behind it) and the chassis; the
-longitudinal direction the wheel spin (I_w/r²); the twist the module inertia I_mod about its axis.
+with m the effective mass the contact sees in that direction: its compliances add,
+``1/m = Σ_j ℓ_j²/I_j`` over the DOFs a force there moves (lever ℓ_j, inertia or mass I_j). Along
+the rolling direction d: the wheel spin (r²/I_w), the module turning about its steering axis
+(b²/I_mod, the contact is offset by b along e) and the chassis (1/M + |(P − O) × d|²/I); across
+(along e): the chassis only (the force passes through the steering axis); the twist: the module's
+yaw inertia I_mod (and the chassis').
 
 Parameter values and their sources: :class:`~azimut_env.params.TireParams`.
 
@@ -311,10 +314,10 @@ def stability_numbers(tire, load: float, dt: float, mass_long: float, mass_lat: 
 
     Args:
         tire: :class:`~azimut_env.params.TireParams`. load: normal load N [N] (the largest).
-        dt: substep [s]. mass_long: smallest mass along the rolling direction [kg] (the wheel
-            spin, I_w/r²). mass_lat: smallest mass across [kg] (the module turning about its
-            steering axis, I_mod/b², or the chassis share if smaller). inertia_twist: yaw inertia
-            the patch twist drives [kg·m²] (the module, I_mod).
+        dt: substep [s]. mass_long, mass_lat: effective masses [kg] the contact sees along d and
+            along e, 1/m = Σ ℓ²/I over the DOFs it moves (module docstring; for the default
+            robot about 1.7 kg along d: spin r²/I_w = 0.21, module b²/I_mod = 0.32, chassis
+            ≈ 0.05 1/kg). inertia_twist: yaw inertia the patch twist drives [kg·m²] (I_mod).
 
     Returns:
         ``{"<dir>_a", "<dir>_b", "<dir>_margin"}`` for dir in long, lat, twist, margin = b + 2a
