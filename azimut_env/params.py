@@ -247,8 +247,10 @@ class TireParams:
             k_y a²/2. 0.01 m (a 2 cm patch, a soft tread under 86 N) is an assumption: a Hertz line
             contact of a 30 mm wide rubber tread (E ≈ 5 MPa) gives ≈ 7 mm (Johnson 1985, Ch. 4).
         damping_time: τ_d [s], bristle damping per unit contact stiffness (c = k τ_d, the LuGre
-            σ₁ of Canudas de Wit et al. 1995): damps the stuck tread at rest (0.008 s: ζ ≈ 0.3 for
-            a quarter of the robot on one tire; assumption).
+            σ₁ of Canudas de Wit et al. 1995): damps the stuck tread at rest and at low speed
+            (0.005 s, assumption: ζ ≈ 0.2 for a quarter of the robot on one tire laterally, ≈ 0.5
+            for the fastest contact mode, spin and module against the tread at ω ≈ 210 rad/s).
+            It is explicit: with ω_max the fastest contact mode, ω_max² dt (dt + 2τ_d) < 4.
         rolling_resistance: rolling resistance coefficient C_rr [-] (torque C_rr N r on the spin).
         rolling_knee: spin surface speed below which rolling resistance fades linearly [m/s].
         slip_knee: legacy viscous tire only (``tire.tire_force_kernel``): slip speed at which its
@@ -261,7 +263,7 @@ class TireParams:
     relaxation_length: float = 0.02
     longitudinal_relaxation_length: float = 0.02
     contact_half_length: float = 0.01
-    damping_time: float = 0.008
+    damping_time: float = 0.005
     rolling_resistance: float = 0.015
     rolling_knee: float = 0.02
     slip_knee: float = 0.05
