@@ -20,6 +20,7 @@ import sys
 #: name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("control.evaluate", "run controllers on tracks and write a report (the main job)"),
+    "bench-campaign": ("control.bench_campaign", "time an eval campaign serially and on N workers (same metrics?)"),
     "bench-estimators": ("estimation.bench", "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
     "bench-env": ("azimut_env.bench", "measure simulator throughput (steps/s) with a time breakdown"),
     "sim-paper": ("control.phenomenon", "the paper's phenomenon: qua while moving under the ICR controller at three "
