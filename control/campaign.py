@@ -481,8 +481,8 @@ def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episode
                         help="auto (default): serial for 1 worker, else Ray when installed (the 'cluster' extra), "
                              "else local processes; or name one")
     parser.add_argument("--ray-address", default=None, metavar="ADDRESS",
-                        help="join an existing Ray cluster (e.g. 'auto' on a cluster node, or ray://HOST:10001) "
-                             "instead of starting a local instance; every node needs this package installed")
+                        help="join an existing Ray cluster ('auto' on one of its nodes, or HEAD_IP:6379) instead of "
+                             "starting a local instance; every node needs this package installed")
     parser.add_argument("--threads-per-task", type=arg_int(1, 1024), default=None, metavar="N",
                         help="numba/torch/BLAS threads per task (default: CPUs // workers)")
     parser.add_argument("--retries", type=arg_int(0, 10), default=1,
@@ -534,9 +534,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], group_by: Sequence[str], metric
     """Per group of ``rows`` (same values of ``group_by``, in order of first appearance): the mean
     and bootstrap interval of each metric over the rows (bools as 0/1 shares).
 
-    Each cell's resampling seed is a hash of the group and the metric, so a cell's interval does
-    not depend on the other cells or on the order of the rows within the group... up to that
-    order's effect on the resample indices: rows are sorted by ``seed`` when they have one.
+    Each cell's resampling seed is a hash of the group and the metric, and the rows of a group are
+    sorted by ``seed`` (when they have one) first, so a cell's interval depends on its values
+    alone, not on the other cells or on the order in which the tasks finished.
     """
     groups: dict[tuple, list] = {}
     for row in rows:

@@ -30,7 +30,7 @@ from azimut_env.tracks import make_track
 from .campaign import (CampaignInterrupted, Task, TaskStore, add_executor_arguments, arg_seeds, check_executor_args,
                        resolve_executor, run_tasks, summarize)
 
-__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",
+__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",
            "comparison_plots"]
 
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
@@ -151,6 +151,13 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     check_executor_args(args)
     check_output_path(args.out, directory=True)
+
+
+def run_kwargs(args: argparse.Namespace) -> dict:
+    """The executor flags as keyword arguments of :func:`control.campaign.run_tasks`."""
+    return {"executor": resolve_executor(args.executor, args.workers, args.ray_address), "workers": args.workers,
+            "threads": args.threads_per_task, "ray_address": args.ray_address, "retries": args.retries,
+            "resume": args.resume}
 
 
 def seeds_of(args: argparse.Namespace) -> list[int]:
@@ -331,7 +338,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=plot_seed)
-    executor = resolve_executor(args.executor, args.workers, args.ray_address)
+    executor = run_kwargs(args)["executor"]
     env0 = AzimutEnv()
     geom, limits = env0.geometry, env0.limits
     if not args.resume and plot_dir.is_dir():
@@ -361,9 +368,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     start = time.perf_counter()
     n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")
     try:
-        records = run_tasks(tasks, store, executor=executor, workers=args.workers, threads=args.threads_per_task,
-                            ray_address=args.ray_address, retries=args.retries, resume=args.resume,
-                            on_result=on_result, progress=progress)
+        records = run_tasks(tasks, store, **run_kwargs(args), on_result=on_result, progress=progress)
     except CampaignInterrupted as exc:
         print(f"azimut eval: {exc}; run the same command with --resume", file=sys.stderr)
         return 130

@@ -390,9 +390,11 @@ def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
     return items
 
 
-def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path) -> str:
-    """Run the robustness study per controller; write kicks_<controller>.json; return Markdown."""
-    from .robustness import kick_study, summarize_kicks
+def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run_kwargs: dict | None = None) -> str:
+    """Run the robustness study per controller (on the campaign's executor, ``run_kwargs`` of
+    :func:`control.campaign.run_tasks`; trials saved under ``out/kicks/``); write
+    kicks_<controller>.json; return Markdown."""
+    from .robustness import kick_study_campaign, summarize_kicks
 
     lines = ["## Robustness: random wheels kicked to random angles mid-track (paper track)", "",
              "| controller | runs | recovered | failed | limit-exceeded steps | recovery time p50/p90/max [s] "
@@ -401,8 +403,9 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path) -> 
              "|---|---|---|---|---|---|---|---|---|"]
     for controller in controllers:
         start = time.time()
-        trials = kick_study(n_runs, "icr" if controller == "icr" else "twist", seed0=1000 + 1000 * seed,
-                            progress=lambda i, n: _progress_bar(f"kicks/{controller}", i / n, start))
+        trials = kick_study_campaign(n_runs, "icr" if controller == "icr" else "twist", seed0=1000 + 1000 * seed,
+                                     store=out / "kicks" / controller, **(run_kwargs or {}),
+                                     progress=lambda i, n, *_: _progress_bar(f"kicks/{controller}", i / n, start))
         if sys.stderr.isatty():
             sys.stderr.write("\n")
         summ = summarize_kicks(trials)
@@ -430,12 +433,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"azimut eval: error: {exc}", file=sys.stderr)
         return 2
-    from .eval_campaign import seeds_of
-    from .eval_campaign import run_eval_campaign
+    from .eval_campaign import run_eval_campaign, run_kwargs, seeds_of
 
     out = Path(args.out)
     rc = run_eval_campaign(args, controllers, tracks, seeds_of(args))
     if rc in (0, 1) and args.kick_runs > 0:
         with open(out / "report.md", "a") as fh:
-            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds_of(args)[0], out) + "\n")
+            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds_of(args)[0], out,
+                                           run_kwargs(args)) + "\n")
     return rc

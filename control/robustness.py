@@ -17,7 +17,7 @@ from azimut_env.tracks import make_track
 
 from .evaluate import run_episode
 
-__all__ = ["KickTrial", "kick_trial", "kick_study", "summarize_kicks"]
+__all__ = ["KickTrial", "kick_trial", "kick_study", "kick_trial_task", "kick_study_campaign", "summarize_kicks"]
 
 
 @dataclass(frozen=True)
@@ -85,6 +85,43 @@ def kick_study(n_runs: int = 200, controller: str = "icr", track: str = "paper",
         trials.append(kick_trial(seed0 + i, controller, track))
         if progress is not None:
             progress(i + 1, n_runs)
+    return trials
+
+
+def kick_trial_task(seed: int, controller: str = "icr", track: str = "paper") -> dict:
+    """:func:`kick_trial` as a campaign task (:mod:`control.campaign`): ``{"trial": dict}``."""
+    return {"trial": asdict(kick_trial(seed, controller, track))}
+
+
+def kick_study_campaign(n_runs: int, controller: str = "icr", track: str = "paper", seed0: int = 1000,
+                        store=None, **run_kwargs) -> list[KickTrial]:
+    """:func:`kick_study` run by :func:`control.campaign.run_tasks` (``run_kwargs``: executor,
+    workers, resume, progress, ...), with each trial saved in ``store`` as it finishes. The same
+    trials as the serial study, whatever the executor; a trial whose task failed (after its retry)
+    is a failed, unrecovered trial."""
+    import tempfile
+
+    from .campaign import Task, run_tasks
+
+    tasks = [Task("control.robustness:kick_trial_task", {"seed": seed0 + i, "controller": controller, "track": track},
+                  label=f"kick-{controller}-{track}-{seed0 + i}") for i in range(n_runs)]
+    if store is None:
+        with tempfile.TemporaryDirectory(prefix="azimut-kicks-") as tmp:
+            records = run_tasks(tasks, tmp, **run_kwargs)
+    else:
+        records = run_tasks(tasks, store, **run_kwargs)
+    trials = []
+    for task, rec in zip(tasks, records):
+        if rec["status"] == "ok":
+            d = dict(rec["result"]["trial"])
+            d["wheels"] = tuple(d["wheels"])
+            trials.append(KickTrial(**d))
+        else:
+            nan = float("nan")
+            trials.append(KickTrial(seed=task.key["seed"], wheels=(), impulse=nan, kick_time=nan, peak_beta_error=nan,
+                                    max_lateral_after=nan, recovery_time=nan, settle_time=nan,
+                                    limit_violation_steps=0, reconfigure_events=0,
+                                    error=f"task failed: {rec.get('error')}", recovered=False))
     return trials
 
 

@@ -213,3 +213,13 @@ def test_cli_eval_refuses_bad_campaign_flags(flags, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "error" in err[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_kick_study_on_workers_equals_the_serial_study(tmp_path):
+    from dataclasses import asdict
+
+    from control.robustness import kick_study, kick_study_campaign
+
+    serial = kick_study(2, "icr", seed0=1003)
+    parallel = kick_study_campaign(2, "icr", seed0=1003, store=tmp_path / "kicks", executor="process", workers=2)
+    assert [json.dumps(asdict(t)) for t in parallel] == [json.dumps(asdict(t)) for t in serial]
