@@ -128,6 +128,7 @@ __all__ = [
     "brush_forces",
     "brush_trail",
     "stability_numbers",
+    "tire_elastic_energy",
     "tire_force_kernel",
     "tire_forces",
 ]
@@ -338,6 +339,31 @@ def stability_numbers(tire, load: float, dt: float, mass_long: float, mass_lat: 
         b = k * dt * dt / m
         out[f"{name}_a"], out[f"{name}_b"], out[f"{name}_margin"] = a, b, b + 2 * a
     return out
+
+
+def tire_elastic_energy(state, load, tire) -> np.ndarray:
+    """Elastic energy [J] stored in deflected tires: ``state`` (..., 3) (:class:`TS`), ``load``
+    (...) [N] broadcast with it.
+
+    The work of the brush force along the current deflection: with z = (k_x u_x, k_y u_y),
+    ψ = ‖z‖/(3μN) and the stiffness along u, k_u = ‖z‖²/(k_x u_x² + k_y u_y²),
+    ``E = (3 μ²N²/k_u) (ψ + ((1 − ψ)⁴ − 1)/4)`` (→ ½ (k_x u_x² + k_y u_y²) at small ψ; exact for
+    deflections along one axis), plus ``½ k_φ φ²`` for the twist. With k_x ≠ k_y the combined brush
+    force is not exactly the gradient of an energy, so this is the energy along rays."""
+    st = np.asarray(state, dtype=np.float64)
+    n = np.maximum(np.asarray(load, dtype=np.float64), 0.0)
+    ux, uy, tw = st[..., 0], st[..., 1], st[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k_x = tire.longitudinal_stiffness * n / tire.longitudinal_relaxation_length
+        k_y = tire.cornering_stiffness * n / tire.relaxation_length
+        quad = k_x * ux * ux + k_y * uy * uy
+        z = np.hypot(k_x * ux, k_y * uy)
+        mu_n = tire.friction * n
+        psi = np.minimum(np.where(mu_n > 0, z / (3.0 * mu_n), 0.0), 1.0)
+        k_u = np.where(quad > 0, z * z / quad, 1.0)
+        e = np.where(quad > 0, 3.0 * mu_n * mu_n / k_u * (psi + ((1.0 - psi) ** 4 - 1.0) / 4.0), 0.0)
+    k_t = 0.5 * k_y * tire.contact_half_length ** 2
+    return e + 0.5 * k_t * tw * tw
 
 
 # ---------------------------------------------------------------------- legacy viscous model

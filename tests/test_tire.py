@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from azimut_env.params import TireParams
-from azimut_env.tire import (TRAIL_SPEED_EPS, brush_forces, brush_trail, stability_numbers, tire_step,
-                             tire_step_kernel)
+from azimut_env.tire import (TRAIL_SPEED_EPS, brush_forces, brush_trail, stability_numbers, tire_elastic_energy,
+                             tire_step, tire_step_kernel)
 
 TIRE = TireParams()
 N = 86.0  # [N] a quarter of the 35 kg robot
@@ -323,3 +323,20 @@ def test_tire_params_are_validated():
         with pytest.raises(ValueError):
             TireParams(**bad)
     assert TireParams(damping_time=0.0).damping_time == 0.0
+
+
+def test_elastic_energy_is_the_work_of_the_brush_force():
+    """Along one axis, E(u) = ∫ F du (numerical quadrature), ½ k u² at small deflection."""
+    k_x = C_K / TIRE.longitudinal_relaxation_length
+    for axis, k in ((1, K_Y), (0, k_x)):
+        u = np.linspace(0.0, 0.9 * (3 * MU_N / k), 2001)
+        st = np.zeros((u.size, 3))
+        st[:, axis] = u
+        psi = k * u / (3 * MU_N)
+        force = MU_N * (1 - (1 - psi) ** 3)
+        work = np.concatenate([[0.0], np.cumsum(0.5 * (force[1:] + force[:-1]) * np.diff(u))])
+        assert np.allclose(tire_elastic_energy(st, N, TIRE), work, rtol=1e-5, atol=1e-7)  # trapezoid error
+    small = tire_elastic_energy([1e-7, -2e-7, 0.0], N, TIRE)
+    assert small == pytest.approx(0.5 * (k_x * 1e-14 + K_Y * 4e-14), rel=1e-5)
+    assert tire_elastic_energy([0.0, 0.0, 0.01], N, TIRE) == pytest.approx(0.5 * K_T * 1e-4)
+    assert tire_elastic_energy([1e-3, 1e-3, 0.1], 0.0, TIRE) == 0.0
