@@ -34,6 +34,8 @@ class CommandParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose errors are one line on stderr and exit status 2."""
 
     def error(self, message: str):  # type: ignore[override]
+        # one line even when an argument holds a line break or another control character
+        message = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 

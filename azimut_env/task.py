@@ -159,7 +159,8 @@ class TaskConfig:
     def __post_init__(self) -> None:
         # every field checked (and stored as its canonical type) here, once, with the field's name
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
-        fix("control_period", check_range("control_period", self.control_period, 0.0, 1.0, lo_open=True))
+        # 0.1 ms .. 1 s: below, step counts of the time limit overflow and the render rate is absurd
+        fix("control_period", check_range("control_period", self.control_period, 1e-4, 1.0))
         fix("substeps", check_int("substeps", self.substeps, min_value=1, max_value=10_000))
         fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
                                            max_value=10_000))

@@ -117,3 +117,19 @@ def test_subprocess_error_has_no_traceback(tmp_path, a_file):
     proc = subprocess.run([sys.executable, "-m", "azimut_env.cli", "eval", "--out", a_file], capture_output=True,
                           text=True, cwd=ROOT, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("argv", [["bench-estimators", "--bogus", "\x1e0"], ["eval", "--seed", "1\n2"],
+                                  ["eval", "--tracks", "a\rb"]])
+def test_control_characters_in_arguments_still_give_one_line(argv, capsys):
+    """Found by the property tests: a line break inside an argument split the error in two."""
+    code, out, err, _ = run_cli(argv, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+
+
+def test_tiny_control_period_refused():
+    """Found by the property tests: control_period=1.7e-27 overflowed the time-limit step count."""
+    from azimut_env.env import AzimutEnv
+
+    with pytest.raises(ValueError, match="control_period"):
+        AzimutEnv(control_period=1.6846197063791808e-27)

@@ -1,0 +1,298 @@
+"""Property-based tests (hypothesis) of issue 10: arbitrary options, keyword arguments and command
+lines thrown at every entry point. Each call must either succeed or raise a clear error
+(``ValueError``, ``TypeError``, ``ResetNeeded``; the CLI: exit status 2 and one line on stderr),
+never another exception type; and after a refusal, the next good call must behave exactly as if
+the bad one had never happened (the trajectories are compared bit for bit with an env that never
+saw it).
+
+The default run keeps ``max_examples`` small (a few tens of seconds in all); ``-m slow`` runs the
+same properties with many more examples. ``TRIED`` counts the inputs per entry point; run with
+``-s`` to see the counts printed at the end.
+"""
+
+from __future__ import annotations
+
+import collections
+import importlib
+import inspect
+import math
+import shlex
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from azimut_env.cli import _available, main
+from azimut_env.env import AzimutEnv
+from azimut_env.task import RESET_OPTIONS
+from azimut_env.tracks import TRACK_NAMES, Track, make_track
+from azimut_env.validation import ResetNeeded
+from azimut_env.vector_env import AzimutVectorEnv
+from estimation import METHODS, RobotGeometry, estimate_eta, estimate_icr, quality
+
+CLEAR = (ValueError, TypeError, ResetNeeded)
+TRIED: collections.Counter = collections.Counter()
+GEOM = RobotGeometry.azimut3()
+START = make_track("paper").sample(0.0)
+SMALL_TRACK = Track.from_waypoints([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]], speed=0.4, name="paper")
+
+
+def _profiles(fn, default: int, slow: int, **given_kwargs):
+    """The same property as a default test (``default`` examples) and a slow one."""
+    quick = settings(max_examples=default, deadline=None, derandomize=False,
+                     suppress_health_check=list(HealthCheck))(given(**given_kwargs)(fn))
+    long = pytest.mark.slow(settings(max_examples=slow, deadline=None,
+                                     suppress_health_check=list(HealthCheck))(given(**given_kwargs)(fn)))
+    return quick, long
+
+
+# ---------------------------------------------------------------------- value strategies
+
+junk = st.one_of(
+    st.none(), st.booleans(), st.integers(-10**9, 10**9), st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6), st.complex_numbers(max_magnitude=10), st.lists(st.integers(-10, 10), max_size=5),
+    st.lists(st.floats(allow_nan=True), max_size=4), st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+    st.builds(object), st.just(np.array([1.0, 2.0])), st.just(np.float32(0.5)), st.just(np.int64(2)),
+)
+plausible_kick = st.fixed_dictionaries({}, optional={
+    "step": st.one_of(st.integers(-3, 30), junk), "wheels": st.one_of(st.lists(st.integers(-2, 6), max_size=5), junk),
+    "impulse": st.one_of(st.floats(-2, 2), junk), "extra": junk})
+plausible_obstacles = st.one_of(
+    st.lists(st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-0.5, 1.0)), max_size=3),
+    st.just([(float(START[0]), float(START[1]), 0.3)]),  # over the start pose: a reset that fails late
+    st.just([[(0.0, 0.0), (1.0, 0.0)]]), junk)
+option_values = {
+    "track": st.one_of(st.sampled_from(TRACK_NAMES + ("nope", "")), st.just(SMALL_TRACK), junk),
+    "kick": st.one_of(plausible_kick, junk),
+    "start_progress": st.one_of(st.floats(-5, 50), junk),
+    "obstacles": plausible_obstacles,
+}
+reset_options = st.one_of(
+    st.none(), junk,
+    st.fixed_dictionaries({}, optional={**option_values, "bogus": junk}),
+)
+seeds = st.one_of(st.none(), st.integers(-5, 2**33), junk)
+
+
+def _actions(n: int, steps: int) -> np.ndarray:
+    return np.random.default_rng(1).uniform(-1, 1, (steps, 2 * n)).astype(np.float32)
+
+
+def _step_all(env, actions):
+    out = []
+    for a in actions:
+        obs, r, term, trunc, _ = env.step(a)
+        out.append(np.append(obs, [r, term, trunc]))
+    return np.array(out)
+
+
+# ---------------------------------------------------------------------- single env: reset, step, kick
+
+
+def _prop_single_env_refusal_changes_nothing(seed0, call, seed, options, action, wheels, impulse):
+    TRIED["env." + call] += 1
+    env, ref = AzimutEnv(track=SMALL_TRACK), AzimutEnv(track=SMALL_TRACK)
+    acts = _actions(env.n, 6)
+    env.reset(seed=seed0)
+    ref.reset(seed=seed0)
+    _step_all(env, acts[:2])
+    _step_all(ref, acts[:2])
+    try:
+        if call == "reset":
+            env.reset(seed=seed, options=options)
+        elif call == "step":
+            env.step(action)
+        else:
+            env.kick(wheels, impulse)
+    except CLEAR:
+        TRIED["env.refused"] += 1
+    else:
+        return  # accepted: nothing to compare with
+    try:
+        got = _step_all(env, acts[2:])
+    except ResetNeeded:
+        assert call == "reset"  # only a reset that failed late (an obstacle over the start) leaves this
+        TRIED["env.failed_reset"] += 1
+    else:
+        assert np.array_equal(got, _step_all(ref, acts[2:]))
+    env.reset(options={"track": SMALL_TRACK})
+    ref.reset(options={"track": SMALL_TRACK})  # unseeded: the generator was not consumed by the refusal
+    assert np.array_equal(_step_all(env, acts), _step_all(ref, acts))
+
+
+test_single_env_refusal_changes_nothing, test_single_env_refusal_changes_nothing_slow = _profiles(
+    _prop_single_env_refusal_changes_nothing, 40, 1500,
+    seed0=st.integers(0, 1000), call=st.sampled_from(["reset", "reset", "step", "kick"]), seed=seeds,
+    options=reset_options, action=st.one_of(junk, st.lists(st.floats(allow_nan=True), min_size=8, max_size=8)),
+    wheels=st.one_of(st.lists(st.integers(-2, 6), max_size=5), junk), impulse=st.one_of(st.floats(-1, 1), junk))
+
+
+# ---------------------------------------------------------------------- constructor keyword arguments
+
+KWARGS = [p for p in inspect.signature(AzimutEnv.__init__).parameters if p not in ("self", "render_mode")]
+
+
+def _prop_constructor_kwargs(name, value):
+    TRIED["env.__init__"] += 1
+    try:
+        env = AzimutEnv(**{name: value})
+    except CLEAR:
+        TRIED["env.__init__.refused"] += 1
+        return
+    # accepted: the env must work (a bounded amount of work: skip absurd but legal step costs)
+    cfg = env.config
+    if cfg.substeps * cfg.solver_iterations > 2000:
+        return
+    env.reset(seed=0)
+    obs, r, *_ = env.step(np.zeros(2 * env.n, np.float32))
+    assert np.all(np.isfinite(obs)) and math.isfinite(r)
+
+
+test_constructor_kwargs, test_constructor_kwargs_slow = _profiles(
+    _prop_constructor_kwargs, 60, 2000, name=st.sampled_from(KWARGS),
+    value=st.one_of(junk, st.floats(-1e3, 1e3), st.integers(-5, 50), st.sampled_from(TRACK_NAMES)))
+
+
+# ---------------------------------------------------------------------- vector env
+
+
+def _prop_vector_reset_refusal(seed, options, mask):
+    TRIED["vector.reset"] += 1
+    N = 3
+    env, ref = AzimutVectorEnv(num_envs=N, track=SMALL_TRACK), AzimutVectorEnv(num_envs=N, track=SMALL_TRACK)
+    acts = np.stack([_actions(env.n, 4)] * N, axis=1)
+    env.reset(seed=7)
+    ref.reset(seed=7)
+    if mask is not None and isinstance(options, dict):
+        options = {**options, "reset_mask": mask}
+    try:
+        env.reset(seed=seed, options=options)
+    except CLEAR:
+        TRIED["vector.refused"] += 1
+    else:
+        return
+    try:
+        got = [env.step(a)[0] for a in acts]
+    except ResetNeeded:
+        TRIED["vector.failed_reset"] += 1
+        env.reset(seed=9)
+        ref.reset(seed=9)
+        got = [env.step(a)[0] for a in acts]
+    assert np.array_equal(np.array(got), np.array([ref.step(a)[0] for a in acts]))
+
+
+per_sub_env = st.lists(st.one_of(st.none(), st.fixed_dictionaries({}, optional=option_values), junk),
+                       min_size=0, max_size=4)
+test_vector_reset_refusal, test_vector_reset_refusal_slow = _profiles(
+    _prop_vector_reset_refusal, 30, 800, seed=st.one_of(seeds, st.lists(seeds, max_size=4)),
+    options=st.one_of(reset_options, per_sub_env),
+    mask=st.one_of(st.none(), junk, st.lists(st.booleans(), min_size=3, max_size=3).map(np.array)))
+
+
+# ---------------------------------------------------------------------- estimators
+
+arrays = st.one_of(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=9).map(np.array),
+    st.lists(st.lists(st.floats(-20, 20), min_size=4, max_size=4), min_size=1, max_size=5).map(np.array),
+    st.lists(st.complex_numbers(max_magnitude=3), min_size=4, max_size=4).map(np.array),
+    st.lists(st.integers(-3, 3), min_size=4, max_size=4).map(np.array),
+    st.lists(st.text(max_size=2), min_size=4, max_size=4).map(np.array), junk)
+
+
+def _prop_estimators(q, phidot, method, mu_tol):
+    TRIED["estimation"] += 1
+    try:
+        lam = estimate_icr(q, GEOM, method)
+    except (ValueError, TypeError):
+        TRIED["estimation.refused"] += 1
+    else:
+        assert np.all(np.isfinite(lam)) and np.allclose(np.linalg.norm(lam, axis=-1), 1.0)
+    try:
+        lam, mu, beta, qua = estimate_eta(q, phidot, GEOM, method, mu_tol=mu_tol)
+    except (ValueError, TypeError):
+        TRIED["estimation.refused"] += 1
+    else:
+        assert np.all(np.isfinite(mu)) and np.all((qua >= 0) & (qua <= 1))
+    try:
+        v = quality(q, phidot)
+    except (ValueError, TypeError):
+        TRIED["estimation.refused"] += 1
+    else:
+        assert np.all((v >= 0) & (v <= 1))
+
+
+test_estimators, test_estimators_slow = _profiles(
+    _prop_estimators, 150, 5000, q=arrays, phidot=arrays,
+    method=st.one_of(st.sampled_from([m for m in METHODS if m != "ORACLE"]), junk),
+    mu_tol=st.one_of(st.floats(0, 1), junk))
+
+
+# ---------------------------------------------------------------------- the command line
+
+FLAGS = {
+    "eval": ["--controllers", "--tracks", "--seed", "--speed-scale", "--max-time", "--out", "--kick-runs", "--no-plots"],
+    "bench-env": ["--steps", "--track", "--substeps", "--seed", "--num-envs", "--vector-steps", "--episode-steps",
+                  "--solver-iterations", "--reference"],
+    "bench-estimators": ["--json", "--points", "--random", "--seed", "--single-calls", "--d2", "--methods"],
+    "sim-paper": ["--driver", "--track", "--speeds", "--seed", "--json", "--plot", "--substeps"],
+    "record-d2": ["--points", "--seed", "--speed-scale", "--out"],
+}
+cli_values = st.one_of(
+    st.integers(-5, 10**7).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(["icr", "twist", "icr,twist", "paper", "circle,nope", "NE", "NE,LS", "IT,NE", "auto", "recorded",
+                     "", "1,16", "0", "-1", "x", "Pendulum-v1", "Nope-v0", "{tmp}/out", "{file}", "{file}/x",
+                     "/proc/x", "{tmp}", "{tmp}/missing/x.json"]),
+    st.text(max_size=8))
+
+
+def _prop_cli(command, flags, tmp_path_factory, capsys_holder):
+    tmp = tmp_path_factory.mktemp("cli")
+    existing = tmp / "existing.txt"
+    existing.write_text("x")
+    TRIED["cli"] += 1
+    argv = [command] + [a.replace("{tmp}", str(tmp)).replace("{file}", str(existing))
+                        for pair in flags for a in pair if a is not None]
+    module = importlib.import_module(_available()[command][0]) if command in _available() else None
+    if module is None:
+        return
+    ran = []
+    real_run = module.run
+    module.run = lambda args: ran.append(args) or 0  # the work itself is not fuzzed, only its entry
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # main returns codes; a SystemExit escaping it is a defect too
+        raise AssertionError(f"SystemExit({exc.code}) escaped main for {shlex.join(argv)}") from None
+    finally:
+        module.run = real_run
+    err = capsys_holder.readouterr().err
+    assert code in (0, 2), (argv, code)
+    if code == 2:
+        TRIED["cli.refused"] += 1
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
+        assert not ran
+    else:
+        assert ran or "--help" in argv
+    assert existing.read_text() == "x"  # nothing written before the work
+
+
+def _cli_test(max_examples):
+    cmd_flags = st.sampled_from(sorted(FLAGS)).flatmap(
+        lambda c: st.tuples(st.just(c), st.lists(st.tuples(st.sampled_from(FLAGS[c] + ["--bogus"]),
+                                                           st.one_of(st.none(), cli_values)), max_size=4)))
+
+    @settings(max_examples=max_examples, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(cf=cmd_flags)
+    def test(cf, tmp_path_factory, capsys):
+        _prop_cli(cf[0], cf[1], tmp_path_factory, capsys)
+
+    return test
+
+
+test_cli_arguments = _cli_test(150)
+test_cli_arguments_slow = pytest.mark.slow(_cli_test(4000))
+
+
+def test_print_counts():
+    """Last in the file: print how many inputs each entry point got (``pytest -s`` shows it)."""
+    if TRIED:
+        print("\nfuzz inputs tried:", dict(sorted(TRIED.items())))
