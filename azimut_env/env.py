@@ -18,7 +18,10 @@ Controller interface (stable names, on ``env.unwrapped``):
 * measurements of the last step: ``measured_beta``, ``measured_phidot``, ``measured_motor_angles``
   ((n,) arrays); ``estimated_eta`` -> (λ̂, μ̂), the IT estimate with the canonical sign.
 * ``track`` (:class:`~azimut_env.tracks.Track`: ``sample``, ``reference_twist``,
-  ``reference_twist_body``, ``query``...) and ``progress`` (s along it [m]).
+  ``reference_twist_body``, ``query``...) and ``progress`` (s along it [m], from the true pose).
+* ``estimated_pose``: the pose (x, y, θ) the observation is computed from: the true pose with
+  ``pose_source="true"``, the odometry + localisation estimate with ``"odometry"``
+  (:mod:`azimut_env.localisation`). Controllers that follow the track should read this one.
 * ground truth for evaluation only: ``true_pose``, ``true_twist``, and ``info`` of each step.
 """
 
@@ -34,6 +37,7 @@ from estimation import estimate_eta
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import AzimutPhysics
+from .localisation import LocalisationParams
 from .task import RESET_OPTIONS, AzimutTask, TaskConfig, observation_layout, resolve_params
 from .tracks import Track
 from .validation import ResetNeeded, check_finite, check_index_list, check_seed
@@ -93,6 +97,19 @@ class AzimutEnv(gym.Env):
     | speed_ref       | 1    | reference progress speed at the current progress              | m/s   |
     | lookahead       | 3K   | K reference points ahead: (x, y) in the chassis frame, Δθ      | m, rad|
     | prev_action     | 2n   | the previous action                                            | -     |
+
+    **What is privileged.** ``lambda_hat``, ``mu_hat``, ``beta``, ``phidot``, ``motor_angle``
+    come from the simulated sensors (noise, quantisation) and the IT estimator; ``speed_ref`` is
+    the track's reference; ``prev_action`` is the agent's own. With ``pose_source="true"`` (the
+    default) ``lateral_error``, ``heading_error``, ``speed_along`` and ``lookahead`` are computed
+    from the **true** chassis pose and velocity (ground truth a real robot does not have; sensor
+    noise does not reach them). With ``pose_source="odometry"`` they are computed from a pose
+    estimate: dead reckoning from the estimated H state and the wheel encoders, corrected by a
+    noisy absolute localisation fix every ``localisation.fix_period_s``
+    (:mod:`azimut_env.localisation`), and ``speed_along`` from the odometry twist. In both modes
+    the reward, the termination, ``progress`` and ``info`` (``pose``, ``twist``, ``eta_true``,
+    ``beta_true``, ``lateral_error``...) use the ground truth; ``info["pose_estimate"]`` is the
+    pose the observation used.
 
     ## Rewards
     Per step, ``reward = progress + lateral + heading + overspeed + slip + internal_force +
@@ -175,6 +192,9 @@ class AzimutEnv(gym.Env):
     * ``action_latency``: command latency k in control periods (default 0): the set-points of an
       action drive the motors k steps later (the motors hold the reset set-points for the first k
       steps of an episode); for sim-to-real work.
+    * ``pose_source``: ``"true"`` (default) or ``"odometry"`` (see "What is privileged");
+      ``localisation``: :class:`~azimut_env.localisation.LocalisationParams` (fix period [s], fix
+      noise [m], [rad]; default 1 s, 2 cm, 0.01 rad).
 
     ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode
     only), ``"start_progress"`` [m], ``"obstacles"`` (for this episode; one that overlaps the
@@ -205,7 +225,8 @@ class AzimutEnv(gym.Env):
                  stall_distance: float = 0.05, time_limit_factor: float = 3.0, action_rate_weight: float = 0.05,
                  off_track_penalty: float = 10.0, max_lateral_error: float = 0.5, lookahead_count: int = 5,
                  lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, solver_iterations: int = 20, action_latency: int = 0) -> None:
+                 render_mode: str | None = None, solver_iterations: int = 20, action_latency: int = 0,
+                 pose_source: str = "true", localisation: LocalisationParams | None = None) -> None:
         params = resolve_params(params, sensors, noise_scale)
         config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
                             domain_randomization=domain_randomization, progress_weight=progress_weight,
@@ -217,7 +238,8 @@ class AzimutEnv(gym.Env):
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
                             max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
                             lookahead_spacing=lookahead_spacing, start_noise=start_noise,
-                            action_latency=action_latency)
+                            action_latency=action_latency, pose_source=pose_source,
+                            localisation=localisation or LocalisationParams())
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
         self.params = params
@@ -298,6 +320,17 @@ class AzimutEnv(gym.Env):
     def progress(self) -> float:
         """Progress s along the track [m] (unwrapped over laps)."""
         return float(self.task.s[0])
+
+    @property
+    def pose_source(self) -> str:
+        """``"true"`` or ``"odometry"``: where the observation's pose comes from."""
+        return self.task.pose_source
+
+    @property
+    def estimated_pose(self) -> np.ndarray:
+        """The pose (x, y, θ) [m, m, rad] the observation was computed from (the true pose with
+        ``pose_source="true"``; dead reckoning + localisation fixes with ``"odometry"``)."""
+        return self.task.pose_estimate(0)
 
     @property
     def true_pose(self) -> np.ndarray:

@@ -22,15 +22,16 @@ the same order whatever N is, so robot i of a batch replays a single env seeded 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
 from numba import njit
 from numba.typed import List as NumbaList
 
-from estimation import estimate_eta, eta_from_twist, steering_from_lambda
+from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_twist, steering_from_lambda
 
+from .localisation import LocalisationParams, check_pose_source
 from .params import RobotParams, SensorParams, _setpoints_row, action_from_setpoints
 from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
 from .sensors import _measure_kernel
@@ -130,6 +131,11 @@ class TaskConfig:
             set-points). Models the transport delay of a real robot's command path for
             sim-to-real work. The observation's ``prev_action`` is the action given, not the
             one being applied.
+        pose_source: ``"true"`` (the observation's tracking errors and look-ahead come from the
+            true pose) or ``"odometry"`` (from dead reckoning corrected by localisation fixes;
+            :mod:`azimut_env.localisation`).
+        localisation: :class:`~azimut_env.localisation.LocalisationParams` (used with
+            ``pose_source="odometry"``).
     """
 
     control_period: float = 0.02
@@ -155,6 +161,8 @@ class TaskConfig:
     lookahead_spacing: float = 0.3
     start_noise: float = 0.02
     action_latency: int = 0
+    pose_source: str = "true"
+    localisation: LocalisationParams = field(default_factory=LocalisationParams)
 
     def __post_init__(self) -> None:
         # every field checked (and stored as its canonical type) here, once, with the field's name
@@ -175,6 +183,9 @@ class TaskConfig:
         fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
         fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
         fix("action_latency", check_int("action_latency", self.action_latency, min_value=0, max_value=1000))
+        check_pose_source(self.pose_source)
+        if not isinstance(self.localisation, LocalisationParams):
+            raise TypeError(f"localisation must be LocalisationParams, got {type(self.localisation).__name__}")
 
     @property
     def weights(self) -> dict[str, float]:
@@ -257,9 +268,9 @@ def _draw_normals_kernel(rngs, rows, out):
 
 
 @njit(cache=True)
-def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds, lam, mu, beta, phidot, motor,
-                       action, prev_action, weights, scales, dt, max_lat, lo, hi, v_along, reward, terms, off_track,
-                       finished, obs):
+def _reward_obs_kernel(rows, summ, track_out, look, obs_track, obs_look, obs_vel, s_prev, lengths, max_speeds, lam,
+                       mu, beta, phidot, motor, action, prev_action, weights, scales, dt, max_lat, lo, hi, v_along,
+                       reward, terms, off_track, finished, obs):
     """For the robots where ``rows`` is True: speed along the path, reward terms and reward,
     off-track and finished flags, and the observation (layout of :func:`observation_layout`;
     non-finite values become 0, all clipped to [lo, hi]); prev_action takes the action.
@@ -268,7 +279,11 @@ def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds,
     magnitudes): progress w·clip(Δs, −v_max dt, v_ref dt)/(v_max dt) (backward jumps of the
     projection clipped to one step at full speed); lateral and heading −w·(1 − exp(−|e|/scale));
     overspeed −w·max(0, v_along − v_ref)/v_max; slip −min(w·P_slip, cap); internal force
-    −min(w·F_int, cap); action rate −w‖a − a_prev‖²; off-track −penalty."""
+    −min(w·F_int, cap); action rate −w‖a − a_prev‖²; off-track −penalty.
+
+    The reward and flags use the true track state (``track_out``, ``summ``); the observation's
+    tracking errors, speeds and look-ahead use ``obs_track`` (N, 5), ``obs_look`` (N, K, 3) and the
+    world velocity ``obs_vel`` (N, 2) of the pose source (the same arrays when it is the truth)."""
     n = beta.shape[1]
     for i in range(rows.shape[0]):
         if not rows[i]:
@@ -308,8 +323,10 @@ def _reward_obs_kernel(rows, summ, track_out, look, s_prev, lengths, max_speeds,
         reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7
         for j in range(action.shape[1]):
             prev_action[i, j] = action[i, j]
-        _fill_obs_row(obs[i], lam[i], mu[i], beta[i], phidot[i], motor[i], lat, head, va, v_ref, look[i],
-                      prev_action[i], lo, hi, n)
+        psi_o = obs_track[i, 4]
+        va_o = obs_vel[i, 0] * math.cos(psi_o) + obs_vel[i, 1] * math.sin(psi_o)
+        _fill_obs_row(obs[i], lam[i], mu[i], beta[i], phidot[i], motor[i], obs_track[i, 1], obs_track[i, 2], va_o,
+                      obs_track[i, 3], obs_look[i], prev_action[i], lo, hi, n)
 
 
 @njit(cache=True)
@@ -444,6 +461,19 @@ class AzimutTask:
         self._cmd_fifo = np.zeros((N, config.action_latency, n, 2))
         self._cmd_new = np.zeros((N, n, 2))
         self._meas = np.empty((N, 3, n))
+        # the pose source (azimut_env.localisation): with "odometry", the pose estimate and the
+        # track state seen from it; with "true" these stay unused and the observation reads the truth
+        self.pose_source = config.pose_source
+        self._odometry = config.pose_source == "odometry"
+        self._fix_every = config.localisation.fix_every(config.control_period)
+        loc = config.localisation
+        self._fix_sigma = np.array([loc.fix_noise_xy_m, loc.fix_noise_xy_m, loc.fix_noise_theta_rad])
+        self.pose_est = np.zeros((N, 3))
+        self.beta_m_prev = np.zeros((N, n))
+        self.track_out_est = np.zeros((N, 5))
+        self.look_est = np.zeros((N, K, 3))
+        self.vel_est = np.zeros((N, 2))
+        self._loc_rngs: list[np.random.Generator | None] = [None] * N
 
     # ------------------------------------------------------------------ reset
 
@@ -600,8 +630,19 @@ class AzimutTask:
         psi = self.track_out[i, 4]
         summ = phys.summary[i]
         self.v_along[i] = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
+        obs_track, obs_look, va = self.track_out[i], self.look[i], self.v_along[i]
+        if self._odometry:
+            # the localisation system's generator, spawned from the robot's; the first fix now
+            self._loc_rngs[i] = np.random.default_rng(int(rng.integers(0, 2**63 - 1)))
+            self.beta_m_prev[i] = self.beta_m[i]
+            self.pose_est[i] = self._fix(i)
+            self.vel_est[i] = 0.0
+            s_, look = track.query_many(self.pose_est[sl], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+            self.track_out_est[i] = s_[0]
+            self.look_est[i] = look[0]
+            obs_track, obs_look, va = self.track_out_est[i], self.look_est[i], 0.0
         _fill_obs_row(self.obs[i], self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
-                      self.motor_m[i], self.lat[i], self.head[i], self.v_along[i], self.v_ref[i], self.look[i],
+                      self.motor_m[i], obs_track[1], obs_track[2], va, obs_track[3], obs_look,
                       self.prev_action[i], self.obs_low, self.obs_high, n)
 
     def reference_beta(self, track: Track, s: float, theta: float) -> np.ndarray:
@@ -704,8 +745,9 @@ class AzimutTask:
             for a, v in zip((self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat, self.head,
                              self.v_ref, self.track_out, self.look), saved):
                 a[keep] = v
-        _reward_obs_kernel(rows, self.physics.summary, self.track_out, self.look, s_prev, self.track_length,
-                           self.track_max_speed, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
+        obs_track, obs_look, obs_vel = self._pose_source_state(rows)
+        _reward_obs_kernel(rows, self.physics.summary, self.track_out, self.look, obs_track, obs_look, obs_vel, s_prev,
+                           self.track_length, self.track_max_speed, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
                            action, self.prev_action, self._weights, self._scales, self.config.control_period,
                            self.config.max_lateral_error, self.obs_low, self.obs_high, self.v_along, self.reward,
                            self.reward_terms, self.off_track, self.finished, self.obs)
@@ -751,6 +793,42 @@ class AzimutTask:
         self.beta_est[rows] = beta_est
         self.qua[rows] = qua
 
+    def _fix(self, i: int) -> np.ndarray:
+        """A localisation fix of robot i: its true pose plus Gaussian noise (draws 3 normals)."""
+        return self.physics.summary[i, :3] + self._fix_sigma * self._loc_rngs[i].standard_normal(3)
+
+    def pose_estimate(self, i: int) -> np.ndarray:
+        """Robot i's pose (x, y, θ) as the observation sees it: the estimate with
+        ``pose_source="odometry"``, the true pose otherwise."""
+        return self.pose_est[i].copy() if self._odometry else self.physics.summary[i, :3].copy()
+
+    def _pose_source_state(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The track state (N, 5), look-ahead (N, K, 3) and world velocity (N, 2) that the
+        observation uses: the true ones, or (odometry) those of the pose estimate, which this
+        advances for ``rows`` by one control period of dead reckoning (and a fix where one is due)."""
+        if not self._odometry:
+            return self.track_out, self.look, self.physics.summary[:, 3:5]
+        cfg, geom = self.config, self.params.geometry
+        dt = cfg.control_period
+        idx = np.flatnonzero(rows)
+        beta_rate = (self.beta_m[idx] - self.beta_m_prev[idx]) / dt
+        twist = odometry_twist(self.lam_hat[idx], self.phidot_m[idx], self.beta_m[idx], beta_rate, geom)
+        pose = integrate_pose(self.pose_est[idx], twist, dt)
+        self.beta_m_prev[idx] = self.beta_m[idx]
+        th = pose[:, 2] - 0.5 * twist[:, 2] * dt  # the heading at mid-period
+        c, sn = np.cos(th), np.sin(th)
+        self.vel_est[idx, 0] = c * twist[:, 0] - sn * twist[:, 1]
+        self.vel_est[idx, 1] = sn * twist[:, 0] + c * twist[:, 1]
+        self.pose_est[idx] = pose
+        if self._fix_every > 0:
+            for i in idx[self.steps[idx] % self._fix_every == 0]:
+                self.pose_est[i] = self._fix(int(i))
+        out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho, self.pose_est,
+                                 self.track_out_est[:, 0].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
+        self.track_out_est[idx] = out[idx]
+        self.look_est[idx] = look[idx]
+        return self.track_out_est, self.look_est, self.vel_est
+
     def _query_tracks(self, s_hint: np.ndarray) -> None:
         """Every robot's track state, each on its own track, in one compiled call."""
         cfg = self.config
@@ -795,6 +873,7 @@ class AzimutTask:
         terms = {name: float(self.reward_terms[i, j]) for j, name in enumerate(REWARD_TERMS)} if with_terms else {}
         return {
             "pose": summ[0:3].copy(),
+            "pose_estimate": self.pose_estimate(i),
             "twist": twist,
             "eta_true": (lam, mu),
             "eta_hat": (self.lam_hat[i].copy(), float(self.mu_hat[i])),

@@ -27,6 +27,7 @@ from numba.typed import List as NumbaList
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import AzimutPhysics
+from .localisation import LocalisationParams
 from .task import REWARD_TERMS, AzimutTask, TaskConfig, resolve_params
 from .tracks import Track
 from .validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
@@ -80,7 +81,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     ``domain_randomization`` (drawn per sub-env and reset), reward weights,
     ``max_lateral_error``, ``lookahead_count``, ``lookahead_spacing``, ``obstacles`` (shared by all
     sub-envs, at the same world positions), ``start_noise``, ``render_mode``, ``action_latency``
-    (a FIFO per sub-env, emptied at its reset).
+    (a FIFO per sub-env, emptied at its reset), ``pose_source``, ``localisation`` (each sub-env has
+    its own pose estimate and fix noise, drawn from its generator).
 
     ``reset(seed=..., options=...)``: ``seed`` an int (sub-env i gets ``seed + i``) or a list of
     ``num_envs`` ints/None; ``options`` a dict applied to every reset sub-env, or a sequence of
@@ -109,7 +111,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                  lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
                  render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
-                 action_latency: int = 0) -> None:
+                 action_latency: int = 0, pose_source: str = "true", localisation: LocalisationParams | None = None) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
@@ -131,7 +133,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                             action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
                             max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
                             lookahead_spacing=lookahead_spacing, start_noise=start_noise,
-                            action_latency=action_latency)
+                            action_latency=action_latency, pose_source=pose_source,
+                            localisation=localisation or LocalisationParams())
         self.num_envs = N = int(num_envs)
         self.params = params
         self.config = config
@@ -216,6 +219,18 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     def progress(self) -> np.ndarray:
         """Progress s (N,) along each sub-env's track [m]."""
         return self.task.s.copy()
+
+    @property
+    def pose_source(self) -> str:
+        """``"true"`` or ``"odometry"``: where the observations' poses come from (see
+        :class:`~azimut_env.env.AzimutEnv`, "What is privileged")."""
+        return self.task.pose_source
+
+    @property
+    def estimated_pose(self) -> np.ndarray:
+        """(N, 3) poses the observations were computed from (the true poses with
+        ``pose_source="true"``; dead reckoning + localisation fixes with ``"odometry"``)."""
+        return np.stack([self.task.pose_estimate(i) for i in range(self.num_envs)])
 
     @property
     def true_pose(self) -> np.ndarray:

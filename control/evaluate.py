@@ -147,7 +147,7 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     for k in range(steps):
         lam_hat, mu_hat = env.estimated_eta
         beta_m, phidot_m = env.measured_beta, env.measured_phidot
-        target = follower.step(info["pose"])
+        target = follower.step(env.estimated_pose)  # the true pose unless pose_source="odometry"
         if controller == "icr":
             cmd = ctl.step(lam_hat, mu_hat, beta_m, phidot_m, target.lam, target.mu)
             mode = int(cmd.info["mode"])

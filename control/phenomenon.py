@@ -85,7 +85,7 @@ class FeedForwardController:
         """Set-points (β_c [rad], φ̇_c [rad/s]) for the env's current state (uses the env's pose
         estimate, :attr:`AzimutEnv.estimated_pose`, the true pose unless ``pose_source="odometry"``)."""
         track, geom = env.track, env.geometry
-        x, y, th = env.true_pose
+        x, y, th = env.estimated_pose
         s = env.progress
         ref = track.sample(s)
         tw = track.reference_twist(s) * self.speed_scale

@@ -25,7 +25,9 @@ from .hrep import (
     twist_from_eta,
 )
 from .kinematics import (
+    integrate_pose,
     mu_from_wheel_speeds,
+    odometry_twist,
     propulsion_circle_normals,
     s_perp,
     singular_wheels,
@@ -63,8 +65,10 @@ __all__ = [
     "lambda_distance",
     "lambda_from_chart",
     "lambda_from_plane",
+    "integrate_pose",
     "mu_from_wheel_speeds",
     "normalize",
+    "odometry_twist",
     "plane_from_lambda",
     "point_velocity",
     "propulsion_circle_normals",

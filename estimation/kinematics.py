@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import RobotGeometry
-from .hrep import _canonical_eta_sign
+from .hrep import _canonical_eta_sign, twist_from_eta
 from .quality import _quality_from_d2
 
 __all__ = [
@@ -51,6 +51,8 @@ __all__ = [
     "wheel_speeds",
     "mu_from_wheel_speeds",
     "twist_from_wheels",
+    "odometry_twist",
+    "integrate_pose",
     "steering_path_derivatives",
     "wheel_speed_path_derivative",
 ]
@@ -413,6 +415,41 @@ def twist_from_wheels(beta, beta_rate, phidot, geom: RobotGeometry) -> tuple[np.
     a, y = np.concatenate(rows), np.concatenate(rhs)
     twist, *_ = np.linalg.lstsq(a, y, rcond=None)
     return twist, float(np.linalg.norm(a @ twist - y))
+
+
+def odometry_twist(lam, phidot, beta, beta_rate, geom: RobotGeometry) -> np.ndarray:
+    """Odometry in the H representation, batched: the chassis twist (ẋ, ẏ, θ̇) in R [m/s, m/s,
+    rad/s] from an ICR estimate λ (N, 3) and the wheel states β, β̇, φ̇ (N, n).
+
+    μ is the least-squares fit of r_k φ̇_k + b_k β̇_k = μ c_k(λ, β_k) (:func:`mu_from_wheel_speeds`;
+    the b β̇ term removes the steer-to-drive coupling, so wheels turned in place at rest give
+    μ ≈ 0) and ξ̇ = μ (v, −u, w) (``hrep.twist_from_eta``). With λ from an ICR estimator this is
+    the dead-reckoning twist of a robot whose propulsion axes need not concur; for one robot whose
+    axes concur it equals :func:`twist_from_wheels`.
+    """
+    mu = mu_from_wheel_speeds(lam, phidot, geom, beta=beta, beta_rate=beta_rate)
+    return twist_from_eta(lam, mu)
+
+
+def integrate_pose(pose, twist, dt: float) -> np.ndarray:
+    """Dead reckoning, batched: the world pose (x, y, θ) (..., 3) [m, m, rad] after moving for
+    ``dt`` [s] with the constant chassis-frame twist (ẋ, ẏ, θ̇) (..., 3), by the exact SE(2)
+    exponential (a circular arc; a straight segment when θ̇ = 0)::
+
+        d = [[sin a, −(1 − cos a)], [1 − cos a, sin a]] / a · (ẋ, ẏ) dt,   a = θ̇ dt
+        (x, y) += R(θ) d,   θ += a
+    """
+    pose = np.asarray(pose, dtype=np.float64)
+    twist = np.asarray(twist, dtype=np.float64)
+    a = twist[..., 2] * dt
+    small = np.abs(a) < 1e-6
+    a_safe = np.where(small, 1.0, a)
+    s_a = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)  # sin a / a
+    c_a = np.where(small, 0.5 * a, (1.0 - np.cos(a_safe)) / a_safe)  # (1 − cos a) / a
+    dx = (s_a * twist[..., 0] - c_a * twist[..., 1]) * dt
+    dy = (c_a * twist[..., 0] + s_a * twist[..., 1]) * dt
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+    return np.stack([pose[..., 0] + c * dx - s * dy, pose[..., 1] + s * dx + c * dy, pose[..., 2] + a], axis=-1)
 
 
 def steering_path_derivatives(lam, dlam, ddlam, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:

@@ -56,6 +56,15 @@ def test_equivalence_with_single_envs_500_steps_with_resets():
     assert counts["terminated"] > 0 and counts["truncated"] > 0 and counts["resets"] >= 6
 
 
+def test_equivalence_with_odometry_pose_source():
+    # the pose estimate (dead reckoning + a noisy fix every 5 steps) replays bit for bit, resets included
+    from azimut_env.localisation import LocalisationParams
+
+    counts = _run_equivalence(3, 300, 60, seed=4, track="random", max_lateral_error=0.15, pose_source="odometry",
+                              localisation=LocalisationParams(fix_period_s=0.1))
+    assert counts["resets"] >= 3
+
+
 @pytest.mark.slow
 def test_equivalence_many_envs_paper_track():
     counts = _run_equivalence(16, 500, 150, seed=5, track="paper", max_lateral_error=0.2)
