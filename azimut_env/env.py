@@ -240,7 +240,8 @@ class AzimutEnv(gym.Env):
                             lookahead_spacing=lookahead_spacing, start_noise=start_noise,
                             action_latency=action_latency, pose_source=pose_source,
                             localisation=localisation or LocalisationParams())
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+        if render_mode is not None and (not isinstance(render_mode, str)
+                                        or render_mode not in self.metadata["render_modes"]):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
         self.params = params
         self.config = config

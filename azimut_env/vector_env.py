@@ -112,15 +112,16 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
                  render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
                  action_latency: int = 0, pose_source: str = "true", localisation: LocalisationParams | None = None) -> None:
-        if int(num_envs) != num_envs or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
-            raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
+        num_envs = check_int("num_envs", num_envs, min_value=1, max_value=1_000_000)
+        if max_episode_steps is not None:
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, min_value=1)
+        render_index = check_int("render_index", render_index, min_value=0, max_value=num_envs - 1)
         try:
             autoreset_mode = AutoresetMode(autoreset_mode)
-        except ValueError:
+        except (ValueError, TypeError):
             raise ValueError(f"autoreset_mode must be an AutoresetMode, got {autoreset_mode!r}") from None
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+        if render_mode is not None and (not isinstance(render_mode, str)
+                                        or render_mode not in self.metadata["render_modes"]):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
         params = resolve_params(params, sensors, noise_scale)
         config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,

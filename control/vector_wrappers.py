@@ -104,7 +104,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
                                 lambda_rate_max=lambda_rate_max, mu_accel=mu_accel, target_rate=target_rate,
                                 cross_push=cross_push).items():
             check_positive(name, value)
-        min_norm = check_range("min_norm", min_norm, 0.0, 1.0, hi_open=True)
+        min_norm = check_range("min_norm", min_norm, 0.0, 1.0, lo_open=True, hi_open=True)
         check_bool("shape_targets", shape_targets)
         for name, value, kind in (("icr_config", icr_config, ICRControllerConfig),
                                   ("swerve_config", swerve_config, SwerveConfig),

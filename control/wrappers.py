@@ -47,7 +47,7 @@ def icr_target_from_action(action, mu_max: float, min_norm: float) -> tuple[np.n
     μ_d = a[3]·mu_max [m/s]; below ``min_norm`` the action means "hold": λ_d = (0, 0, 1), μ_d = 0."""
     a = np.asarray(action, dtype=np.float64)
     norm = np.linalg.norm(a[..., :3], axis=-1)
-    small = norm < min_norm
+    small = (norm < min_norm) | (norm == 0.0)  # a zero direction is "hold" whatever min_norm
     lam_d = np.where(small[..., None], np.array([0.0, 0.0, 1.0]), a[..., :3] / np.where(small, 1.0, norm)[..., None])
     mu_d = np.where(small, 0.0, a[..., 3] * mu_max)
     return lam_d, mu_d
@@ -138,7 +138,7 @@ class ICRTargetAction(_ControllerWrapper):
                  cross_push: float = 0.6) -> None:
         super().__init__(env, "icr", icr_config, None, shape_targets, target_rate, cross_push)
         self.mu_max = check_positive("mu_max", mu_max)
-        self.min_norm = check_range("min_norm", min_norm, 0.0, 1.0, hi_open=True)
+        self.min_norm = check_range("min_norm", min_norm, 0.0, 1.0, lo_open=True, hi_open=True)
         self.action_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
 
     def step(self, action):

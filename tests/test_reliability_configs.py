@@ -90,3 +90,13 @@ def test_validation_helpers():
     assert check_choice("c", "a", ("a", "b")) == "a"
     with pytest.raises(ValueError):
         check_choice("c", True, (1, 2))
+
+
+def test_icr_target_zero_direction_is_hold_not_nan():
+    """Found by the property tests: min_norm=0 with a zero direction divided 0/0 (NaN target)."""
+    from control.wrappers import icr_target_from_action
+
+    lam, mu = icr_target_from_action(np.array([0.0, 0.0, 0.0, 0.3]), 1.0, 0.0)
+    assert np.array_equal(lam, [0.0, 0.0, 1.0]) and mu == 0.0
+    with pytest.raises(ValueError):
+        ICRTargetAction(AzimutEnv(), min_norm=0.0)

@@ -189,6 +189,76 @@ test_vector_reset_refusal, test_vector_reset_refusal_slow = _profiles(
     mask=st.one_of(st.none(), junk, st.lists(st.booleans(), min_size=3, max_size=3).map(np.array)))
 
 
+VECTOR_KWARGS = ["num_envs", "max_episode_steps", "autoreset_mode", "render_index", "track", "obstacles",
+                 "substeps", "control_period", "lookahead_count", "sensors", "params"]
+
+
+def _prop_vector_constructor_and_step(name, value, action):
+    TRIED["vector.__init__"] += 1
+    kwargs = {"num_envs": 2, "track": SMALL_TRACK}
+    kwargs[name] = value
+    try:
+        env = AzimutVectorEnv(**kwargs)
+    except CLEAR:
+        TRIED["vector.__init__.refused"] += 1
+        return
+    if env.num_envs > 64 or env.config.substeps * env.config.solver_iterations > 2000:
+        return
+    env.reset(seed=3)
+    ref = AzimutVectorEnv(**kwargs)
+    ref.reset(seed=3)
+    TRIED["vector.step"] += 1
+    try:
+        env.step(action)
+    except CLEAR:
+        TRIED["vector.step.refused"] += 1
+    else:
+        return
+    good = np.zeros((env.num_envs, 2 * env.n), np.float32)
+    a, b = env.step(good), ref.step(good)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+test_vector_constructor_and_step, test_vector_constructor_and_step_slow = _profiles(
+    _prop_vector_constructor_and_step, 30, 800, name=st.sampled_from(VECTOR_KWARGS),
+    value=st.one_of(junk, st.integers(-3, 70), st.sampled_from(["next_step", "same_step", "disabled", "human"])),
+    action=st.one_of(junk, st.lists(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=8,
+                                             max_size=8), min_size=1, max_size=3).map(np.array)))
+
+
+def _prop_wrappers(kind, kwargs, action):
+    from control.wrappers import ICRTargetAction, TwistAction
+
+    TRIED["wrapper"] += 1
+    cls = ICRTargetAction if kind == "icr" else TwistAction
+    try:
+        env = cls(AzimutEnv(track=SMALL_TRACK), **kwargs)
+        ref = cls(AzimutEnv(track=SMALL_TRACK), **kwargs)
+    except CLEAR:
+        TRIED["wrapper.refused"] += 1
+        return
+    env.reset(seed=2)
+    ref.reset(seed=2)
+    try:
+        env.step(action)
+    except CLEAR:
+        TRIED["wrapper.refused"] += 1
+    else:
+        return
+    good = np.zeros(env.action_space.shape, np.float32)
+    good[-1] = 0.3
+    assert np.array_equal(env.step(good)[0], ref.step(good)[0])
+
+
+wrapper_kwargs = st.fixed_dictionaries({}, optional={
+    "mu_max": st.one_of(st.floats(0.01, 3), junk), "min_norm": st.one_of(st.floats(0, 1), junk),
+    "shape_targets": st.one_of(st.booleans(), junk), "target_rate": st.one_of(st.floats(0.1, 10), junk)})
+test_wrappers, test_wrappers_slow = _profiles(
+    _prop_wrappers, 20, 500, kind=st.sampled_from(["icr", "twist"]),
+    kwargs=wrapper_kwargs.map(lambda d: d), action=st.one_of(junk, st.lists(st.floats(allow_nan=True), min_size=3,
+                                                                              max_size=4).map(np.array)))
+
+
 # ---------------------------------------------------------------------- estimators
 
 arrays = st.one_of(
@@ -292,7 +362,9 @@ test_cli_arguments = _cli_test(150)
 test_cli_arguments_slow = pytest.mark.slow(_cli_test(4000))
 
 
-def test_print_counts():
-    """Last in the file: print how many inputs each entry point got (``pytest -s`` shows it)."""
+@pytest.fixture(scope="module", autouse=True)
+def _print_counts():
+    """After the module: print how many inputs each entry point got (``pytest -s`` shows it)."""
+    yield
     if TRIED:
         print("\nfuzz inputs tried:", dict(sorted(TRIED.items())))
