@@ -96,10 +96,11 @@ import pymunk
 import pymunk.batch as pb
 from numba import njit
 
-from .actuators import spring_torque_kernel, steer_motor_kernel, wheel_spin_kernel
+from .actuators import spring_torque_kernel, steer_motor_kernel, wheel_spin_step_kernel
 from .params import RobotParams
+from .tire import TS, stability_numbers, tire_step_kernel
 
-__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS"]
+__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS", "TS"]
 
 _STATE_FIELDS = (pb.BodyFields.POSITION | pb.BodyFields.ANGLE | pb.BodyFields.VELOCITY
                  | pb.BodyFields.ANGULAR_VELOCITY)
@@ -111,11 +112,18 @@ _CAT_OBSTACLE = 0b10
 
 
 class WP:
-    """Column indices of the per-wheel parameter array ``wheel_params`` (N, n, WP.COUNT)."""
+    """Column indices of the per-wheel parameter array ``wheel_params`` (N, n, WP.COUNT).
+
+    LOAD is the static normal load of the robot's current mass [N]; RR_TORQUE the rolling
+    resistance coefficient C_rr (torque C_rr N r); C_KAPPA, C_ALPHA the tire stiffnesses per unit
+    load; SIGMA_LONG, SIGMA_LAT the relaxation lengths [m]; HALF_LEN the contact half-length a
+    [m]; DAMP_TIME the bristle damping time τ_d [s] (``params.TireParams``). KNEE holds the
+    legacy viscous tire's slip knee, which the substep no longer uses."""
 
     B, R, ALPHA, LOAD, MU, KNEE, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
-        STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD = range(22)
-    COUNT = 22
+        STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD, \
+        C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME = range(28)
+    COUNT = 28
 
 
 class MS:
@@ -189,13 +197,14 @@ class BlowUpLimits:
 
 
 @njit(cache=True)
-def _step_kernel(state, js, ms, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
+def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
                  n, dt, substeps, integrate):
     """``substeps`` substeps of every robot (see the module docstring for the equations).
 
     state: (rows, 6) chassis (x, y, θ, vx, vy, θ̇) in the world, robot i at row i, updated in
     place (velocities always; positions too when ``integrate``, else pymunk moves the bodies).
-    js (N, n, JS), ms (N, n, MS): joint and motor states, updated. cmd (N, n, 2): set-points.
+    js (N, n, JS), ms (N, n, MS), ts (N, n, TS): joint, motor and tire states, updated. cmd
+    (N, n, 2): set-points.
     wp (N, n, WP): parameters. en (N,): motors on. acc (N, n, 4): accumulates (ΣFx, ΣFy, Σ slip
     power, ΣF_lat) per wheel. body (N, 2): (M, I). accel (N, 2): chassis acceleration in R from
     the tire forces at the last substep (load transfer), updated. lmap (n, 3): the load map.
@@ -256,10 +265,14 @@ def _step_kernel(state, js, ms, cmd, wp, en, acc, body, accel, axis_xy, lmap, co
                     load -= com_h * mass * (lmap[k, 1] * ax_r + lmap[k, 2] * ay_r)
                     if load < 0.0:
                         load = 0.0
-                mu_n = p[4] * load
-                phidot, f_long, f_lat, s_long = wheel_spin_kernel(
-                    ms[i, k, 3], ref, v_roll, v_lat, on, r, p[9], p[10], p[18], p[11],
-                    p[12] * load * r, p[13], mu_n, p[5], dt)
+                # tire (brush model with relaxation; tire.tire_step_kernel) and wheel spin
+                phidot = ms[i, k, 3]
+                s_long = v_roll - r * phidot
+                f_long, f_lat, m_align, m_scrub, ts[i, k, 0], ts[i, k, 1], ts[i, k, 2] = tire_step_kernel(
+                    s_long, v_lat, v_roll, wm, load, ts[i, k, 0], ts[i, k, 1], ts[i, k, 2],
+                    p[4], p[22], p[23], p[24], p[25], p[26], p[27], dt)
+                phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[9], p[10], p[18], p[11],
+                                                p[12] * load * r, p[13], dt)
                 ms[i, k, 2] = ref
                 ms[i, k, 3] = phidot
                 ms[i, k, 4] += phidot * dt
@@ -268,11 +281,12 @@ def _step_kernel(state, js, ms, cmd, wp, en, acc, body, accel, axis_xy, lmap, co
                 fx_sum += fx
                 fy_sum += fy
                 tau_c += axw * fy - ayw * fx - tau_s
-                tau_m = tau_s + b * (cg * fy - sg * fx)
+                # on the module about A_k: spring, the force's moment −b F_long, aligning and scrub couples
+                tau_m = tau_s - b * f_long + m_align + m_scrub
                 omega_new[k] = wm + dt * tau_m / p[21]
                 acc[i, k, 0] += fx
                 acc[i, k, 1] += fy
-                acc[i, k, 2] += -(f_long * s_long + f_lat * v_lat)
+                acc[i, k, 2] += abs(f_long * s_long + f_lat * v_lat)
                 acc[i, k, 3] += f_lat
             # chassis velocities (symplectic Euler: positions move with the new velocities)
             vx += dt * fx_sum / mass
@@ -476,6 +490,8 @@ class AzimutPhysics:
         self.wheel_params = self._default_wheel_params()
         self.motor_state = np.zeros((self.n_robots, self.n, MS.COUNT))
         self.joint_state = np.zeros((self.n_robots, self.n, JS.COUNT))
+        #: (N, n, TS.COUNT) tire states (contact patch deflections u_long, u_lat [m], twist [rad])
+        self.tire_state = np.zeros((self.n_robots, self.n, TS.COUNT))
         self.commands = np.zeros((self.n_robots, self.n, 2))
         self.enabled = np.ones(self.n_robots, dtype=np.bool_)
         self.acc = np.zeros((self.n_robots, self.n, 4))
@@ -493,26 +509,30 @@ class AzimutPhysics:
 
     # ------------------------------------------------------------------ construction
 
-    def stability_figures(self) -> dict[str, float]:
-        """The dimensionless rate·dt figures of the stability budget (module docstring) for these
+    def stability_figures(self) -> dict[str, tuple[float, float]]:
+        """The dimensionless figures of the stability budget (module docstring) for these
         parameters and this substep, each with its bound: ``{name: (value, bound)}``."""
         p, g, dt = self.params, self.params.geometry, self.dt
-        loads = p.static_normal_loads()
-        c = p.tire.friction * loads.max() / p.tire.slip_knee  # tire damping [N·s/m] per wheel
+        load = float(p.static_normal_loads().max())
         i_m = p.steering.module_inertia
-        mass = p.total_mass
-        inertia = float(self._body_inertia(p.chassis.mass)[1])
+        mass, inertia = (float(v) for v in self._body_inertia(p.chassis.mass))
         reach2 = float(np.max((g.l + np.abs(g.b)) ** 2))
+        # the smallest mass each contact direction drives: the wheel spin along d; across, the
+        # module about its axis (I_m/b²) or the chassis' share (translation, rotation)
+        m_long = float(np.min(p.wheel.inertia / g.r ** 2))
+        b2 = float(np.max(g.b ** 2))
+        m_lat = min(i_m / b2 if b2 > 0 else math.inf, mass / self.n, inertia / (self.n * reach2))
+        tire = stability_numbers(p.tire, load, dt, m_long, m_lat, i_m)
         ext = [float(np.ptp(g.axis_xy[:, 0])), float(np.ptp(g.axis_xy[:, 1]))]
         half = min(e for e in ext if e > 0) / 2.0
-        return {
-            "tire_on_steering": (c * max(float(np.max(g.b ** 2)), 1e-6) / i_m * dt, 1.5),
-            "tire_on_chassis_translation": (self.n * c / mass * dt, 1.5),
-            "tire_on_chassis_rotation": (self.n * c * reach2 / inertia * dt, 1.5),
-            "spring_omega_dt": (math.sqrt(p.steering.stiffness / i_m) * dt, 0.5),
-            "spring_damping_dt": (p.steering.damping / i_m * dt, 1.0),
-            "load_transfer_gain": (p.tire.friction * p.chassis.com_height / half, 1.0),
-        }
+        out = {}
+        for d in ("long", "lat", "twist"):
+            out[f"tire_{d}_damping"] = (tire[f"{d}_a"], 1.5)
+            out[f"tire_{d}_margin"] = (tire[f"{d}_margin"], 3.0)
+        out["spring_omega_dt"] = (math.sqrt(p.steering.stiffness / i_m) * dt, 0.5)
+        out["spring_damping_dt"] = (p.steering.damping / i_m * dt, 1.0)
+        out["load_transfer_gain"] = (p.tire.friction * p.chassis.com_height / half, 1.0)
+        return out
 
     def _check_stability(self) -> None:
         """Refuse parameter/substep combinations past the stability budget (module docstring)."""
@@ -557,6 +577,13 @@ class AzimutPhysics:
         wp[..., WP.STEER_MIN] = lim.steer_min
         wp[..., WP.STEER_MAX] = lim.steer_max
         wp[..., WP.I_MOD] = p.steering.module_inertia
+        t = p.tire
+        wp[..., WP.C_KAPPA] = t.longitudinal_stiffness
+        wp[..., WP.C_ALPHA] = t.cornering_stiffness
+        wp[..., WP.SIGMA_LONG] = t.longitudinal_relaxation_length
+        wp[..., WP.SIGMA_LAT] = t.relaxation_length
+        wp[..., WP.HALF_LEN] = t.contact_half_length
+        wp[..., WP.DAMP_TIME] = t.damping_time
         return wp
 
     def _build_space(self) -> None:
@@ -798,6 +825,7 @@ class AzimutPhysics:
         ch.torque = 0.0
         self.joint_state[robot, :, JS.BETA] = beta
         self.joint_state[robot, :, JS.OMEGA] = w
+        self.tire_state[robot] = 0.0  # unloaded patches: a rolling start builds its slip by distance
         self.chassis_accel[robot] = 0.0
         # wheel spins that roll without slip: r φ̇ = v(P)·d
         gam = th + g.alpha + beta
@@ -866,7 +894,7 @@ class AzimutPhysics:
         (``azimut bench-env``'s split)."""
         self.acc[:] = 0.0
         p = self.params
-        args = (self.joint_state, self.motor_state, self.commands, self.wheel_params, self.enabled, self.acc,
+        args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled, self.acc,
                 self.body_inertia, self.chassis_accel, self._axis_xy, self._load_map, float(p.chassis.com_height),
                 float(p.gravity), float(p.steering.stop_restitution), self.n, self.dt)
         tm = times
@@ -982,7 +1010,7 @@ class AzimutPhysics:
 
     def energy(self) -> np.ndarray:
         """(N,) kinetic energy (chassis with the module masses, module rotations, wheel spins)
-        plus steering spring energy [J]."""
+        plus the elastic energy of the steering springs and the tires' contact patches [J]."""
         st = self._state[: self.n_robots]
         m, inertia = self.body_inertia[:, 0], self.body_inertia[:, 1]
         e = 0.5 * m * (st[:, 3] ** 2 + st[:, 4] ** 2) + 0.5 * inertia * st[:, 5] ** 2
@@ -990,6 +1018,14 @@ class AzimutPhysics:
         e += 0.5 * np.sum(wp[..., WP.I_MOD] * self.joint_state[..., JS.OMEGA] ** 2, axis=1)
         e += 0.5 * np.sum(wp[..., WP.I_W] * self.motor_state[..., MS.PHIDOT] ** 2, axis=1)
         e += 0.5 * np.sum(wp[..., WP.K_S] * (self.motor_state[..., MS.THETA] - self.joint_state[..., JS.BETA]) ** 2,
+                          axis=1)
+        # the tire's contact springs: k_x = C_κ/σ_κ, k_y = C_α/σ_α, twist k_y a²/2 (tire module)
+        loads = self.normal_loads()
+        ts = self.tire_state
+        k_x = wp[..., WP.C_KAPPA] * loads / wp[..., WP.SIGMA_LONG]
+        k_y = wp[..., WP.C_ALPHA] * loads / wp[..., WP.SIGMA_LAT]
+        k_t = 0.5 * k_y * wp[..., WP.HALF_LEN] ** 2
+        e += 0.5 * np.sum(k_x * ts[..., TS.U_LONG] ** 2 + k_y * ts[..., TS.U_LAT] ** 2 + k_t * ts[..., TS.TWIST] ** 2,
                           axis=1)
         return e
 
