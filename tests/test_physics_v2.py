@@ -152,9 +152,13 @@ def test_stability_budget_is_enforced_at_construction():
     AzimutPhysics(RobotParams(steering=SteeringParams(stiffness=6000.0)), substeps=40)
     with pytest.raises(ValueError, match="load_transfer_gain"):
         AzimutPhysics(RobotParams(chassis=ChassisParams(com_height=0.3)))
-    with pytest.raises(ValueError, match="tire_lat_margin"):
-        AzimutPhysics(RobotParams(tire=TireParams(relaxation_length=0.001)))
-    AzimutPhysics(RobotParams(tire=TireParams(relaxation_length=0.001)), substeps=64)
+    with pytest.raises(ValueError, match="tire_long_margin"):
+        AzimutPhysics(RobotParams(tire=TireParams(longitudinal_relaxation_length=0.002)))
+    AzimutPhysics(RobotParams(tire=TireParams(longitudinal_relaxation_length=0.002)), substeps=64)
+    phys = AzimutPhysics()
+    with pytest.raises(ValueError, match="stability margin"):
+        phys.set_chassis_mass(0, 300.0)  # 8.8x the load: the contact spring would go unstable
+    assert phys.body_inertia[0, 0] == pytest.approx(35.0)  # refused, nothing changed
     figs = AzimutPhysics().stability_figures()
     assert all(v < bound for v, bound in figs.values())
 
@@ -279,3 +283,14 @@ def test_aligning_moment_turns_a_misaligned_wheel_toward_the_travel_direction():
         defl = phys.steering_angles()[0, 0] - phys.motor_angles()[0, 0]
         assert np.sign(defl) == -np.sign(off)
         assert abs(defl) > np.deg2rad(0.05)
+
+
+@pytest.mark.slow
+def test_substep_convergence_is_first_order():
+    """``azimut bench-env --convergence`` on a 10 s replay: the error halves when the substeps double."""
+    from azimut_env.bench import substep_convergence
+
+    rows = substep_convergence((8, 16, 32), reference=128, seconds=10.0)
+    orders = [r["order"] for r in rows[1:]]
+    assert all(0.8 < o < 1.6 for o in orders), orders
+    assert rows[0]["max_position_error"] < 0.03
