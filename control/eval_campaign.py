@@ -47,6 +47,7 @@ SUMMARY_COLUMNS = [
     ("mean_qua", "mean qua (all)", "{:.4f}", 1.0),
     ("mean_qua_moving", "mean qua moving", "{:.4f}", 1.0),
     ("min_qua_moving", "min qua moving", "{:.4f}", 1.0),
+    ("standstill_share", "standstill share", "{:.2f}", 1.0),
     ("limit_violation_steps", "limit-exceeded steps", "{:.1f}", 1.0),
     ("reconfigure_events", "stop+reconfig", "{:.1f}", 1.0),
 ]

@@ -227,7 +227,8 @@ _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("comp
             ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
             ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
             ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
-            ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"), ("limit_violation_steps", "limit-exceeded steps", "{}"),
+            ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"),
+            ("limit_violation_steps", "limit-exceeded steps", "{}"),
             ("reconfigure_events", "stop+reconfig", "{}")]
 
 
