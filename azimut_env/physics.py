@@ -74,7 +74,8 @@ are :meth:`AzimutPhysics.stability_figures`):
   that would take a margin past 4). The relaxation itself (|v_x| dt/σ) is implicit: no bound;
 * the series spring on the module: ω = sqrt(k_s / I_m) = 55 rad/s, ω·dt = 0.14 (symplectic Euler
   is stable below 2; refused above 0.5), its damper c_s dt / I_m = 0.075 (refused above 1);
-* the propulsion velocity loop and bearing are implicit in the spin: no bound on dt;
+* the propulsion velocity loop and bearing are implicit in the spin, and the DC steering motor's
+  rotor (``SteeringMotorParams.model = "dc"``) on the spring is implicit: no bound on dt;
 * the hard stops are exact projections (no stiffness, no bound on dt);
 * load transfer (h > 0) closes a loop N → F → a → N; its gain is at most 2 μ h / ℓ (ℓ the
   shorter wheelbase, between the axes along x or y; the worst case has the front and rear wheels
@@ -108,7 +109,7 @@ import pymunk
 import pymunk.batch as pb
 from numba import njit
 
-from .actuators import spring_torque_kernel, steer_motor_kernel, wheel_spin_step_kernel
+from .actuators import steer_actuator_kernel, wheel_spin_step_kernel
 from .params import RobotParams
 from .tire import TS, stability_numbers, tire_step_kernel
 
@@ -129,13 +130,17 @@ class WP:
     LOAD is the static normal load of the robot's current mass [N]; RR_TORQUE the rolling
     resistance coefficient C_rr (torque C_rr N r); C_KAPPA, C_ALPHA the tire stiffnesses per unit
     load; SIGMA_LONG, SIGMA_LAT the relaxation lengths [m]; HALF_LEN the contact half-length a
-    [m]; DAMP_TIME the bristle damping time τ_d [s] (``params.TireParams``). KNEE holds the
+    [m]; DAMP_TIME the bristle damping time τ_d [s] (``params.TireParams``); MOTOR_STALL,
+    MOTOR_NO_LOAD, MOTOR_INERTIA the DC steering motor's stall torque [N·m], no-load speed
+    [rad/s] and reflected rotor inertia [kg·m²] (``params.SteeringMotorParams``, used when its
+    model is "dc"). KNEE holds the
     legacy viscous tire's slip knee, which the substep no longer uses."""
 
     B, R, ALPHA, LOAD, MU, KNEE, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
         STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD, \
-        C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME = range(28)
-    COUNT = 28
+        C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME, \
+        MOTOR_STALL, MOTOR_NO_LOAD, MOTOR_INERTIA = range(31)
+    COUNT = 31
 
 
 class MS:
@@ -210,7 +215,7 @@ class BlowUpLimits:
 
 @njit(cache=True)
 def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
-                 n, dt, substeps, integrate):
+                 dc, n, dt, substeps, integrate):
     """``substeps`` substeps of every robot (see the module docstring for the equations).
 
     state: (rows, 6) chassis (x, y, θ, vx, vy, θ̇) in the world, robot i at row i, updated in
@@ -220,6 +225,8 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
     wp (N, n, WP): parameters. en (N,): motors on. acc (N, n, 4): accumulates (ΣFx, ΣFy, Σ slip
     power, ΣF_lat) per wheel. body (N, 2): (M, I). accel (N, 2): chassis acceleration in R from
     the tire forces at the last substep (load transfer), updated. lmap (n, 3): the load map.
+    dc: the steering motor model (False: kinematic position source; True: DC motor with back-EMF,
+    ``actuators.steer_actuator_kernel``).
     """
     n_robots = ms.shape[0]
     omega_new = np.empty(n)
@@ -244,9 +251,9 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
                 wm = js[i, k, 1]
                 beta_dot = wm - w
                 # steering motor and series spring
-                theta, omega = steer_motor_kernel(ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, on,
-                                                  p[8], p[14], p[15], p[16], p[6], dt)
-                tau_s = spring_torque_kernel(theta, omega, beta, beta_dot, on, p[6], p[7], p[16])
+                theta, omega, tau_s = steer_actuator_kernel(dc, ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, beta_dot,
+                                                            on, p[8], p[14], p[15], p[16], p[6], p[7], p[28], p[29],
+                                                            p[30], dt)
                 ms[i, k, 0] = theta
                 ms[i, k, 1] = omega
                 # steering axis A_k (relative to the chassis centre, world axes) and contact point
@@ -597,6 +604,10 @@ class AzimutPhysics:
         wp[..., WP.SIGMA_LAT] = t.relaxation_length
         wp[..., WP.HALF_LEN] = t.contact_half_length
         wp[..., WP.DAMP_TIME] = t.damping_time
+        m = p.steer_motor
+        wp[..., WP.MOTOR_STALL] = m.stall_torque
+        wp[..., WP.MOTOR_NO_LOAD] = m.no_load_speed
+        wp[..., WP.MOTOR_INERTIA] = m.rotor_inertia
         return wp
 
     def _build_space(self) -> None:
@@ -914,7 +925,7 @@ class AzimutPhysics:
         p = self.params
         args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled, self.acc,
                 self.body_inertia, self.chassis_accel, self._axis_xy, self._load_map, float(p.chassis.com_height),
-                float(p.gravity), float(p.steering.stop_restitution), self.n, self.dt)
+                float(p.gravity), float(p.steering.stop_restitution), bool(p.steer_motor.is_dc), self.n, self.dt)
         tm = times
         t = time.perf_counter() if tm is not None else 0.0
         self._get_bodies()
