@@ -1,16 +1,26 @@
 """Actuator models: the series-elastic steering motor and the velocity-controlled propulsion motor.
 
-Steering (per wheel): the motor angle θ_m follows the set-point β_cmd under a position loop with
-rate and acceleration limits (the desired rate is ``min(gain·|e|, rate_max, sqrt(2·accel_max·|e|))``
-toward the set-point, so it brakes in time). It drives the module through a spring and damper,
-``τ_s = k_s (θ_m − β) + c_s (θ̇_m − β̇)``, clipped to the motor's torque limit; when the spring
-would need more torque the motor stalls (θ_m stays within τ_max / k_s of β). The spring torque is
-computed here, in closed form, rather than with pymunk's explicit ``DampedRotarySpring``.
+Steering (per wheel), two models (``params.SteeringMotorParams.model``):
+
+* ``"kinematic"`` (default): the motor angle θ_m follows the set-point β_cmd under a position loop
+  with rate and acceleration limits (the desired rate is ``min(gain·|e|, rate_max,
+  sqrt(2·accel_max·|e|))`` toward the set-point, so it brakes in time). It drives the module
+  through a spring and damper, ``τ_s = k_s (θ_m − β) + c_s (θ̇_m − β̇)``, clipped to the motor's
+  torque limit; when the spring would need more torque the motor stalls (θ_m stays within
+  τ_max / k_s of β) (:func:`steer_motor_kernel`, :func:`spring_torque_kernel`).
+* ``"dc"``: the same rate profile asked of a DC motor with reflected rotor inertia J, whose torque
+  is limited by its torque–speed line τ_stall (1 − |ω|/ω₀) (back-EMF) and its current limit
+  (:func:`steer_dc_motor_kernel`, :func:`dc_torque_limits_kernel`); under load it slows down.
+
+:func:`steer_actuator_kernel` runs either one.
 
 Propulsion (per wheel): the set-point φ̇_cmd is ramped at ``wheel_accel_max`` into φ̇_ref; the
-motor torque is ``clip(K_v (φ̇_ref − φ̇), ±τ_max)``. The spin is integrated implicitly in the
-tire's linear range (see :func:`wheel_spin_kernel`), which keeps a light wheel on a stiff tire
-stable at the default substep.
+motor torque is ``clip(K_v (φ̇_ref − φ̇), ±τ_max)``, implicit in the spin; the tire force of
+:func:`azimut_env.tire.tire_step_kernel` and the rolling resistance load the spin
+(:func:`wheel_spin_step_kernel`).
+
+Command latency (k control periods of transport delay) lives in the task
+(``TaskConfig.action_latency``), where the actions enter.
 
 These are numba scalar kernels inlined into the physics substep loop.
 """
@@ -21,9 +31,7 @@ import math
 
 from numba import njit
 
-from .tire import tire_force_kernel
-
-__all__ = ["steer_motor_kernel", "spring_torque_kernel", "wheel_spin_kernel", "rolling_resistance_kernel",
+__all__ = ["steer_motor_kernel", "spring_torque_kernel", "rolling_resistance_kernel",
            "wheel_spin_step_kernel", "dc_torque_limits_kernel", "steer_dc_motor_kernel", "steer_actuator_kernel"]
 
 
@@ -72,50 +80,6 @@ def spring_torque_kernel(theta: float, omega: float, beta: float, beta_dot: floa
         elif tau < -torque_max:
             tau = -torque_max
     return tau
-
-
-@njit(cache=True, inline="always")
-def wheel_spin_kernel(phidot: float, ref: float, v_roll: float, v_lat: float, enabled: bool,
-                      r: float, inertia: float, kv: float, torque_max: float, bearing: float,
-                      rr_torque: float, rr_knee: float, mu_n: float, knee: float, dt: float):
-    """One substep of the wheel spin and its tire.
-
-    Solves the spin implicitly in the motor gain and the linear tire:
-    ``I φ̇' = I φ̇ + dt (τ_m(φ̇') + τ_rr − b φ̇' − r F_long(φ̇'))``; if the motor torque saturates
-    it is held at its limit; if the tire force leaves the friction circle the saturated force is
-    used explicitly. Returns (φ̇', F_long, F_lat, slip_long).
-    """
-    # rolling resistance, fading linearly near zero spin so that the robot can come to rest
-    x = phidot * r / rr_knee
-    if x > 1.0:
-        x = 1.0
-    elif x < -1.0:
-        x = -1.0
-    tau_rr = -rr_torque * x
-    c = mu_n / knee
-    cr2 = c * r * r
-    if enabled:
-        den = inertia + dt * (kv + cr2 + bearing)
-        new = (inertia * phidot + dt * (kv * ref + tau_rr + r * c * v_roll)) / den
-        tau_m = kv * (ref - new)
-        if tau_m > torque_max or tau_m < -torque_max:
-            tau_m = torque_max if tau_m > 0 else -torque_max
-            new = (inertia * phidot + dt * (tau_m + tau_rr + r * c * v_roll)) / (inertia + dt * (cr2 + bearing))
-    else:
-        tau_m = 0.0
-        new = (inertia * phidot + dt * (tau_rr + r * c * v_roll)) / (inertia + dt * (cr2 + bearing))
-    s_long = v_roll - r * new
-    f_long, f_lat, sat = tire_force_kernel(s_long, v_lat, mu_n, knee)
-    if sat:
-        if enabled:
-            tau_m = kv * (ref - phidot)
-            if tau_m > torque_max:
-                tau_m = torque_max
-            elif tau_m < -torque_max:
-                tau_m = -torque_max
-        new = phidot + dt * (tau_m + tau_rr - bearing * phidot - r * f_long) / inertia
-        s_long = v_roll - r * new
-    return new, f_long, f_lat, s_long
 
 
 @njit(cache=True, inline="always")

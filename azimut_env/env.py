@@ -178,7 +178,9 @@ class AzimutEnv(gym.Env):
       ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
       standard deviations (0: noise-free, quantisation kept).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering
-      stiffness and damping and chassis mass are scaled by factors uniform in [1 − d, 1 + d].
+      stiffness and damping, chassis mass (the normal loads follow), tire slip stiffness (with its
+      relaxation lengths, so the contact stiffness stays) and contact patch size are scaled by
+      factors uniform in [1 − d, 1 + d].
     * reward weights: ``progress_weight``, ``lateral_weight``, ``heading_weight``,
       ``overspeed_weight``, ``slip_weight`` [1/W], ``internal_force_weight`` [1/N],
       ``action_rate_weight``, ``off_track_penalty``; scales ``lateral_scale`` [m],

@@ -253,8 +253,8 @@ class TireParams:
             It is explicit: with ω_max the fastest contact mode, ω_max² dt (dt + 2τ_d) < 4.
         rolling_resistance: rolling resistance coefficient C_rr [-] (torque C_rr N r on the spin).
         rolling_knee: spin surface speed below which rolling resistance fades linearly [m/s].
-        slip_knee: legacy viscous tire only (``tire.tire_force_kernel``): slip speed at which its
-            force saturates [m/s]. Unused by the brush tire.
+        slip_knee: the slip speed [m/s] at which the former viscous tire saturated; unused by the
+            brush tire (the physics still copies it into ``wheel_params``; to be removed).
     """
 
     friction: float = 0.8

@@ -110,7 +110,8 @@ class TaskConfig:
         control_period: seconds per step [s]. substeps: physics substeps per step.
         solver_iterations: pymunk solver iterations per substep (see ``AzimutPhysics``).
         domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
-            damping and chassis mass, drawn per reset.
+            damping, chassis mass (the loads follow), tire slip stiffness (with its relaxation
+            lengths) and contact patch size, drawn per reset.
         progress_weight, lateral_weight, heading_weight, overspeed_weight, slip_weight [1/W],
         internal_force_weight [1/N], action_rate_weight, off_track_penalty: reward weights (the
             terms are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
@@ -655,19 +656,28 @@ class AzimutTask:
 
     def _randomize(self, i: int, rng: np.random.Generator) -> None:
         """Robot i's parameters for this episode: the defaults, scaled by factors drawn from
-        [1 − d, 1 + d] with d = ``domain_randomization`` (friction, spring, damper, chassis mass).
-        Everything that depends on the mass follows it: the body's mass and moment and the
-        wheels' normal loads (``AzimutPhysics.set_chassis_mass``)."""
+        [1 − d, 1 + d] with d = ``domain_randomization`` (friction, spring, damper, chassis mass,
+        tire stiffness, contact patch size). Everything that depends on the mass follows it: the
+        body's mass and moment and the wheels' normal loads (``AzimutPhysics.set_chassis_mass``).
+
+        The tire's cornering and longitudinal stiffness coefficients and its relaxation lengths
+        take the same factor: σ = C/k with k the carcass (contact) stiffness (Pacejka 2012, Ch. 7),
+        so a stiffer or softer tread changes the slip stiffness and the distance to build force,
+        and leaves the contact stiffness k, hence the stability budget, as it is. The contact
+        half-length scales the aligning trail, the scrub torque limit and the twist stiffness."""
         phys = self.physics
         wp = self._default_wp[i].copy()
         d = self.config.domain_randomization
         mass = self.params.chassis.mass
         if d > 0:
-            f = rng.uniform(1 - d, 1 + d, size=4)
+            f = rng.uniform(1 - d, 1 + d, size=6)
             wp[..., WP.MU] *= f[0]
             wp[..., WP.K_S] *= f[1]
             wp[..., WP.C_S] *= f[2]
             mass *= f[3]
+            for col in (WP.C_KAPPA, WP.C_ALPHA, WP.SIGMA_LONG, WP.SIGMA_LAT):
+                wp[..., col] *= f[4]
+            wp[..., WP.HALF_LEN] *= f[5]
         phys.wheel_params[i] = wp
         phys.set_chassis_mass(i, mass)
 

@@ -129,8 +129,6 @@ __all__ = [
     "brush_trail",
     "stability_numbers",
     "tire_elastic_energy",
-    "tire_force_kernel",
-    "tire_forces",
 ]
 
 
@@ -364,33 +362,3 @@ def tire_elastic_energy(state, load, tire) -> np.ndarray:
         e = np.where(quad > 0, 3.0 * mu_n * mu_n / k_u * (psi + ((1.0 - psi) ** 4 - 1.0) / 4.0), 0.0)
     k_t = 0.5 * k_y * tire.contact_half_length ** 2
     return e + 0.5 * k_t * tw * tw
-
-
-# ---------------------------------------------------------------------- legacy viscous model
-# The regularised-Coulomb tire that ``physics._substep_kernel`` still calls (force ∝ sliding speed
-# below ``TireParams.slip_knee``). It goes when the substep calls :func:`tire_step_kernel`.
-
-
-@njit(cache=True, inline="always")
-def tire_force_kernel(s_long: float, s_lat: float, mu_n: float, knee: float):
-    """Legacy: (F_long, F_lat, saturated) for slip (s_long, s_lat) [m/s], regularised Coulomb."""
-    c = mu_n / knee
-    f_long = -c * s_long
-    f_lat = -c * s_lat
-    mag = math.sqrt(f_long * f_long + f_lat * f_lat)
-    if mag > mu_n:
-        scale = mu_n / mag
-        return f_long * scale, f_lat * scale, True
-    return f_long, f_lat, False
-
-
-def tire_forces(s_long, s_lat, normal_load, friction: float, knee: float) -> tuple[np.ndarray, np.ndarray]:
-    """Legacy: numpy version of :func:`tire_force_kernel` over arrays."""
-    s_long = np.asarray(s_long, dtype=np.float64)
-    s_lat = np.asarray(s_lat, dtype=np.float64)
-    mu_n = friction * np.asarray(normal_load, dtype=np.float64)
-    f_long = -mu_n * s_long / knee
-    f_lat = -mu_n * s_lat / knee
-    mag = np.hypot(f_long, f_lat)
-    scale = np.where(mag > mu_n, mu_n / np.where(mag > 0, mag, 1.0), 1.0)
-    return f_long * scale, f_lat * scale

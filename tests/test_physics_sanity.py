@@ -8,7 +8,7 @@ import pytest
 
 from azimut_env.params import RobotParams, TireParams
 from azimut_env.physics import AzimutPhysics
-from azimut_env.tire import tire_forces
+from azimut_env.tire import brush_forces
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
 
@@ -112,12 +112,16 @@ def test_tire_longitudinal_force_deflects_the_compliant_steering():
 
 
 def test_tire_model_saturates_on_the_friction_circle():
-    fl, fa = tire_forces(np.array([0.01, 1.0, -3.0]), np.array([0.0, 1.0, 0.5]), np.array([80.0, 80.0, 80.0]),
-                         friction=0.8, knee=0.05)
+    """The brush tire's steady forces stay inside μN and reach it at large slip (tests/test_tire.py
+    has the closed forms)."""
+    tire = TireParams()
+    kappa = np.array([0.001, 0.5, -3.0])
+    alpha = np.array([0.0, 0.5, 0.3])
+    fl, fa = brush_forces(kappa, alpha, np.full(3, 80.0), tire)
     mag = np.hypot(fl, fa)
-    assert mag[0] == pytest.approx(0.8 * 80 * 0.01 / 0.05)
-    assert np.allclose(mag[1:], 0.8 * 80)
-    assert np.all(fl * np.array([0.01, 1.0, -3.0]) <= 0)
+    assert mag[0] == pytest.approx(tire.longitudinal_stiffness * 80 * 0.001, rel=0.01)
+    assert np.allclose(mag[1:], tire.friction * 80)
+    assert np.all(fl * kappa >= 0)  # F_x = C_κ κ: along the slip ratio
 
 
 def test_parameters_are_validated():

@@ -340,3 +340,26 @@ def test_elastic_energy_is_the_work_of_the_brush_force():
     assert small == pytest.approx(0.5 * (k_x * 1e-14 + K_Y * 4e-14), rel=1e-5)
     assert tire_elastic_energy([0.0, 0.0, 0.01], N, TIRE) == pytest.approx(0.5 * K_T * 1e-4)
     assert tire_elastic_energy([1e-3, 1e-3, 0.1], 0.0, TIRE) == 0.0
+
+
+def test_domain_randomisation_draws_the_tire_with_a_fixed_contact_stiffness():
+    """Slip stiffness and relaxation lengths share a factor (σ = C/k, k the carcass stiffness):
+    C/σ, and so the contact's stability figures, stay; the patch size varies on its own."""
+    from azimut_env.env import AzimutEnv
+    from azimut_env.physics import WP
+
+    env = AzimutEnv(domain_randomization=0.4)
+    seen = []
+    for seed in range(3):
+        env.reset(seed=seed)
+        w = env.physics.wheel_params[0]
+        assert np.allclose(w[:, WP.C_ALPHA] / w[:, WP.SIGMA_LAT], TIRE.cornering_stiffness / SIG)
+        assert np.allclose(w[:, WP.C_KAPPA] / w[:, WP.SIGMA_LONG],
+                           TIRE.longitudinal_stiffness / TIRE.longitudinal_relaxation_length)
+        assert np.all(np.abs(w[:, WP.C_ALPHA] / TIRE.cornering_stiffness - 1) <= 0.4 + 1e-12)
+        seen.append((w[0, WP.C_ALPHA], w[0, WP.HALF_LEN]))
+    seen = np.array(seen)
+    assert np.ptp(seen[:, 0]) > 0 and np.ptp(seen[:, 1]) > 0
+    plain = AzimutEnv()
+    plain.reset(seed=0)
+    assert plain.physics.wheel_params[0, 0, WP.C_ALPHA] == TIRE.cornering_stiffness
