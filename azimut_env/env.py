@@ -193,7 +193,8 @@ class AzimutEnv(gym.Env):
     * ``start_noise``: starting pose noise. ``render_mode``: ``None``, ``"human"``, ``"rgb_array"``.
     * ``action_latency``: command latency k in control periods (default 0): the set-points of an
       action drive the motors k steps later (the motors hold the reset set-points for the first k
-      steps of an episode); for sim-to-real work.
+      steps of an episode); for sim-to-real work. The steering motor model (a kinematic position
+      source, or a DC motor under its torque–speed limit) is ``params.steer_motor``.
     * ``pose_source``: ``"true"`` (default) or ``"odometry"`` (see "What is privileged");
       ``localisation``: :class:`~azimut_env.localisation.LocalisationParams` (fix period [s], fix
       noise [m], [rad]; default 1 s, 2 cm, 0.01 rad).
