@@ -1,7 +1,14 @@
-"""train: RL baselines (Stable-Baselines3 + PyTorch CPU, the ``rl`` extra).
+"""train: RL baselines on ``Azimut-v1`` (Stable-Baselines3 + PyTorch CPU, the ``rl`` extra).
 
-Not built yet. What exists for it: ``Azimut-v1`` (SB3 ``check_env`` passes), the batched
-``azimut_env.vector_env.AzimutVectorEnv`` with its SB3 ``VecEnv`` adapter
-(``azimut_env.sb3.AzimutSB3VecEnv``), and the ICR-target and twist action wrappers in
-``control.wrappers``.
+* ``azimut train --algo ppo|sac --action raw|residual|icr-rate ...`` (:mod:`train.cli`): N robots in
+  one vector env behind the chosen action space (:mod:`train.envs`), VecNormalize saved with the
+  model, versioned defaults per algorithm × action space (``train/hyperparams/*.json``), periodic
+  evaluation on held-out tracks with the ``azimut eval`` metrics (:mod:`train.callbacks`),
+  checkpoints and ``--resume``, TensorBoard logs when ``tensorboard`` is installed;
+* :func:`train.policy.load_policy` loads a trained policy with its normalisation, and
+  :mod:`train.rollout` runs it on a track with the same log as ``azimut eval`` (which takes
+  ``ppo:PATH`` and ``sac:PATH`` controllers).
+
+Importing this package does not import torch or stable-baselines3; its modules that need them
+import them when used.
 """

@@ -1,0 +1,120 @@
+"""SB3 callbacks of ``azimut train``: env diagnostics from the infos, and periodic evaluation on
+held-out tracks with the ``azimut eval`` metrics."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from .policy import TrainedPolicy
+from .rollout import policy_metrics
+
+__all__ = ["InfoStatsCallback", "HeldOutEvalCallback", "WallClockLimit"]
+
+_INFO_KEYS = ("slip_power", "internal_force", "heading_error", "lateral_error")
+
+
+class InfoStatsCallback(BaseCallback):
+    """Mean |value| over the last ``every`` env steps of the infos' slip power [W], internal force
+    [N], heading and lateral errors, logged as ``env/<key>`` (TensorBoard and progress.csv)."""
+
+    def __init__(self, every: int = 256) -> None:
+        super().__init__()
+        self.every = int(every)
+        self._sums = dict.fromkeys(_INFO_KEYS, 0.0)
+        self._count = 0
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            for key in _INFO_KEYS:
+                if key in info:
+                    self._sums[key] += abs(float(info[key]))
+            self._count += 1
+        if self.n_calls % self.every == 0 and self._count:
+            for key, total in self._sums.items():
+                self.logger.record(f"env/{key}", total / self._count)
+            self._sums = dict.fromkeys(_INFO_KEYS, 0.0)
+            self._count = 0
+        return True
+
+
+class HeldOutEvalCallback(BaseCallback):
+    """Every ``eval_every`` timesteps: one deterministic episode per held-out track with the
+    current policy and the training VecNormalize statistics; logs ``eval/<track>/...`` and the
+    mean return, appends the rows to ``out/evaluations.json``, and saves the best policy (highest
+    mean return) as ``best_model.zip`` + ``best_vecnormalize.pkl``."""
+
+    def __init__(self, tracks: list[str], eval_every: int, out: Path, algo: str, action: str, env_kwargs: dict,
+                 seed: int = 0) -> None:
+        super().__init__()
+        self.tracks, self.eval_every, self.out = list(tracks), int(eval_every), Path(out)
+        self.algo, self.action, self.env_kwargs, self.seed = algo, action, dict(env_kwargs), int(seed)
+        self.best = -np.inf
+        self._next = int(eval_every)
+        self.history: list[dict] = []
+        f = self.out / "evaluations.json"
+        if f.is_file():
+            self.history = json.loads(f.read_text())
+            if self.history:
+                self.best = max(h["mean_return"] for h in self.history)
+
+    def _on_training_start(self) -> None:
+        self._next = (self.num_timesteps // self.eval_every + 1) * self.eval_every
+
+    def evaluate(self) -> dict:
+        vn = self.model.get_vec_normalize_env()
+        policy = TrainedPolicy(model=self.model, algo=self.algo, action=self.action, env_kwargs=self.env_kwargs,
+                               obs_rms=None if vn is None else vn.obs_rms,
+                               clip_obs=10.0 if vn is None else vn.clip_obs, epsilon=1e-8 if vn is None else vn.epsilon)
+        start = time.perf_counter()
+        rows = [policy_metrics(policy, track, seed=self.seed, label=f"{self.algo}-{self.action}")[0]
+                for track in self.tracks]
+        entry = {"timesteps": int(self.num_timesteps), "eval_wall_s": time.perf_counter() - start, "rows": rows,
+                 "mean_return": float(np.mean([r["return"] for r in rows]))}
+        for r in rows:
+            t = r["track"]
+            self.logger.record(f"eval/{t}/return", r["return"])
+            self.logger.record(f"eval/{t}/rms_lateral_cm", 100 * r["rms_lateral_m"])
+            self.logger.record(f"eval/{t}/internal_force_N", r["mean_internal_force_N"])
+            self.logger.record(f"eval/{t}/slip_energy_J", r["slip_energy_J"])
+            self.logger.record(f"eval/{t}/completed", float(r["completed"]))
+        self.logger.record("eval/mean_return", entry["mean_return"])
+        return entry
+
+    def _on_step(self) -> bool:
+        if self.eval_every <= 0 or self.num_timesteps < self._next:
+            return True
+        self._next += self.eval_every
+        entry = self.evaluate()
+        self.history.append(entry)
+        (self.out / "evaluations.json").write_text(json.dumps(self.history, indent=1, allow_nan=True))
+        if entry["mean_return"] > self.best:
+            self.best = entry["mean_return"]
+            self.model.save(str(self.out / "best_model.zip"))
+            vn = self.model.get_vec_normalize_env()
+            if vn is not None:
+                vn.save(str(self.out / "best_vecnormalize.pkl"))
+        summary = ", ".join(f"{r['track']} ret {r['return']:.0f} lat {100 * r['rms_lateral_m']:.2f} cm "
+                            f"F {r['mean_internal_force_N']:.1f} N{'' if r['completed'] else ' (' + str(r['error']) + ')'}"
+                            for r in entry["rows"])
+        print(f"[eval @ {self.num_timesteps}] {summary}", flush=True)
+        return True
+
+
+class WallClockLimit(BaseCallback):
+    """Stop ``learn`` after ``seconds`` of wall time (the budget of a training run)."""
+
+    def __init__(self, seconds: float) -> None:
+        super().__init__()
+        self.seconds = float(seconds)
+        self._start = 0.0
+
+    def _on_training_start(self) -> None:
+        self._start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        return time.perf_counter() - self._start < self.seconds

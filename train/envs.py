@@ -1,0 +1,53 @@
+"""Training and evaluation environments for ``train``: N robots of ``Azimut-v1`` in one
+:class:`~azimut_env.vector_env.AzimutVectorEnv`, behind the chosen action space, as an SB3 ``VecEnv``.
+
+Action spaces (``ACTIONS``):
+
+* ``raw``: the env's own per-wheel set-points (``Box(-1, 1, (8,))``);
+* ``residual``: path follower + ICR controller with a bounded policy correction (zero action = the
+  reference controller);
+* ``icr_rate``: the policy moves the ICR target on the sphere and changes μ_d (rates);
+
+the last two are :class:`control.vector_wrappers.VectorControllerAction`. The SB3 adapter is
+:class:`azimut_env.sb3.AzimutSB3VecEnv` (needs the ``rl`` extra).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gymnasium.vector import AutoresetMode
+
+__all__ = ["ACTIONS", "make_vector_env", "make_sb3_env"]
+
+#: action space name (CLI spelling) -> VectorControllerAction kind (None: raw set-points)
+ACTIONS = {"raw": None, "residual": "residual", "icr-rate": "icr_rate"}
+
+
+def action_key(action: str) -> str:
+    """The hyperparameter-file key of an action space (``icr-rate`` -> ``icr_rate``)."""
+    if action not in ACTIONS:
+        raise ValueError(f"unknown action space {action!r}; choose from {', '.join(ACTIONS)}")
+    return action.replace("-", "_")
+
+
+def make_vector_env(action: str, num_envs: int, track: str = "random",
+                    autoreset_mode: AutoresetMode = AutoresetMode.SAME_STEP, env_kwargs: dict[str, Any] | None = None):
+    """An ``AzimutVectorEnv`` of ``num_envs`` robots on ``track``, behind ``action``'s wrapper."""
+    from azimut_env.vector_env import AzimutVectorEnv
+
+    action_key(action)
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=autoreset_mode, **(env_kwargs or {}))
+    kind = ACTIONS[action]
+    if kind is None:
+        return venv
+    from control.vector_wrappers import VectorControllerAction
+
+    return VectorControllerAction(venv, action=kind)
+
+
+def make_sb3_env(action: str, num_envs: int, track: str = "random", env_kwargs: dict[str, Any] | None = None):
+    """:func:`make_vector_env` as an SB3 ``VecEnv`` (same-step autoreset)."""
+    from azimut_env.sb3 import AzimutSB3VecEnv
+
+    return AzimutSB3VecEnv(venv=make_vector_env(action, num_envs, track, AutoresetMode.SAME_STEP, env_kwargs))

@@ -1,0 +1,102 @@
+"""Run a trained policy on a track and record the same per-step log as ``azimut eval``.
+
+:func:`run_policy_episode` drives one robot (an ``AzimutVectorEnv`` of one, behind the policy's
+action space, no autoreset) until the track is finished, the robot leaves it, or the env's time
+limit, and fills a :class:`control.evaluate.EpisodeLog`, so :func:`control.evaluate.episode_metrics`
+gives the same metrics as for the controllers; the episode's return (sum of ``Azimut-v1``
+rewards) comes with it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+from azimut_env.tracks import TRACK_NAMES, Track, make_track
+
+from .envs import make_vector_env
+
+__all__ = ["run_policy_episode", "policy_metrics"]
+
+
+def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | None = None,
+                       deterministic: bool = True):
+    """(EpisodeLog, return) of ``policy`` (a :class:`train.policy.TrainedPolicy`) on ``track``."""
+    from control.evaluate import EpisodeLog
+    from control.icr_controller import Mode
+    from control.limits import limit_violations
+
+    if isinstance(track, str):
+        if track not in TRACK_NAMES:
+            raise ValueError(f"unknown track {track!r}; choose from {', '.join(TRACK_NAMES)}")
+        track = make_track(track, rng=np.random.default_rng(seed))
+    venv = make_vector_env(policy.action, 1, track=track, autoreset_mode=AutoresetMode.DISABLED,
+                           env_kwargs=policy.env_kwargs)
+    base = venv.unwrapped
+    obs, info = venv.reset(seed=seed)
+    dt, limits = base.control_period, base.limits
+    log = EpisodeLog(label or f"{policy.algo}-{policy.action}", base.tracks[0], dt)
+    rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
+                                            "beta_meas", "beta_true", "motor_true", "beta_cmd", "phidot_cmd",
+                                            "beta_rate", "phiddot", "lam_hat", "mu_true", "mode", "violations")}
+    ret = 0.0
+    beta_prev, phidot_prev = base.setpoints_from_action(base.task.prev_action)
+    beta_prev, phidot_prev = beta_prev[0], phidot_prev[0]
+    rate_prev = np.zeros_like(beta_prev)
+    events = 0
+    for _ in range(10**7):
+        action = policy.act(obs, deterministic=deterministic)
+        obs, reward, terminated, truncated, info = venv.step(action)
+        ret += float(reward[0])
+        if "error" in info and info["_error"][0]:
+            log.error = str(info["error"][0])
+            break
+        sub = base.sub_env_info(0)
+        beta_c, phidot_c = base.setpoints_from_action(base.task.prev_action)
+        beta_c, phidot_c = beta_c[0], phidot_c[0]
+        rate = (beta_c - beta_prev) / dt
+        accel, phiddot = (rate - rate_prev) / dt, (phidot_c - phidot_prev) / dt
+        viol = bool(limit_violations(rate, accel, phidot_c, phiddot, limits).any())
+        if "limit_exceeded" in info:
+            viol = viol or bool(info["limit_exceeded"][0])
+        beta_prev, rate_prev, phidot_prev = beta_c, rate, phidot_c
+        mode = int(info["controller_mode"][0]) if "controller_mode" in info else int(Mode.RUNNING)
+        if rec["mode"] and mode == int(Mode.STOPPING) and rec["mode"][-1] == int(Mode.RUNNING):
+            events += 1
+        lam_hat, _ = base.estimated_eta
+        for key, value in (("pose", info["pose"][0]), ("lateral", info["lateral_error"][0]),
+                           ("heading", info["heading_error"][0]), ("slip_power", info["slip_power"][0]),
+                           ("internal_force", info["internal_force"][0]), ("qua", info["qua"][0]),
+                           ("beta_meas", base.measured_beta[0]), ("beta_true", sub["beta_true"]),
+                           ("motor_true", base.physics.motor_angles()[0]), ("beta_cmd", beta_c),
+                           ("phidot_cmd", phidot_c), ("beta_rate", rate), ("phiddot", phiddot), ("lam_hat", lam_hat[0]),
+                           ("mu_true", abs(float(sub["eta_true"][1]))), ("mode", mode), ("violations", viol)):
+            rec[key].append(value)
+        if info["finished"][0]:
+            log.completed = True
+            break
+        if info["off_track"][0]:
+            log.error = "off track"
+            break
+        if info.get("stalled", np.zeros(1, bool))[0]:
+            log.error = "stalled"
+            break
+        if truncated[0] or terminated[0]:
+            log.error = "time limit"
+            break
+    for key, values in rec.items():
+        setattr(log, key, np.asarray(values))
+    log.t = dt * np.arange(1, len(rec["lateral"]) + 1)
+    log.events = events
+    venv.close()
+    return log, ret
+
+
+def policy_metrics(policy, track: str | Track, seed: int = 0, label: str | None = None) -> tuple[dict, object]:
+    """(``azimut eval`` metrics row plus ``return``, EpisodeLog) of one episode of ``policy``."""
+    from control.evaluate import episode_metrics
+
+    log, ret = run_policy_episode(policy, track, seed=seed, label=label)
+    row = episode_metrics(log)
+    row["return"] = ret
+    return row, log
