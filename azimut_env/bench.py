@@ -26,9 +26,9 @@ import time
 import numpy as np
 
 from .tracks import TRACK_NAMES
-from .validation import arg_int
+from .validation import arg_choice_list, arg_int
 
-__all__ = ["bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
+__all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
 
 #: stages of the vector env's split, in print order
 VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "sensors", "estimation", "track",
@@ -45,6 +45,70 @@ def _rss_mb() -> float:
         return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
     except (OSError, ValueError, AttributeError):
         return float("nan")
+
+
+#: ``--action`` names -> ``control.vector_wrappers.VectorControllerAction`` kinds (None: raw set-points)
+ACTION_BENCH = {"raw": None, "residual": "residual", "icr-rate": "icr_rate", "icr-target": "icr_target",
+                "twist": "twist"}
+
+
+def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, track: str = "random",
+                            seed: int = 0) -> dict[str, float]:
+    """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
+    same-step autoresets), with the time per control step split into the policy-action ->
+    controller-target stage (path followers, target shaping), the batched ICR controller, the
+    vector env's step and the rest (wrapper glue)."""
+    from gymnasium.vector import AutoresetMode
+
+    from .vector_env import AzimutVectorEnv
+
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP)
+    kind = ACTION_BENCH[action]
+    acc = {"targets": 0.0, "controller": 0.0, "env": 0.0}
+    clock = time.perf_counter
+    if kind is not None:
+        import control.vector_wrappers as vw
+
+        wrapped = vw.VectorControllerAction(venv, action=kind)
+    else:
+        wrapped = venv
+    wrapped.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1, 1, size=(calls + 20,) + wrapped.action_space.shape).astype(np.float32)
+    for k in range(20):  # warm-up (numba kernels load or compile)
+        wrapped.step(actions[k])
+    t0 = clock()
+    for k in range(calls):
+        wrapped.step(actions[20 + k])
+    total = clock() - t0
+    if kind is not None:  # a second, instrumented loop for the split
+        def timed(fn, key):
+            def wrapper(*args, **kwargs):
+                t = clock()
+                out = fn(*args, **kwargs)
+                acc[key] += clock() - t
+                return out
+            return wrapper
+
+        saved = vw.icr_control_step_batch
+        vw.icr_control_step_batch = timed(saved, "controller")
+        wrapped._targets = timed(wrapped._targets, "targets")
+        venv_step = venv.step
+        venv.step = timed(venv_step, "env")
+        try:
+            t1 = clock()
+            for k in range(calls):
+                wrapped.step(actions[20 + k])
+            inst = clock() - t1
+        finally:
+            vw.icr_control_step_batch = saved
+            venv.step = venv_step
+    else:
+        acc["env"], inst = total, total
+    per = 1e6 / (calls * num_envs)
+    return {"action": action, "num_envs": num_envs, "steps_per_s": calls * num_envs / total,
+            "targets_us": acc["targets"] * per, "controller_us": acc["controller"] * per, "env_us": acc["env"] * per,
+            "other_us": (inst - sum(acc.values())) * per, "instrumented_us": inst * per}
 
 
 def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8) -> dict[str, float]:
@@ -339,6 +403,12 @@ def _int_list(text: str) -> list[int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--action", default=None, metavar="NAME[,NAME...]",
+                        type=arg_choice_list(tuple(ACTION_BENCH)),
+                        help="only time the vector env behind these action spaces (raw, residual, icr-rate, "
+                             "icr-target, twist) with a controller in the loop, at --action-envs robots")
+    parser.add_argument("--action-envs", type=arg_int(1, 4096), default=16,
+                        help="robots for --action (default 16)")
     parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,
                         help="single-env steps in the end-to-end loop")
     parser.add_argument("--track", default="paper", choices=TRACK_NAMES,
@@ -369,7 +439,27 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"argument --reference: unknown Gymnasium env {args.reference!r} ('' to skip)")
 
 
+def run_action_bench(args: argparse.Namespace) -> int:
+    """``--action``: robot-steps/s with a controller in the loop, and where the time goes."""
+    track = args.track if args.track != "paper" else "random"
+    print(f"AzimutVectorEnv behind controller action spaces: {args.action_envs} robots, track {track} (random: a "
+          f"new track per episode), uniform random actions, same-step autoresets; us per robot-step "
+          f"(instrumented loop) and robot-steps/s (uninstrumented loop). The machine may be shared: compare ratios "
+          f"within one run.")
+    print(f"{'action':<12}{'steps/s':>9}{'targets':>9}{'ctl':>9}{'env':>9}{'other':>9}{'total':>9}")
+    for action in args.action:
+        r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed)
+        print(f"{action:<12}{r['steps_per_s']:>9.0f}{r['targets_us']:>9.1f}{r['controller_us']:>9.1f}"
+              f"{r['env_us']:>9.1f}{r['other_us']:>9.1f}{r['instrumented_us']:>9.1f}", flush=True)
+    print("(targets: the policy action -> ICR target stage, i.e. the residual's per-robot path followers or the "
+          "target shaping; ctl: the batched ICR controller; env: AzimutVectorEnv.step; goal 5000 robot-steps/s "
+          "for residual and icr-rate at 16 robots)")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.action:
+        return run_action_bench(args)
     if args.convergence:
         print("substep convergence: 30 s open-loop replay of smooth kinematic set-points, against 256 substeps")
         print(f"{'substeps':>9}{'max pos mm':>12}{'final mm':>10}{'heading deg':>12}{'beta deg':>10}{'order':>7}")

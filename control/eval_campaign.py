@@ -16,6 +16,7 @@ and per controller × track its row with its plots embedded; then the per-seed r
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -50,6 +51,7 @@ SUMMARY_COLUMNS = [
     ("standstill_share", "standstill share", "{:.2f}", 1.0),
     ("limit_violation_steps", "limit-exceeded steps", "{:.1f}", 1.0),
     ("reconfigure_events", "stop+reconfig", "{:.1f}", 1.0),
+    ("return", "return", "{:.1f}", 1.0),
 ]
 
 
@@ -76,17 +78,32 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     return {"step": max(step, 1), "wheels": wheels, "impulse": impulse}
 
 
+@functools.lru_cache(maxsize=8)
+def _load_policy(algo: str, path: str):
+    """A trained policy, loaded once per process (``train.policy.load_policy``)."""
+    from train.policy import load_policy
+
+    return load_policy(path, algo=algo)
+
+
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
                  return_log: bool = False) -> dict:
     """One campaign episode: ``{"metrics": row}`` (plus ``artifacts.log``, the
     :class:`~control.evaluate.EpisodeLog`, with ``return_log``)."""
-    from .evaluate import episode_metrics, run_episode
+    from .evaluate import episode_metrics, is_policy, run_episode
 
     kick = draw_kick(seed, track, speed_scale, max_time) if kicks else None
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
-    log = run_episode(controller, track, seed=int(seed), speed_scale=speed_scale, kick=kick, max_time=max_time,
-                      env_kwargs=env_kwargs)
+    if is_policy(controller):  # a trained policy (train.rollout; the rl extra)
+        from train.rollout import run_policy_episode
+
+        algo, path = controller.split(":", 1)
+        log, _ = run_policy_episode(_load_policy(algo, path), track, seed=int(seed), label=controller, kick=kick,
+                                    max_time=max_time, env_kwargs=env_kwargs)
+    else:
+        log = run_episode(controller, track, seed=int(seed), speed_scale=speed_scale, kick=kick, max_time=max_time,
+                          env_kwargs=env_kwargs)
     row = episode_metrics(log)
     row["track"] = track  # the name asked for (a random track's Track may carry another)
     row["seed"] = int(seed)
@@ -112,7 +129,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                        "domain_randomization": float(domain_randomization), "kicks": bool(kicks),
                        "max_time": None if max_time is None else float(max_time)}
                 cost = min(nominal, max_time) if max_time else nominal
-                cost *= 4.0 if controller == "icr" else 1.0  # the ICR controller costs more per step
+                cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("control.eval_campaign:episode_task", key,
                                   extra={"return_log": plot_seed is not None and seed == plot_seed},
                                   label=f"{controller}-{track}-s{seed}", cost=cost))

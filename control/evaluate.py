@@ -47,6 +47,33 @@ __all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask
            "add_arguments", "run"]
 
 CONTROLLERS = ("icr", "twist")
+#: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
+#: ``azimut train`` wrote, its VecNormalize statistics beside it; needs the ``rl`` extra)
+POLICY_PREFIXES = ("ppo", "sac")
+
+
+def is_policy(controller: str) -> bool:
+    """Whether a ``--controllers`` entry names a trained policy (``ppo:PATH`` or ``sac:PATH``)."""
+    return controller.split(":", 1)[0] in POLICY_PREFIXES and ":" in controller
+
+
+def arg_controllers(text: str) -> list[str]:
+    """``type=`` of ``--controllers``: built-in controllers and ``ppo:PATH`` / ``sac:PATH``
+    (the model file must exist)."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"give at least one of {', '.join(CONTROLLERS)}, ppo:PATH, sac:PATH")
+    if len(set(items)) != len(items):
+        raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+    for item in items:
+        if is_policy(item):
+            path = Path(item.split(":", 1)[1])
+            if not (path.is_file() or (path / "model.zip").is_file()):
+                raise argparse.ArgumentTypeError(f"{item}: no model file {path}")
+        elif item not in CONTROLLERS:
+            raise argparse.ArgumentTypeError(f"unknown {item!r}; choose from {', '.join(CONTROLLERS)}, ppo:PATH, "
+                                             "sac:PATH")
+    return items
 #: |μ| [m/s] of the true chassis motion above which a step counts as moving (5% of the paper
 #: track's nominal 1 m/s; μ = ‖ξ̇‖ of the twist, ξ̇ = μ (v, −u, w)).
 MOVING_MU = 0.05
@@ -82,6 +109,7 @@ class EpisodeLog:
     events: int = 0
     completed: bool = False
     error: str | None = None
+    ret: float = float("nan")  #: the episode's return (sum of the ``Azimut-v1`` rewards)
 
 
 def _progress_bar(label: str, frac: float, start: float, stream=sys.stderr) -> None:
@@ -155,7 +183,8 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
             cmd = ctl.step(target.twist, beta_m)
             mode = int(Mode.RUNNING)
         viol = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, limits).any())
-        _, _, terminated, truncated, info = env.step(env.action_from_setpoints(cmd.beta, cmd.phidot))
+        _, reward, terminated, truncated, info = env.step(env.action_from_setpoints(cmd.beta, cmd.phidot))
+        log.ret = reward if k == 0 else log.ret + reward
         if "error" in info:
             log.error = info["error"]
             break
@@ -218,6 +247,7 @@ def episode_metrics(log: EpisodeLog) -> dict:
         "standstill_share": float(1.0 - np.mean(moving)) if log.qua.size else float("nan"),
         "limit_violation_steps": int(np.sum(log.violations)),
         "reconfigure_events": int(log.events),
+        "return": float(log.ret),
     }
 
 
@@ -229,7 +259,7 @@ _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("comp
             ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
             ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"),
             ("limit_violation_steps", "limit-exceeded steps", "{}"),
-            ("reconfigure_events", "stop+reconfig", "{}")]
+            ("reconfigure_events", "stop+reconfig", "{}"), ("return", "return", "{:.1f}")]
 
 
 def metrics_markdown(rows: list[dict]) -> str:
@@ -351,8 +381,9 @@ def write_report(rows: list[dict], out: Path, header: str = "") -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--controllers", default="icr,twist", type=arg_choice_list(CONTROLLERS),
-                        help=f"comma-separated controllers among {', '.join(CONTROLLERS)} (default: icr,twist)")
+    parser.add_argument("--controllers", default="icr,twist", type=arg_controllers,
+                        help=f"comma-separated controllers among {', '.join(CONTROLLERS)}, and trained policies "
+                             "ppo:PATH or sac:PATH (the model.zip azimut train wrote) (default: icr,twist)")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_choice_list(TRACK_NAMES),
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
@@ -380,6 +411,8 @@ def check_args(args: argparse.Namespace) -> None:
 
     if not args.no_plots:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+    if any(is_policy(c) for c in args.controllers):
+        require_module("stable_baselines3", "evaluating a trained policy (the rl extra)")
     check_campaign_args(args)
 
 
@@ -425,7 +458,7 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
 
 def run(args: argparse.Namespace) -> int:
     try:
-        controllers = _parse_list(args.controllers, CONTROLLERS, "controller(s)")
+        controllers = list(args.controllers) if isinstance(args.controllers, list) else arg_controllers(args.controllers)
         tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")

@@ -96,3 +96,22 @@ def test_core_imports_and_runs_without_torch():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0 and res.stdout.strip().endswith("ok"), res.stderr[-2000:]
     assert "needs stable_baselines3" in res.stderr
+
+
+def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
+    from azimut_env.cli import main
+    from train.cli import train
+
+    out = tmp_path / "run"
+    train("ppo", "raw", "crab", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,
+          checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, quiet=True, env_kwargs=SHORT)
+    report = tmp_path / "eval"
+    rc = main(["eval", "--controllers", f"icr,ppo:{out / 'model.zip'}", "--tracks", "crab", "--max-time", "0.5",
+               "--no-plots", "--out", str(report)])
+    assert rc in (0, 1)
+    episodes = json.loads((report / "metrics.json").read_text())["episodes"]
+    by = {e["controller"]: e for e in episodes}
+    assert set(by) == {"icr", f"ppo:{out / 'model.zip'}"}
+    for row in by.values():
+        assert row["status"] == "ok" and np.isfinite(row["return"]) and "mean_internal_force_N" in row
+    assert main(["eval", "--controllers", f"ppo:{tmp_path / 'missing.zip'}", "--out", str(report)]) == 2

@@ -20,8 +20,16 @@ __all__ = ["run_policy_episode", "policy_metrics"]
 
 
 def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | None = None,
-                       deterministic: bool = True):
-    """(EpisodeLog, return) of ``policy`` (a :class:`train.policy.TrainedPolicy`) on ``track``."""
+                       deterministic: bool = True, kick: dict | None = None, max_time: float | None = None,
+                       env_kwargs: dict | None = None):
+    """(EpisodeLog, return) of ``policy`` (a :class:`train.policy.TrainedPolicy`) on ``track``.
+
+    As :func:`control.evaluate.run_episode`: the episode ends when the track is finished, off
+    track, or after ``max_time`` [s] (default 3 × the track's nominal duration + 10 s, the env's
+    own time limit being off); ``kick`` is the env's reset option; ``env_kwargs`` are added to the
+    policy's training env arguments (e.g. ``domain_randomization``)."""
+    from azimut_env.task import nominal_duration
+
     from control.evaluate import EpisodeLog
     from control.icr_controller import Mode
     from control.limits import limit_violations
@@ -30,10 +38,11 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
         if track not in TRACK_NAMES:
             raise ValueError(f"unknown track {track!r}; choose from {', '.join(TRACK_NAMES)}")
         track = make_track(track, rng=np.random.default_rng(seed))
-    venv = make_vector_env(policy.action, 1, track=track, autoreset_mode=AutoresetMode.DISABLED,
-                           env_kwargs=policy.env_kwargs)
+    kwargs = {**policy.env_kwargs, **(env_kwargs or {}), "time_limit_factor": 0.0}
+    venv = make_vector_env(policy.action, 1, track=track, autoreset_mode=AutoresetMode.DISABLED, env_kwargs=kwargs)
     base = venv.unwrapped
-    obs, info = venv.reset(seed=seed)
+    obs, info = venv.reset(seed=seed, options={"kick": kick} if kick else None)
+    max_time = max_time if max_time is not None else 3.0 * nominal_duration(base.tracks[0]) + 10.0
     dt, limits = base.control_period, base.limits
     log = EpisodeLog(label or f"{policy.algo}-{policy.action}", base.tracks[0], dt)
     rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
@@ -44,7 +53,7 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
     beta_prev, phidot_prev = beta_prev[0], phidot_prev[0]
     rate_prev = np.zeros_like(beta_prev)
     events = 0
-    for _ in range(10**7):
+    for _ in range(int(np.ceil(max_time / base.control_period))):
         action = policy.act(obs, deterministic=deterministic)
         obs, reward, terminated, truncated, info = venv.step(action)
         ret += float(reward[0])
@@ -88,6 +97,7 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
         setattr(log, key, np.asarray(values))
     log.t = dt * np.arange(1, len(rec["lateral"]) + 1)
     log.events = events
+    log.ret = ret
     venv.close()
     return log, ret
 
