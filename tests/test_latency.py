@@ -96,3 +96,17 @@ def test_latency_is_validated():
             TaskConfig(action_latency=bad)
     with pytest.raises((ValueError, TypeError)):
         AzimutEnv(action_latency=-2)
+
+
+def test_pickled_env_keeps_its_queue():
+    import pickle
+
+    env = AzimutEnv(action_latency=3)
+    env.reset(seed=5)
+    seq = _actions(12)
+    for a in seq[:5]:
+        env.step(a)
+    clone = pickle.loads(pickle.dumps(env))
+    for a in seq[5:]:
+        r1, r2 = env.step(a), clone.step(a)
+        assert np.array_equal(r1[0], r2[0]) and r1[1] == r2[1]
