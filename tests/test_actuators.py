@@ -177,3 +177,27 @@ def test_motor_params_are_validated():
     with pytest.raises(ValueError):
         SteeringMotorParams(rotor_inertia=math.nan)
     assert not SteeringMotorParams().is_dc and SM.is_dc
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_f = st.floats(-1e3, 1e3, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_f, _f, st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), _f, st.booleans(), st.booleans(), st.floats(1e-5, 0.01))
+def test_steering_kernels_finite_on_finite_input(theta, omega, target, beta, beta_dot, enabled, dc, dt):
+    out = steer_actuator_kernel(dc, theta, omega, target, beta, beta_dot, enabled, KP, LIM.steer_rate_max,
+                                LIM.steer_accel_max, LIM.steer_torque_max, K_S, C_S, SM.stall_torque,
+                                SM.no_load_speed, SM.rotor_inertia, dt)
+    assert all(math.isfinite(x) for x in out)
+    if not enabled:
+        assert out[1] == 0.0  # braked
+
+
+@settings(max_examples=200, deadline=None)
+@given(_f, _f, st.floats(-1e4, 1e4), st.booleans(), st.floats(1e-5, 0.01))
+def test_wheel_spin_kernel_finite_on_finite_input(phidot, ref, f_long, enabled, dt):
+    new = wheel_spin_step_kernel(phidot, ref, f_long, enabled, R, I_W, KV, TAU_W, BEARING, RR, TIRE.rolling_knee, dt)
+    assert math.isfinite(new)
