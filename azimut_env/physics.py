@@ -22,20 +22,27 @@ pivot reaction (it passes through A_k) gives the exact Newton–Euler equations 
     I_m (θ̈ + β̈_k)  = τ_s,k + (P_k − A_k) × F_k + M_z,k − τ_stop,k       (module k about A_k)
 
 with F_k the tire force at P_k, τ_s,k = k_s (θ_m,k − β_k) + c_s (θ̇_m,k − β̇_k) the series spring
-and damper to the motor angle θ_m,k (clipped to the motor's torque limit), M_z,k the tire's
-moment about the vertical at the contact (aligning and scrub torque; zero for the regularised
-Coulomb tire) and τ_stop the hard-stop impulses (equal and opposite on module and chassis). The
+and damper to the motor angle θ_m,k (clipped to the motor's torque limit; the DC motor model
+has its own limits, ``actuators.steer_actuator_kernel``), M_z,k = M_align + M_scrub the tire's
+couples about the vertical at the contact (``tire.tire_step_kernel``: the pneumatic trail's
+aligning moment and the patch-twist scrub / dry-parking torque) and τ_stop the hard-stop
+impulses (equal and opposite on module and chassis). The
 module equation in β reads I_m β̈_k = τ_k − I_m θ̈: the −I_m θ̈ coupling. It is integrated in the
 absolute module rate ω_k = θ̇ + β̇_k, for which it is the plain I_m ω̇_k = τ_k, so the coupling is
 exact with no matrix to invert; β̇_k = ω_k − θ̇ is recovered from it. The tire force acts on the
-chassis at A_k; its moment about A_k (−b_k F_long,k for this tire) and M_z,k act on the module's
-steering DOF, where the series spring holds them and passes them to the chassis. The steering
+chassis at A_k; its moment about A_k and M_z,k act on the module's steering DOF, where the series
+spring holds them and passes them to the chassis. Since P_k − A_k = b_k e_k lies along the
+propulsion axis, the lateral force (along e_k) has no moment about A_k; the moment of the force
+is −b_k F_long,k, the longitudinal force at the sidewise offset. What turns a misaligned wheel
+toward its rolling direction is M_align; what resists steering a loaded wheel at rest is M_scrub
+(and the rolling of the offset contact point, resisted by the wheel's spin and motor). The steering
 angle is a coordinate, so the contact point is exactly A_k + b_k (cos γ_k, sin γ_k): there is no
 pivot to drift (the error is zero by construction).
 
 Integration: semi-implicit (symplectic) Euler at the substep dt = control_period / substeps.
-All forces and torques are evaluated at the start of the substep (the wheel spin and propulsion
-loop implicitly, see ``actuators.wheel_spin_kernel``), then
+All forces and torques are evaluated at the start of the substep (the tire's relaxation and the
+wheel's propulsion loop implicitly, see ``tire.tire_step_kernel`` and
+``actuators.wheel_spin_step_kernel``), then
 
     ω_k' = ω_k + dt τ_k / I_m,   v' = v + dt ΣF / M,   θ̇' = θ̇ + dt τ_c / I,
     β_k' = β_k + dt (ω_k' − θ̇'),  x' = x + dt v',  θ' = θ + dt θ̇'.
@@ -213,7 +220,7 @@ class BlowUpLimits:
     joint_gap: float = 0.05
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
                  dc, n, dt, substeps, integrate):
     """``substeps`` substeps of every robot (see the module docstring for the equations).

@@ -546,8 +546,9 @@ class AzimutTask:
         """Start robot i's episode, drawing from ``rng`` (its generator) in the single env's order.
 
         ``fresh_space`` rebuilds the whole Space (the single env's bit-exact replay, N = 1 only);
-        otherwise the robot gets fresh joints in the running Space, which replays the same
-        episode bit for bit as long as no obstacle contact is involved.
+        otherwise the robot is reset inside the running Space (its whole state is its body and
+        its joint, motor and tire arrays), which replays the same episode bit for bit as long as
+        no obstacle contact is involved (contacts keep pymunk solver caches).
 
         The options are validated first (``checked``: they come from :meth:`check_reset_options`
         already), so a refused option changes nothing. A reset that fails later (an obstacle over
@@ -584,8 +585,6 @@ class AzimutTask:
             phys.obstacles = self.default_obstacles
         if fresh_space:
             phys.rebuild()
-        else:
-            phys.renew_joints(i)
         self.kicks[i] = None
         self._kick_step[i] = -1
         if "kick" in options:
@@ -683,8 +682,7 @@ class AzimutTask:
 
     def park(self, i: int) -> None:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
-        its reset), so that no NaN stays in the Space (its joints' accumulated impulses included)."""
-        self.physics.renew_joints(i)
+        its reset), so that no NaN stays in the Space or in its joint, motor and tire states."""
         self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
         self._cmd_fifo[i] = self.physics.commands[i]
         self.phi_prev[i] = 0.0
