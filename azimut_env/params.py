@@ -369,6 +369,11 @@ class RobotParams:
         g = self.geometry
         if not isinstance(g, RobotGeometry):
             raise ValueError(f"RobotParams.geometry must be a RobotGeometry, got {type(g).__name__}")
+        for name, kind in (("chassis", ChassisParams), ("steering", SteeringParams),
+                           ("steer_motor", SteeringMotorParams), ("wheel", WheelParams), ("tire", TireParams),
+                           ("limits", ActuatorLimits), ("sensors", SensorParams)):
+            if not isinstance(getattr(self, name), kind):
+                raise TypeError(f"RobotParams.{name} must be {kind.__name__}, got {type(getattr(self, name)).__name__}")
         if not (np.isclose(g.steer_max, self.limits.steer_max) and np.isclose(g.steer_min, self.limits.steer_min)):
             raise ValueError("RobotParams: limits.steer_min/steer_max must equal the geometry's steering range")
 

@@ -119,6 +119,7 @@ from numba import njit
 from .actuators import steer_actuator_kernel, wheel_spin_step_kernel
 from .params import RobotParams
 from .tire import TS, stability_numbers, tire_step_kernel
+from .validation import check_positive
 
 __all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS", "TS"]
 
@@ -218,6 +219,10 @@ class BlowUpLimits:
     yaw_rate: float = 200.0
     position: float = 1e4
     joint_gap: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "spin", "yaw_rate", "position", "joint_gap"):  # NaN would disarm the check
+            object.__setattr__(self, name, check_positive(f"BlowUpLimits.{name}", getattr(self, name)))
 
 
 @njit(cache=True, error_model="numpy")

@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from azimut_env.validation import check_bool, check_int, check_positive, check_range
 from estimation.geometry import RobotGeometry
 from estimation.kinematics import steering_from_lambda, steering_gradient, wheel_speed_coefficients
 
@@ -151,16 +152,16 @@ class ICRControllerConfig:
     reconfig_accel_fraction: float = 0.3
 
     def __post_init__(self) -> None:
-        for name in ("k_lambda", "mu_accel_fraction", "mu_headroom", "axis_margin", "arc_step", "stop_mu_tol",
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
-                     "stop_hold_time"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"ICRControllerConfig.{name} must be finite and > 0, got {value!r}")
-        if self.mu_headroom > 1:
-            raise ValueError(f"ICRControllerConfig.mu_headroom must be in ]0, 1], got {self.mu_headroom}")
-        if self.n_kappa < 2:
-            raise ValueError(f"ICRControllerConfig.n_kappa must be >= 2, got {self.n_kappa}")
+                     "stop_hysteresis", "stop_hold_time"):
+            fix(name, check_positive(f"ICRControllerConfig.{name}", getattr(self, name)))
+        for name in ("mu_headroom", "reconfig_rate_fraction", "reconfig_accel_fraction"):  # fractions of a limit
+            fix(name, check_range(f"ICRControllerConfig.{name}", getattr(self, name), 0.0, 1.0, lo_open=True))
+        fix("n_kappa", check_int("ICRControllerConfig.n_kappa", self.n_kappa, min_value=2, max_value=100_000))
+        fix("coupling_from_measurement", check_bool("ICRControllerConfig.coupling_from_measurement",
+                                                    self.coupling_from_measurement))
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,7 @@ class PathFollowerConfig:
     speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("k_int", "moving_speed"):
+        for name in ("k_int", "moving_speed", "preview", "preview_min"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"PathFollowerConfig.{name} must be finite and >= 0, got {value!r}")

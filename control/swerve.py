@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from azimut_env.validation import check_bool
+
 from estimation.geometry import RobotGeometry
 
 from .icr_controller import WheelCommand
@@ -74,6 +76,8 @@ class SwerveConfig:
     coupling: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling"):
+            object.__setattr__(self, name, check_bool(f"SwerveConfig.{name}", getattr(self, name)))
         if not (math.isfinite(self.speed_deadband) and self.speed_deadband >= 0):
             raise ValueError(f"SwerveConfig.speed_deadband must be finite and >= 0, got {self.speed_deadband!r}")
         for name in ("slew_linear", "slew_angular"):

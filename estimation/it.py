@@ -91,6 +91,12 @@ class ITParams:
                 raise ValueError(f"ITParams.{name} must be finite and > 0, got {value}")
         if self.min_step > 1:
             raise ValueError(f"ITParams.min_step must be <= 1, got {self.min_step}")
+        if not (np.isfinite(self.accept_rms) and self.accept_rms >= 0):
+            raise ValueError(f"ITParams.accept_rms must be finite and >= 0, got {self.accept_rms}")
+        for name in ("max_iter", "n_starts") + (("race_iter",) if self.race_iter is not None else ()):
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"ITParams.{name} must be an integer, got {value!r}")
         if int(self.max_iter) < 1 or int(self.n_starts) < 1:
             raise ValueError("ITParams.max_iter and n_starts must be >= 1")
         if self.race_iter is not None and not (0 <= int(self.race_iter) <= int(self.max_iter)):

@@ -39,6 +39,17 @@ class OracleParams:
     ring_points: int = 72
     refine: int = 12
 
+    def __post_init__(self) -> None:
+        for name, low in (("grid_points", 2), ("ring_points", 0), ("refine", 1)):
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"OracleParams.{name} must be an integer, got {value!r}")
+            if not low <= value <= 10_000_000:
+                raise ValueError(f"OracleParams.{name} must be in [{low}, 1e7], got {value}")
+        radii = np.asarray(self.ring_radii)
+        if radii.dtype.kind not in "iuf" or radii.ndim != 1 or not np.all(np.isfinite(radii) & (radii > 0)):
+            raise ValueError(f"OracleParams.ring_radii must be finite radii > 0 [rad], got {self.ring_radii!r}")
+
 
 def oracle_grid(geom: RobotGeometry, params: OracleParams = OracleParams()) -> np.ndarray:
     """Dense search grid of Λ: a Fibonacci hemisphere plus rings around each steering axis."""

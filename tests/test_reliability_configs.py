@@ -100,3 +100,23 @@ def test_icr_target_zero_direction_is_hold_not_nan():
     assert np.array_equal(lam, [0.0, 0.0, 1.0]) and mu == 0.0
     with pytest.raises(ValueError):
         ICRTargetAction(AzimutEnv(), min_norm=0.0)
+
+
+@pytest.mark.parametrize("make", [
+    lambda: __import__("azimut_env.physics", fromlist=["x"]).BlowUpLimits(speed=NAN),
+    lambda: __import__("azimut_env.params", fromlist=["x"]).RobotParams(limits=None),
+    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(stop_hysteresis=NAN),
+    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(n_kappa=2.5),
+    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(reconfig_rate_fraction=2.0),
+    lambda: __import__("control.swerve", fromlist=["x"]).SwerveConfig(discretize=NAN),
+    lambda: __import__("control.path_follower", fromlist=["x"]).PathFollowerConfig(preview=NAN),
+    lambda: __import__("estimation.it", fromlist=["x"]).ITParams(accept_rms=NAN),
+    lambda: __import__("estimation.it", fromlist=["x"]).ITParams(max_iter=2.5),
+    lambda: __import__("estimation.oracle", fromlist=["x"]).OracleParams(grid_points=0),
+    lambda: __import__("estimation.oracle", fromlist=["x"]).OracleParams(ring_radii=(NAN,)),
+])
+def test_config_fields_found_by_property_tests(make):
+    """Found by the property tests: fields accepted NaN (BlowUpLimits: NaN thresholds disarm the
+    blow-up check) or a wrong type (RobotParams(limits=None): AttributeError)."""
+    with pytest.raises((ValueError, TypeError)):
+        make()

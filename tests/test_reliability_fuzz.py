@@ -259,6 +259,44 @@ test_wrappers, test_wrappers_slow = _profiles(
                                                                               max_size=4).map(np.array)))
 
 
+# ---------------------------------------------------------------------- parameter dataclasses
+
+
+def _config_classes():
+    import dataclasses
+
+    from azimut_env import localisation, params, physics, task
+    from control import icr_controller, path_follower, swerve
+    from estimation import it, oracle
+
+    classes = [params.ActuatorLimits, params.SteeringParams, params.SteeringMotorParams, params.WheelParams,
+               params.TireParams, params.ChassisParams, params.SensorParams, params.RobotParams, task.TaskConfig,
+               localisation.LocalisationParams, physics.BlowUpLimits, icr_controller.ICRControllerConfig,
+               swerve.SwerveConfig, path_follower.PathFollowerConfig, it.ITParams, oracle.OracleParams]
+    return [(c, f.name) for c in classes for f in dataclasses.fields(c) if f.init]
+
+
+CONFIG_FIELDS = _config_classes()
+
+
+def _prop_config_fields(cls_field, value):
+    cls, name = cls_field
+    TRIED["config"] += 1
+    try:
+        obj = cls(**{name: value})
+    except (ValueError, TypeError):
+        TRIED["config.refused"] += 1
+        return
+    got = getattr(obj, name)
+    if isinstance(value, float) and not math.isfinite(value):  # NaN or inf kept: a defect unless inf means "none"
+        assert isinstance(got, float) and math.isinf(got) and math.isinf(value), (cls.__name__, name, value)
+
+
+test_config_fields, test_config_fields_slow = _profiles(
+    _prop_config_fields, 150, 5000, cls_field=st.sampled_from(CONFIG_FIELDS),
+    value=st.one_of(junk, st.floats(-1e3, 1e3), st.integers(-5, 5), st.just(float("nan"))))
+
+
 # ---------------------------------------------------------------------- estimators
 
 arrays = st.one_of(
@@ -299,14 +337,21 @@ test_estimators, test_estimators_slow = _profiles(
 
 # ---------------------------------------------------------------------- the command line
 
-FLAGS = {
-    "eval": ["--controllers", "--tracks", "--seed", "--speed-scale", "--max-time", "--out", "--kick-runs", "--no-plots"],
-    "bench-env": ["--steps", "--track", "--substeps", "--seed", "--num-envs", "--vector-steps", "--episode-steps",
-                  "--solver-iterations", "--reference"],
-    "bench-estimators": ["--json", "--points", "--random", "--seed", "--single-calls", "--d2", "--methods"],
-    "sim-paper": ["--driver", "--track", "--speeds", "--seed", "--json", "--plot", "--substeps"],
-    "record-d2": ["--points", "--seed", "--speed-scale", "--out"],
-}
+def _flags() -> dict[str, list[str]]:
+    """Every subcommand's option strings, read from its own parser (new subcommands and flags are
+    fuzzed without editing this file)."""
+    from azimut_env.cli import CommandParser
+
+    out = {}
+    for name, (module_name, _) in _available().items():
+        parser = CommandParser(prog=f"azimut {name}")
+        importlib.import_module(module_name).add_arguments(parser)
+        out[name] = sorted(o for act in parser._actions for o in act.option_strings if o.startswith("--")
+                           and o != "--help")
+    return out
+
+
+FLAGS = _flags()
 cli_values = st.one_of(
     st.integers(-5, 10**7).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.sampled_from(["icr", "twist", "icr,twist", "paper", "circle,nope", "NE", "NE,LS", "IT,NE", "auto", "recorded",
