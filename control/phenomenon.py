@@ -288,7 +288,8 @@ def table_markdown(rows: list[dict]) -> str:
 
 
 def plot_phenomenon(logs: dict, geom, path: str) -> None:
-    """Per speed: qua over time of β (compliant), θ_m (compliant) and β (stiff) (like Fig. 11)."""
+    """Per speed: qua over time of β (compliant), θ_m (compliant) and β (stiff) (like Fig. 11), with
+    the compliant run's stopped and reconfiguring steps shaded (they are left out of the figures)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -301,6 +302,10 @@ def plot_phenomenon(logs: dict, geom, path: str) -> None:
             if sp != speed or not log.qua.size:
                 continue
             if steering == "compliant":
+                from .evaluate import moving_mask
+
+                ax.fill_between(log.t, 0.0, 1.02, where=~moving_mask(log), color="0.88", step="mid", lw=0,
+                                label="not moving (excluded)")
                 ax.plot(log.t, qua_of_angles(log.beta_true, geom), lw=0.8, label="qua β (compliant)")
                 ax.plot(log.t, qua_of_angles(log.motor_true, geom), lw=0.8, alpha=0.8, label="qua θ_m (compliant)")
             else:
