@@ -28,6 +28,7 @@ import json
 import math
 import sys
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,6 +71,9 @@ def arg_controllers(text: str) -> list[str]:
             path = Path(item.split(":", 1)[1])
             if not (path.is_file() or (path / "model.zip").is_file()):
                 raise argparse.ArgumentTypeError(f"{item}: no model file {path}")
+            model = path if path.is_file() else path / "model.zip"
+            if not zipfile.is_zipfile(model):  # SB3 saves zip archives
+                raise argparse.ArgumentTypeError(f"{item}: {model} is not a saved model (not a zip archive)")
         elif item not in CONTROLLERS:
             raise argparse.ArgumentTypeError(f"unknown {item!r}; choose from {', '.join(CONTROLLERS)}, ppo:PATH, "
                                              "sac:PATH")
@@ -411,6 +415,17 @@ def check_args(args: argparse.Namespace) -> None:
 
     if not args.no_plots:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+    for item in args.controllers:  # load each trained policy once now, not after the other episodes
+        if is_policy(item):
+            require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
+            from train.policy import load_policy
+
+            algo, path = item.split(":", 1)
+            try:
+                load_policy(path, algo)
+            except Exception as exc:  # noqa: BLE001 (any failure to load is the user's file: say it in one line)
+                raise ValueError(f"argument --controllers: {item}: cannot load the model "
+                                 f"({type(exc).__name__}: {exc})") from None
     if any(is_policy(c) for c in args.controllers):
         require_module("stable_baselines3", "evaluating a trained policy (the rl extra)")
     check_campaign_args(args)

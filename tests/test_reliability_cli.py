@@ -54,6 +54,7 @@ BAD = [
     "bench-estimators --json {tmp}", "bench-estimators --json {tmp}/missing/x.json", "bench-estimators --seed -1",
     "record-d2 --points 0", "record-d2 --out {file}/x.npz", "record-d2 --speed-scale 0", "record-d2 --seed -5",
     "record-d2 --out {tmp}", "nope", "eval --out ''",
+    "eval --controllers ppo:{file}", "eval --controllers sac:{tmp}/none.zip", "eval --workers 0", "eval --seeds 5-1",
 ]
 
 
@@ -133,3 +134,18 @@ def test_tiny_control_period_refused():
 
     with pytest.raises(ValueError, match="control_period"):
         AzimutEnv(control_period=1.6846197063791808e-27)
+
+
+def test_eval_refuses_an_unloadable_policy_before_the_other_episodes(tmp_path, capsys):
+    """Found by hand: ``--controllers ppo:FILE`` with a file that is not a model ran every other
+    episode first and failed at the end (exit 1)."""
+    pytest.importorskip("stable_baselines3")
+    import zipfile
+
+    bad = tmp_path / "bad.zip"
+    with zipfile.ZipFile(bad, "w") as z:
+        z.writestr("x", "y")
+    code, out, err, _ = run_cli(["eval", "--controllers", f"icr,sac:{bad}", "--no-plots", "--out",
+                                 str(tmp_path / "r")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot load" in err and out == ""
+    assert not (tmp_path / "r").exists()
