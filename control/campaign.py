@@ -470,9 +470,11 @@ arg_seeds.__name__ = "seeds"
 # ---------------------------------------------------------------------------- command line
 
 
-def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episodes") -> None:
+def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episodes", *, threads: bool = True,
+                           resume: bool = True) -> None:
     """``--workers``, ``--executor``, ``--ray-address``, ``--threads-per-task``, ``--retries``,
-    ``--resume``: how a command runs its tasks (shared by the commands that run campaigns)."""
+    ``--resume``: how a command runs its tasks (shared by the commands that run campaigns; a
+    command with its own thread or resume flag leaves those out)."""
     from azimut_env.validation import arg_int
 
     parser.add_argument("--workers", type=arg_int(1, 1024), default=1,
@@ -483,14 +485,16 @@ def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episode
     parser.add_argument("--ray-address", default=None, metavar="ADDRESS",
                         help="join an existing Ray cluster ('auto' on one of its nodes, or HEAD_IP:6379) instead of "
                              "starting a local instance; every node needs this package installed")
-    parser.add_argument("--threads-per-task", type=arg_int(1, 1024), default=None, metavar="N",
-                        help="numba/torch/BLAS threads per task (default: CPUs // workers)")
+    if threads:
+        parser.add_argument("--threads-per-task", type=arg_int(1, 1024), default=None, metavar="N",
+                            help="numba/torch/BLAS threads per task (default: CPUs // workers)")
     parser.add_argument("--retries", type=arg_int(0, 10), default=1,
                         help="runs again a task that raised or whose worker died, this many times, before "
                              "reporting it as failed (default 1)")
-    parser.add_argument("--resume", action="store_true",
-                        help=f"keep the {what} already saved in the output folder and compute only the missing ones "
-                             f"(without it, saved {what} are discarded)")
+    if resume:
+        parser.add_argument("--resume", action="store_true",
+                            help=f"keep the {what} already saved in the output folder and compute only the missing "
+                                 f"ones (without it, saved {what} are discarded)")
 
 
 def check_executor_args(args: argparse.Namespace) -> str:
