@@ -3,9 +3,13 @@ one run, with the wall times, the speed-up and a check that every episode's metr
 bit-identical.
 
 Default: 2 controllers × 6 tracks × 4 seeds (48 full episodes, no plots), serial in this process
-against ``--workers 2`` (Ray when installed, else local processes). The serial run goes first,
-after one short warm-up episode per controller so that it does not pay for loading the numba
-kernels; the parallel runs include everything they cost (starting workers, imports, Ray).
+against ``--workers 2`` (Ray when installed, else local processes; ``--executors process,ray``
+times both). The campaign runs in rounds, one per seed, each run by every executor in turn, so
+that the varying load of a shared machine falls on all of them alike. The serial runs follow one
+short warm-up episode per controller, so they do not pay for loading the numba kernels; the
+parallel runs include everything they cost (starting worker processes in every round, imports,
+starting the Ray instance once). Besides the wall times it prints the CPU time the episodes got
+(CPU time / wall time: the cores a run actually had).
 """
 
 from __future__ import annotations
@@ -39,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="parallel executors to time against serial, e.g. process,ray (default: auto)")
     parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
                         help="cap each episode (default: full episodes)")
+    parser.add_argument("--no-interleave", dest="interleave", action="store_false",
+                        help="run the whole campaign serially, then on workers (default: one round per seed, "
+                             "each run by every executor in turn, so a shared machine's load falls on all alike)")
 
 
 def check_args(args: argparse.Namespace) -> None:
@@ -53,34 +60,63 @@ def _metrics(records) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     tasks = episode_tasks(args.controllers, args.tracks, args.seeds, max_time=args.max_time)
     n = len(tasks)
+    names = ["serial"] + [resolve_executor(ex, args.workers, None) for ex in args.executors]
+    rounds = [[t for t in tasks if t.key["seed"] == seed] for seed in args.seeds] if args.interleave else [tasks]
     print(f"campaign: {len(args.controllers)} controllers x {len(args.tracks)} tracks x {len(args.seeds)} seeds = "
           f"{n} episodes" + (f", at most {args.max_time} s each" if args.max_time else ", full length")
-          + f"; {os.cpu_count()} CPUs", flush=True)
+          + f"; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f}", flush=True)
+    print(f"{len(rounds)} round(s) of {len(rounds[0])} episodes, each run by " + ", then ".join(names)
+          + " (alternating the order), so that the load of a shared machine falls on all alike", flush=True)
     for controller in args.controllers:  # warm-up: numba kernels loaded before the serial clock starts
         episode_task(controller, "circle", 0, max_time=0.2)
-    results = []
-    with tempfile.TemporaryDirectory(prefix="azimut-bench-campaign-") as tmp:
-        t0 = time.perf_counter()
-        serial = run_tasks(tasks, os.path.join(tmp, "serial"), executor="serial")
-        t_serial = time.perf_counter() - t0
-        busy = sum(r.get("elapsed_s", 0.0) for r in serial)
-        results.append(("serial", 1, t_serial, busy, True))
-        print(f"serial: {t_serial:.1f} s", flush=True)
-        for ex in args.executors:
-            name = resolve_executor(ex, args.workers, None)
+    wall = dict.fromkeys(names, 0.0)
+    cpu = dict.fromkeys(names, 0.0)
+    load: dict[str, list[float]] = {k: [] for k in names}
+    records: dict[str, list] = {k: [] for k in names}
+    ray_started = False
+    if "ray" in names:
+        import logging
+
+        import ray
+
+        if not ray.is_initialized():
             t0 = time.perf_counter()
-            par = run_tasks(tasks, os.path.join(tmp, name), executor=name, workers=args.workers)
-            t_par = time.perf_counter() - t0
-            same = _metrics(par) == _metrics(serial)
-            results.append((name, args.workers, t_par, sum(r.get("elapsed_s", 0.0) for r in par), same))
-            print(f"{name} x{args.workers}: {t_par:.1f} s", flush=True)
-    failed = sum(r["status"] != "ok" for r in serial)
+            ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.WARNING)
+            wall["ray"] += time.perf_counter() - t0  # the instance's start is part of Ray's cost
+            ray_started = True
+    try:
+        with tempfile.TemporaryDirectory(prefix="azimut-bench-campaign-") as tmp:
+            for k, chunk in enumerate(rounds):
+                order = names if k % 2 == 0 else names[::-1]
+                for name in order:
+                    t0 = time.perf_counter()
+                    recs = run_tasks(chunk, os.path.join(tmp, f"{name}-{k}"), executor=name,
+                                     workers=1 if name == "serial" else args.workers)
+                    wall[name] += time.perf_counter() - t0
+                    cpu[name] += sum(r.get("cpu_s", 0.0) for r in recs)
+                    load[name].append(os.getloadavg()[0])
+                    records[name] += recs
+                print(f"round {k + 1}/{len(rounds)}: " + ", ".join(f"{nm} {wall[nm]:.1f} s" for nm in names)
+                      + " (cumulative)", flush=True)
+    finally:
+        if ray_started:
+            ray.shutdown()
+    key = {t.id: i for i, t in enumerate(tasks)}
+    for name in names:
+        records[name].sort(key=lambda r: key[r["id"]])
+    failed = sum(r["status"] != "ok" for r in records["serial"])
     print()
-    print(f"{'executor':<10} {'workers':>7} {'wall [s]':>9} {'episodes/s':>11} {'speed-up':>9} "
-          f"{'task time [s]':>14}  identical metrics")
-    for name, w, wall, busy, same in results:
-        print(f"{name:<10} {w:>7} {wall:>9.1f} {n / wall:>11.3f} {t_serial / wall:>8.2f}x {busy:>14.1f}  "
+    print(f"{'executor':<10} {'workers':>7} {'wall [s]':>9} {'episodes/s':>11} {'speed-up':>9} {'task CPU [s]':>13} "
+          f"{'cores used':>11} {'load avg':>9}  identical metrics")
+    for name in names:
+        same = _metrics(records[name]) == _metrics(records["serial"])
+        w = 1 if name == "serial" else args.workers
+        print(f"{name:<10} {w:>7} {wall[name]:>9.1f} {n / wall[name]:>11.3f} {wall['serial'] / wall[name]:>8.2f}x "
+              f"{cpu[name]:>13.1f} {cpu[name] / wall[name]:>11.2f} {sum(load[name]) / len(load[name]):>9.1f}  "
               f"{'yes' if same else 'NO'}")
-    print(f"(speed-up: serial wall time / wall time, same run; task time: the episodes' own run times summed, "
-          f"which grows when workers share cores; bar 1.7x for 2 workers on 2 cores; {failed} episodes failed)")
-    return 0 if all(r[4] for r in results) and failed == 0 else 1
+    print(f"(speed-up: serial wall time / wall time, same run; task CPU: the episodes' CPU time summed; cores used: "
+          f"task CPU / wall, what the run got of the machine; load avg: 1-min load average after each round; "
+          f"bar 1.7x for 2 workers on 2 cores; {failed} episodes failed)")
+    ok = all(_metrics(records[nm]) == _metrics(records["serial"]) for nm in names)
+    return 0 if ok and failed == 0 else 1

@@ -156,16 +156,17 @@ def limit_threads(threads: int | None) -> None:
 def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads: int | None) -> dict:
     """Run one task in the current process; an exception becomes a failed record."""
     limit_threads(threads)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     try:
         result = _resolve(fn)(**dict(key), **dict(extra))
         if not isinstance(result, dict):
             raise TypeError(f"task function {fn} returned {type(result).__name__}, expected dict")
-        return {"status": "ok", "result": result, "elapsed_s": time.perf_counter() - start, "worker": worker}
+        rec = {"status": "ok", "result": result}
     except Exception as exc:  # noqa: BLE001 - a task's failure is data, not a crash of the campaign
-        return {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(),
-                "elapsed_s": time.perf_counter() - start, "worker": worker}
+        rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+    rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker)
+    return rec
 
 
 def _worker_init(threads: int | None) -> None:
