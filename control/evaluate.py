@@ -26,6 +26,7 @@ import argparse
 import functools
 import json
 import math
+import re
 import sys
 import time
 import zipfile
@@ -296,7 +297,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    stem = f"{log.controller}_{log.track.name}"
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # ppo:PATH -> a file name
     files = []
     # 1. trajectory over the track (Fig. 9)
     fig, ax = plt.subplots(figsize=(6, 6))
