@@ -4,8 +4,11 @@ bit-identical.
 
 Default: 2 controllers × 6 tracks × 4 seeds (48 full episodes, no plots), serial in this process
 against ``--workers 2`` (Ray when installed, else local processes; ``--executors process,ray``
-times both). The campaign runs in rounds, one per seed, each run by every executor in turn, so
-that the varying load of a shared machine falls on all of them alike. The serial runs follow one
+times both). The campaign runs in rounds of ``--seeds-per-round`` seeds (default 2), each run by
+every executor in turn (alternating the order), so that the varying load of a shared machine
+falls on all of them alike; a round holds several of the longest episodes (the ICR controller on
+``paper``), so that it can be shared evenly by the workers. It also prints the ideal parallel
+time computed from the serial task times. The serial runs follow one
 short warm-up episode per controller, so they do not pay for loading the numba kernels; the
 parallel runs include everything they cost (starting worker processes in every round, imports,
 starting the Ray instance once). Besides the wall times it prints the CPU time the episodes got
@@ -43,14 +46,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="parallel executors to time against serial, e.g. process,ray (default: auto)")
     parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
                         help="cap each episode (default: full episodes)")
-    parser.add_argument("--no-interleave", dest="interleave", action="store_false",
-                        help="run the whole campaign serially, then on workers (default: one round per seed, "
-                             "each run by every executor in turn, so a shared machine's load falls on all alike)")
+    parser.add_argument("--seeds-per-round", type=arg_int(0, 100_000), default=2, metavar="K",
+                        help="rounds of K seeds, each run by every executor in turn, so that a shared machine's "
+                             "load falls on all alike (default 2; 0: one round, the whole campaign)")
 
 
 def check_args(args: argparse.Namespace) -> None:
     for ex in args.executors:
         resolve_executor(ex, args.workers, None)
+
+
+def _spin(n: int) -> float:
+    x = 0
+    for i in range(n):
+        x += i * i
+    return float(x > 0)
+
+
+def machine_headroom(workers: int, n: int = 5_000_000) -> float:
+    """What the machine gives right now: the speed-up of ``workers`` processes each running a
+    pure-Python loop over one process running one (no I/O, no memory traffic: the bound for any
+    parallel run at this moment on a shared machine)."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    with cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
+        list(ex.map(_spin, [1000] * workers))  # workers started
+        t0 = time.perf_counter()
+        _spin(n)
+        one = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        list(ex.map(_spin, [n] * workers))
+        many = time.perf_counter() - t0
+    return workers * one / many
 
 
 def _metrics(records) -> list[str]:
@@ -61,12 +89,17 @@ def run(args: argparse.Namespace) -> int:
     tasks = episode_tasks(args.controllers, args.tracks, args.seeds, max_time=args.max_time)
     n = len(tasks)
     names = ["serial"] + [resolve_executor(ex, args.workers, None) for ex in args.executors]
-    rounds = [[t for t in tasks if t.key["seed"] == seed] for seed in args.seeds] if args.interleave else [tasks]
+    k = args.seeds_per_round or len(args.seeds)
+    groups = [args.seeds[i:i + k] for i in range(0, len(args.seeds), k)]
+    rounds = [[t for t in tasks if t.key["seed"] in group] for group in groups]
     print(f"campaign: {len(args.controllers)} controllers x {len(args.tracks)} tracks x {len(args.seeds)} seeds = "
           f"{n} episodes" + (f", at most {args.max_time} s each" if args.max_time else ", full length")
           + f"; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f}", flush=True)
     print(f"{len(rounds)} round(s) of {len(rounds[0])} episodes, each run by " + ", then ".join(names)
           + " (alternating the order), so that the load of a shared machine falls on all alike", flush=True)
+    headroom = [machine_headroom(args.workers)]
+    print(f"machine headroom now: {args.workers} processes of a pure-Python loop run {headroom[0]:.2f}x faster than 1",
+          flush=True)
     for controller in args.controllers:  # warm-up: numba kernels loaded before the serial clock starts
         episode_task(controller, "circle", 0, max_time=0.2)
     wall = dict.fromkeys(names, 0.0)
@@ -102,6 +135,14 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if ray_started:
             ray.shutdown()
+    headroom.append(machine_headroom(args.workers))
+    # the best a parallel run could do, from the serial task times: per round, the longer of the
+    # longest task and the round's work shared by the workers
+    ideal = 0.0
+    for chunk in rounds:
+        ids = {t.id for t in chunk}
+        times = [r.get("elapsed_s", 0.0) for r in records["serial"] if r["id"] in ids]
+        ideal += max(max(times), sum(times) / args.workers)
     key = {t.id: i for i, t in enumerate(tasks)}
     for name in names:
         records[name].sort(key=lambda r: key[r["id"]])
@@ -115,6 +156,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name:<10} {w:>7} {wall[name]:>9.1f} {n / wall[name]:>11.3f} {wall['serial'] / wall[name]:>8.2f}x "
               f"{cpu[name]:>13.1f} {cpu[name] / wall[name]:>11.2f} {sum(load[name]) / len(load[name]):>9.1f}  "
               f"{'yes' if same else 'NO'}")
+    print(f"ideal on {args.workers} workers from the serial task times (longest task or work / workers, per round): "
+          f"{ideal:.1f} s, {wall['serial'] / ideal:.2f}x; longest episode {max(r.get('elapsed_s', 0) for r in records['serial']):.1f} s")
+    print(f"machine headroom ({args.workers} pure-Python loops against 1, same moment): {headroom[0]:.2f}x before, "
+          f"{headroom[1]:.2f}x after the campaign")
     print(f"(speed-up: serial wall time / wall time, same run; task CPU: the episodes' CPU time summed; cores used: "
           f"task CPU / wall, what the run got of the machine; load avg: 1-min load average after each round; "
           f"bar 1.7x for 2 workers on 2 cores; {failed} episodes failed)")
