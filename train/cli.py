@@ -57,6 +57,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--progress-bar", action="store_true",
                         help="SB3's progress bar (needs tqdm and rich; otherwise a line per evaluation)")
     parser.add_argument("--quiet", action="store_true", help="no SB3 log table on stdout")
+    from control.campaign import add_executor_arguments, arg_seeds
+
+    parser.add_argument("--seeds", type=arg_seeds, default=None, metavar="SEEDS",
+                        help="train one agent per seed (0-4, 0,3,5) into OUT/seed_N, with --workers at a time; "
+                             "OUT/report.md gives learning curves and final metrics as mean and 95%% interval "
+                             "over seeds (--resume then keeps the finished seeds)")
+    add_executor_arguments(parser, "seeds", threads=False, resume=False)
 
 
 def check_args(args: argparse.Namespace) -> None:
@@ -77,6 +84,11 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"--hyperparams {args.hyperparams}: not valid JSON ({exc})") from None
         if not isinstance(data, dict):
             raise ValueError(f"--hyperparams {args.hyperparams}: expected a JSON object")
+    if getattr(args, "seeds", None) is not None:
+        from .seeds import check_seed_args
+
+        check_seed_args(args)
+        return
     if args.resume and _latest_checkpoint(Path(args.out)) is None:
         raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
     if not args.resume and (Path(args.out) / "model.zip").exists():
@@ -195,6 +207,10 @@ def _plot_learning_curve(out: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "seeds", None) is not None:  # one agent per seed, as campaign tasks (train.seeds)
+        from .seeds import run_seeds
+
+        return run_seeds(args, args.seeds)
     import torch
 
     torch.set_num_threads(args.torch_threads)
