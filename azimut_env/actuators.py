@@ -31,8 +31,28 @@ import math
 
 from numba import njit
 
-__all__ = ["steer_motor_kernel", "spring_torque_kernel", "rolling_resistance_kernel",
+__all__ = ["steer_rate_step_kernel", "steer_motor_kernel", "spring_torque_kernel", "rolling_resistance_kernel",
            "wheel_spin_step_kernel", "dc_torque_limits_kernel", "steer_dc_motor_kernel", "steer_actuator_kernel"]
+
+
+@njit(cache=True, inline="always")
+def steer_rate_step_kernel(theta: float, omega: float, target: float, gain: float, rate_max: float,
+                           accel_max: float, dt: float) -> float:
+    """The change of the steering motor's rate over one substep [rad/s] that its position loop
+    asks: toward the rate ``sgn(e) min(gain |e|, rate_max, 0.9 √(2 accel_max |e|))`` (e = target −
+    θ_m; the square root brakes in time), by at most ``accel_max dt``. Both motor models use it."""
+    e = target - theta
+    ae = abs(e)
+    v = min(gain * ae, rate_max, math.sqrt(2.0 * accel_max * ae) * 0.9)
+    if e < 0:
+        v = -v
+    dv = v - omega
+    lim = accel_max * dt
+    if dv > lim:
+        dv = lim
+    elif dv < -lim:
+        dv = -lim
+    return dv
 
 
 @njit(cache=True, inline="always")
@@ -41,18 +61,7 @@ def steer_motor_kernel(theta: float, omega: float, target: float, beta: float, e
                        stiffness: float, dt: float):
     """One substep of the steering motor. Returns the new (θ_m, θ̇_m)."""
     if enabled:
-        e = target - theta
-        ae = abs(e)
-        v = min(gain * ae, rate_max, math.sqrt(2.0 * accel_max * ae) * 0.9)
-        if e < 0:
-            v = -v
-        dv = v - omega
-        lim = accel_max * dt
-        if dv > lim:
-            dv = lim
-        elif dv < -lim:
-            dv = -lim
-        omega = omega + dv
+        omega = omega + steer_rate_step_kernel(theta, omega, target, gain, rate_max, accel_max, dt)
         theta = theta + omega * dt
         # torque limit: the motor stalls rather than wind the spring beyond τ_max
         band = torque_max / stiffness
@@ -168,17 +177,7 @@ def steer_dc_motor_kernel(theta: float, omega: float, target: float, beta: float
     Returns (θ_m', θ̇_m', τ_s), τ_s = k_s (θ_m' − β) + c_s (θ̇_m' − β̇) the torque on the module
     (not clipped: the motor's torque limit is its own)."""
     if enabled:
-        e = target - theta
-        ae = abs(e)
-        v = min(gain * ae, rate_max, math.sqrt(2.0 * accel_max * ae) * 0.9)
-        if e < 0:
-            v = -v
-        dv = v - omega
-        lim = accel_max * dt
-        if dv > lim:
-            dv = lim
-        elif dv < -lim:
-            dv = -lim
+        dv = steer_rate_step_kernel(theta, omega, target, gain, rate_max, accel_max, dt)
         v = omega + dv
         spring = stiffness * (theta - beta) - damping * beta_dot
         tau = inertia * dv / dt + spring + (damping + dt * stiffness) * v
