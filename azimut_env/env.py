@@ -130,20 +130,20 @@ class AzimutEnv(gym.Env):
     * action_rate = −``action_rate_weight`` · ‖a − a_prev‖² (the set-point action);
     * off_track = −``off_track_penalty`` on the step that leaves the track (or stalls, below).
 
-    Typical per-step means, measured with default weights (one run, seed 0): the ICR reference
-    controller (``control``'s path follower + ICR controller) and uniformly random raw actions
-    (4 robots, 500 steps):
+    Typical per-step means, measured with default weights (one run, seed 0, the v2 physics with
+    the brush tire): the ICR reference controller (``control``'s path follower + ICR controller)
+    and uniformly random raw actions (4 robots, 500 steps):
 
     | term           | ICR, circle | ICR, paper | random, circle | random, paper |
     |----------------|-------------|------------|----------------|---------------|
-    | progress       | +0.987      | +0.568     | −0.004         | +0.002        |
-    | lateral        | −0.006      | −0.056     | −0.268         | −0.266        |
-    | heading        | −0.002      | −0.031     | −0.223         | −0.234        |
-    | overspeed      | −0.0001     | −0.0002    | 0              | −0.005        |
-    | slip           | −0.0004     | −0.006     | −0.418         | −0.422        |
-    | internal_force | −0.008      | −0.083     | −1.13          | −1.14         |
+    | progress       | +0.987      | +0.505     | −0.004         | +0.002        |
+    | lateral        | −0.006      | −0.063     | −0.264         | −0.252        |
+    | heading        | −0.002      | −0.037     | −0.224         | −0.235        |
+    | overspeed      | −0.0001     | −0.0004    | 0              | −0.006        |
+    | slip           | −0.0003     | −0.005     | −0.376         | −0.377        |
+    | internal_force | −0.012      | −0.133     | −1.21          | −1.22         |
     | action_rate    | −0.00002    | −0.00002   | −0.265         | −0.265        |
-    | reward         | +0.971      | +0.390     | −2.31          | −2.33         |
+    | reward         | +0.967      | +0.267     | −2.35          | −2.35         |
 
     (the paper track's reference slows down and stops to turn its wheels in place at its corners,
     hence its lower progress per step). A policy that fights its wheels (mean internal force
