@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 
-#: short episodes (0.1 × the nominal lap) keep the smoke test fast
+#: short training episodes (0.1 × the nominal lap) and 1 s evaluations keep the smoke test fast
 SHORT = {"time_limit_factor": 0.1}
 
 
@@ -28,7 +28,7 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
         {"learning_starts": 64, "batch_size": 32, "gradient_steps": 1, "buffer_size": 2000}
     out = tmp_path / f"{algo}_{action}"
     record = train(algo, action, "random", seed=0, steps=256, out=out, num_robots=4, eval_tracks=("crab",),
-                   eval_every=128, checkpoint_every=128, overrides=overrides, quiet=True, env_kwargs=SHORT)
+                   eval_every=128, checkpoint_every=128, overrides=overrides, quiet=True, env_kwargs=SHORT, eval_max_time=1.0)
     assert record["num_timesteps"] >= 256 and record["steps_per_s_in_learn"] > 0
     for name in ("model.zip", "vecnormalize.pkl", "run.json", "evaluations.json"):
         assert (out / name).is_file(), name
@@ -36,7 +36,7 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
     policy = load_policy(out / "model.zip")
     assert policy.algo == algo and policy.action == action and policy.obs_rms is not None
     assert policy.env_kwargs == SHORT
-    row, log = policy_metrics(policy, "crab", seed=1)
+    row, log = policy_metrics(policy, "crab", seed=1, max_time=1.0)
     assert {"return", "rms_lateral_m", "mean_internal_force_N", "slip_energy_J"} <= set(row)
     assert np.isfinite(row["return"]) and log.t.size > 0
     evals = json.loads((out / "evaluations.json").read_text())
@@ -49,10 +49,10 @@ def test_resume_continues_from_the_checkpoint(tmp_path):
     hp = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
     out = tmp_path / "run"
     train("ppo", "raw", "crab", seed=0, steps=128, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,
-          checkpoint_every=64, overrides=hp, quiet=True, env_kwargs=SHORT)
+          checkpoint_every=64, overrides=hp, quiet=True, env_kwargs=SHORT, eval_max_time=1.0)
     (out / "model.zip").unlink()
     rec = train("ppo", "raw", "crab", seed=0, steps=256, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,
-                checkpoint_every=64, overrides=hp, quiet=True, resume=True, env_kwargs=SHORT)
+                checkpoint_every=64, overrides=hp, quiet=True, resume=True, env_kwargs=SHORT, eval_max_time=1.0)
     assert rec["resumed_from"] and rec["num_timesteps"] >= 256
 
 
@@ -104,7 +104,7 @@ def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
 
     out = tmp_path / "run"
     train("ppo", "raw", "crab", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,
-          checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, quiet=True, env_kwargs=SHORT)
+          checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, quiet=True, env_kwargs=SHORT, eval_max_time=1.0)
     report = tmp_path / "eval"
     rc = main(["eval", "--controllers", f"icr,ppo:{out / 'model.zip'}", "--tracks", "crab", "--max-time", "0.5",
                "--no-plots", "--out", str(report)])

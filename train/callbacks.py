@@ -49,8 +49,9 @@ class HeldOutEvalCallback(BaseCallback):
     mean return) as ``best_model.zip`` + ``best_vecnormalize.pkl``."""
 
     def __init__(self, tracks: list[str], eval_every: int, out: Path, algo: str, action: str, env_kwargs: dict,
-                 seed: int = 0) -> None:
+                 seed: int = 0, max_time: float | None = None) -> None:
         super().__init__()
+        self.max_time = max_time
         self.tracks, self.eval_every, self.out = list(tracks), int(eval_every), Path(out)
         self.algo, self.action, self.env_kwargs, self.seed = algo, action, dict(env_kwargs), int(seed)
         self.best = -np.inf
@@ -71,8 +72,8 @@ class HeldOutEvalCallback(BaseCallback):
                                obs_rms=None if vn is None else vn.obs_rms,
                                clip_obs=10.0 if vn is None else vn.clip_obs, epsilon=1e-8 if vn is None else vn.epsilon)
         start = time.perf_counter()
-        rows = [policy_metrics(policy, track, seed=self.seed, label=f"{self.algo}-{self.action}")[0]
-                for track in self.tracks]
+        rows = [policy_metrics(policy, track, seed=self.seed, label=f"{self.algo}-{self.action}",
+                               max_time=self.max_time)[0] for track in self.tracks]
         entry = {"timesteps": int(self.num_timesteps), "eval_wall_s": time.perf_counter() - start, "rows": rows,
                  "mean_return": float(np.mean([r["return"] for r in rows]))}
         for r in rows:

@@ -104,7 +104,7 @@ def _latest_checkpoint(out: Path) -> Path | None:
 def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
           eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
           resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
-          env_kwargs: dict | None = None, time_limit_min: float = 0.0) -> dict:
+          env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None) -> dict:
     """Train and save (see the module docstring); returns the run record (``run.json``)."""
     import torch
     from stable_baselines3 import PPO, SAC
@@ -147,7 +147,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     if time_limit_min > 0:
         callbacks.append(WallClockLimit(60.0 * time_limit_min))
     evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
-                                    env_kwargs, seed=seed)
+                                    env_kwargs, seed=seed, max_time=eval_max_time)
     callbacks.append(evaluator)
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),

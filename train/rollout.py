@@ -102,11 +102,12 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
     return log, ret
 
 
-def policy_metrics(policy, track: str | Track, seed: int = 0, label: str | None = None) -> tuple[dict, object]:
+def policy_metrics(policy, track: str | Track, seed: int = 0, label: str | None = None,
+                   max_time: float | None = None) -> tuple[dict, object]:
     """(``azimut eval`` metrics row plus ``return``, EpisodeLog) of one episode of ``policy``."""
     from control.evaluate import episode_metrics
 
-    log, ret = run_policy_episode(policy, track, seed=seed, label=label)
+    log, ret = run_policy_episode(policy, track, seed=seed, label=label, max_time=max_time)
     row = episode_metrics(log)
     row["return"] = ret
     return row, log
