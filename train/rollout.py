@@ -65,9 +65,10 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
         beta_c, phidot_c = beta_c[0], phidot_c[0]
         rate = (beta_c - beta_prev) / dt
         accel, phiddot = (rate - rate_prev) / dt, (phidot_c - phidot_prev) / dt
-        viol = bool(limit_violations(rate, accel, phidot_c, phiddot, limits).any())
-        if "limit_exceeded" in info:
-            viol = viol or bool(info["limit_exceeded"][0])
+        if "limit_exceeded" in info:  # the controller's own commands (float64), as azimut eval checks them
+            viol = bool(info["limit_exceeded"][0])
+        else:  # raw set-points: finite differences of what the env applied
+            viol = bool(limit_violations(rate, accel, phidot_c, phiddot, limits).any())
         beta_prev, rate_prev, phidot_prev = beta_c, rate, phidot_c
         mode = int(info["controller_mode"][0]) if "controller_mode" in info else int(Mode.RUNNING)
         if rec["mode"] and mode == int(Mode.STOPPING) and rec["mode"][-1] == int(Mode.RUNNING):
