@@ -35,7 +35,7 @@ def plot_runs(runs: list[Path], out: Path) -> None:
             ev = json.loads(ev_file.read_text())
             axes[1].plot([e["timesteps"] for e in ev], [e["mean_return"] for e in ev], "o-", color=f"C{i}", label=label)
     axes[0].set_title("training episodes: mean return")
-    axes[1].set_title("held-out tracks (deterministic): mean return")
+    axes[1].set_title("evaluation tracks (deterministic episodes): mean return")
     for ax in axes:
         ax.set_xlabel("environment steps")
         ax.legend(fontsize=7)
