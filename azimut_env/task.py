@@ -616,8 +616,9 @@ class AzimutTask:
         self.stalled[i] = False
         self.best_step[i] = 0
         factor = self.config.time_limit_factor
-        self.step_limit[i] = (int(math.ceil(factor * nominal_duration(track) / self.config.control_period))
-                              if factor > 0 else np.iinfo(np.int64).max)
+        steps = factor * nominal_duration(track) / self.config.control_period
+        big = np.iinfo(np.int64).max  # no limit (factor 0), or one beyond any run (a huge factor)
+        self.step_limit[i] = int(math.ceil(steps)) if 0 < steps < 9e18 else big
         sl = slice(i, i + 1)
         rng.standard_normal(out=self._normals[i])
         self._measure(sl)

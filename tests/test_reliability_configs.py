@@ -120,3 +120,11 @@ def test_config_fields_found_by_property_tests(make):
     blow-up check) or a wrong type (RobotParams(limits=None): AttributeError)."""
     with pytest.raises((ValueError, TypeError)):
         make()
+
+
+def test_huge_time_limit_factor_means_no_limit():
+    """Found by the property tests: time_limit_factor=5.7e15 overflowed the step-limit integer."""
+    env = AzimutEnv(time_limit_factor=5744005514610670.0)
+    env.reset(seed=0)
+    env.step(np.zeros(8, np.float32))
+    assert env.task.step_limit[0] == np.iinfo(np.int64).max
