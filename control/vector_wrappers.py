@@ -4,8 +4,9 @@ Every action space here goes through a controller, batched over the N sub-envs (
 :func:`~control.icr_controller.icr_control_step_batch` call per control step for all robots, and
 one batched ``step`` of the vector env with all set-points):
 
-* ``"residual"`` ((N, 3)): the path follower (:class:`~control.path_follower.PathFollower`, one per
-  sub-env, on that sub-env's track) + the ICR controller, with the policy adding a bounded
+* ``"residual"`` ((N, 3)): the path follower (:class:`~control.path_follower.PathFollower`'s
+  arithmetic, compiled for all sub-envs in :class:`~control.follower_batch.BatchFollower`, each on
+  its own track) + the ICR controller, with the policy adding a bounded
   correction to the follower's target (λ_f, μ_f): action[:2] · ``residual_angle`` [rad] turns λ_f
   on the sphere (in a tangent frame carried with it) and action[2] · ``residual_mu`` [m/s] is added
   to μ_f. A correction that would carry λ_f across a steering stop or into an axis cap is dropped
@@ -55,7 +56,8 @@ from estimation.hrep import eta_from_twist
 from .icr_controller import (ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch,
                              nearer_target, reference_stop_mask)
 from .limits import limit_violations
-from .path_follower import PathFollower, PathFollowerConfig
+from .follower_batch import BatchFollower
+from .path_follower import PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
 from .target_shaping import advance_target, exp_step, initial_frame, step_toward, transport_frame
 from .wrappers import icr_target_from_action
@@ -133,15 +135,18 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         self._mu_s = np.zeros(N)
         self._e1 = initial_frame(self._lam_s)
         self._push = np.zeros(N)
-        self._followers: list[PathFollower | None] = [None] * N  # residual only
         geom = base.geometry
         self._stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=self._icr_config.axis_margin)
+        # residual only: the path followers of all sub-envs, one compiled call per step
+        self._follower = BatchFollower(N, self._follower_config, self._stop_mask, base.control_period) \
+            if action == "residual" else None
         self.last_command = None  #: the last BatchWheelCommand of the ICR controllers (diagnostics)
 
     @property
-    def followers(self) -> list[PathFollower | None]:
-        """The residual action space's path followers, one per sub-env (None otherwise)."""
-        return list(self._followers)
+    def follower(self) -> BatchFollower | None:
+        """The residual action space's path followers (a :class:`~control.follower_batch.BatchFollower`
+        over the sub-envs; None for the other action spaces)."""
+        return self._follower
 
     def _reset_controllers(self, which: np.ndarray) -> None:
         base = self.env.unwrapped
@@ -163,10 +168,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             if self._kind == "residual":
                 tracks, progress = base.tracks, base.progress
                 for i in idx:
-                    f = PathFollower(tracks[i], self._follower_config, stop_mask=self._stop_mask,
-                                     dt=base.control_period)
-                    f.reset(float(progress[i]))
-                    self._followers[i] = f
+                    self._follower.reset(int(i), tracks[i], float(progress[i]))
             return
         for i in idx:
             ctl = SwerveController(base.geometry, base.limits, base.control_period, self._swerve_config)
@@ -187,11 +189,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         geom, cfg, dt = base.geometry, self._icr_config, base.control_period
         held = np.zeros(rows.size, dtype=np.bool_)
         if self._kind == "residual":
-            pose = base.true_pose
-            twist = np.empty((rows.size, 3))
-            for j, i in enumerate(rows):
-                twist[j] = self._followers[i].step(pose[i]).twist
-            lam_f, mu_f = eta_from_twist(twist)
+            lam_f, mu_f = eta_from_twist(self._follower.step(base.true_pose, rows))
             prop = exp_step(lam_f, initial_frame(lam_f), a[:, :2] * self.residual_angle, 1.0)
             lam_d, _, held = advance_target(lam_f, prop, np.zeros(rows.size), geom, cfg.axis_margin, np.inf)
             return lam_d, mu_f + a[:, 2] * self.residual_mu, held
