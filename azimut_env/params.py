@@ -253,8 +253,6 @@ class TireParams:
             It is explicit: with ω_max the fastest contact mode, ω_max² dt (dt + 2τ_d) < 4.
         rolling_resistance: rolling resistance coefficient C_rr [-] (torque C_rr N r on the spin).
         rolling_knee: spin surface speed below which rolling resistance fades linearly [m/s].
-        slip_knee: the slip speed [m/s] at which the former viscous tire saturated; unused by the
-            brush tire (the physics still copies it into ``wheel_params``; to be removed).
     """
 
     friction: float = 0.8
@@ -266,11 +264,10 @@ class TireParams:
     damping_time: float = 0.005
     rolling_resistance: float = 0.015
     rolling_knee: float = 0.02
-    slip_knee: float = 0.05
 
     def __post_init__(self) -> None:
         _check_positive(self, "friction", "cornering_stiffness", "longitudinal_stiffness", "relaxation_length",
-                        "longitudinal_relaxation_length", "contact_half_length", "slip_knee", "rolling_knee")
+                        "longitudinal_relaxation_length", "contact_half_length", "rolling_knee")
         _check_positive(self, "rolling_resistance", "damping_time", allow_zero=True)
 
     @property

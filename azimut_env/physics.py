@@ -141,10 +141,10 @@ class WP:
     [m]; DAMP_TIME the bristle damping time τ_d [s] (``params.TireParams``); MOTOR_STALL,
     MOTOR_NO_LOAD, MOTOR_INERTIA the DC steering motor's stall torque [N·m], no-load speed
     [rad/s] and reflected rotor inertia [kg·m²] (``params.SteeringMotorParams``, used when its
-    model is "dc"). KNEE holds the
-    legacy viscous tire's slip knee, which the substep no longer uses."""
+    model is "dc"). Column 5 (``UNUSED``) held the former viscous tire's slip knee; it stays free
+    so that the compiled kernels' column numbers do not move."""
 
-    B, R, ALPHA, LOAD, MU, KNEE, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
+    B, R, ALPHA, LOAD, MU, UNUSED, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
         STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD, \
         C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME, \
         MOTOR_STALL, MOTOR_NO_LOAD, MOTOR_INERTIA = range(31)
@@ -591,7 +591,6 @@ class AzimutPhysics:
         wp[..., WP.ALPHA] = g.alpha
         wp[..., WP.LOAD] = p.static_normal_loads()
         wp[..., WP.MU] = p.tire.friction
-        wp[..., WP.KNEE] = p.tire.slip_knee
         wp[..., WP.K_S] = p.steering.stiffness
         wp[..., WP.C_S] = p.steering.damping
         wp[..., WP.KP] = p.steering.position_gain
