@@ -231,3 +231,22 @@ def test_step_refuses_complex_and_object_actions():
         env.step(np.array(["a"] * 8))
     with pytest.raises(ValueError):
         env.step(np.full(8, 1e300))  # beyond float32: inf
+
+
+@pytest.mark.parametrize("bad", [{"seed": -1}, {"seed": 0, "options": {"kick": {"wheels": [7], "impulse": 1.0}}}])
+def test_refused_first_reset_through_gym_make_leaves_the_next_good_episode_intact(bad):
+    """Through ``gymnasium.make`` (the documented path), a refused first reset changes nothing:
+    the next good reset and step replay an env that never saw it (Gymnasium's passive checker
+    used to be left without data by the refused reset and raised a TypeError at the first step)."""
+    env, ref = gym.make("Azimut-v1"), gym.make("Azimut-v1")
+    with pytest.raises(ValueError):
+        env.reset(**bad)
+    obs, _ = env.reset(seed=0)
+    obs_ref, _ = ref.reset(seed=0)
+    np.testing.assert_array_equal(obs, obs_ref)
+    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    out, out_ref = env.step(action), ref.step(action)
+    np.testing.assert_array_equal(out[0], out_ref[0])
+    assert out[1] == out_ref[1]
+    env.close()
+    ref.close()

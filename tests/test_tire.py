@@ -92,7 +92,7 @@ def test_combined_slip_stays_on_the_friction_circle():
     lin = np.array([C_K * kappa, C_A * math.tan(alpha)])
     psi = np.hypot(*lin) / (3 * MU_N)
     assert np.hypot(fx, fy) == pytest.approx(MU_N * (1 - (1 - psi) ** 3))
-    assert np.cross([fx, fy], lin) == pytest.approx(0.0, abs=1e-9)  # along the linear force
+    assert fx * lin[1] - fy * lin[0] == pytest.approx(0.0, abs=1e-9)  # along the linear force (2-D cross)
     # beyond sliding: |F| = μN in the direction of the slip, and each part below its pure-slip value
     fx, fy = brush_forces(0.3, math.radians(15.0), N, TIRE)
     assert np.hypot(fx, fy) == pytest.approx(MU_N)
