@@ -3,7 +3,7 @@ one run, with the wall times, the speed-up and a check that every episode's metr
 bit-identical.
 
 Default: 2 controllers × 6 tracks × 4 seeds (48 full episodes, no plots), serial in this process
-against ``--workers 2`` (Ray when installed, else local processes; ``--executors process,ray``
+against ``--workers 2`` (local processes by default; ``--executors process,ray``
 times both). The campaign runs in rounds of ``--seeds-per-round`` seeds (default 2), each run by
 every executor in turn (alternating the order), so that the varying load of a shared machine
 falls on all of them alike; a round holds several of the longest episodes (the ICR controller on

@@ -223,3 +223,11 @@ def test_kick_study_on_workers_equals_the_serial_study(tmp_path):
     serial = kick_study(2, "icr", seed0=1003)
     parallel = kick_study_campaign(2, "icr", seed0=1003, store=tmp_path / "kicks", executor="process", workers=2)
     assert [json.dumps(asdict(t)) for t in parallel] == [json.dumps(asdict(t)) for t in serial]
+
+
+def test_auto_executor_is_processes_on_one_machine_and_ray_with_an_address():
+    from control.campaign import ray_available, resolve_executor
+    assert resolve_executor("auto", 1, None) == "serial"
+    assert resolve_executor("auto", 2, None) == "process"  # faster than a local Ray instance here
+    if ray_available():
+        assert resolve_executor("auto", 2, "auto") == "ray"
