@@ -53,9 +53,12 @@ def _wrap_pi(a):
 
 
 @njit(cache=True)
-def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s_hint, back, ahead,
-                        spacing, look):
-    """Windowed projection, errors, reference speed and look-ahead in one call (see Track.query)."""
+def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, always_wrap):
+    """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
+    s_hint + ahead], metric ‖Δxy‖² + (ρ Δθ)², refined along the segment (the compiled
+    :meth:`Track.project`; unwrapped on a closed track). ``always_wrap``: wrap every heading
+    difference as ``Track.project`` does (``control.follower_batch`` matches ``PathFollower``
+    to the last bit that way); otherwise only those outside ]−π, π] (the env's hot loop)."""
     m = S.shape[0]
     mu = m - 1
     if closed:
@@ -83,7 +86,7 @@ def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s
         dx = X[i] - px
         dy = Y[i] - py
         dth = TH[i] - pth
-        if dth > math.pi or dth <= -math.pi:  # the float modulo only when needed (hot loop)
+        if always_wrap or dth > math.pi or dth <= -math.pi:  # the float modulo only when needed
             dth = _wrap_pi(dth)
         c = dx * dx + dy * dy + (rho * dth) ** 2
         if c < best:
@@ -104,6 +107,14 @@ def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s
         s += min(max(step, -seg), seg)
     if not closed:
         s = min(max(s, 0.0), length)
+    return s
+
+
+@njit(cache=True)
+def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s_hint, back, ahead,
+                        spacing, look):
+    """Windowed projection, errors, reference speed and look-ahead in one call (see Track.query)."""
+    s = project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, False)
     sw = s % length if closed else s
     xr = _interp1(S, X, sw)
     yr = _interp1(S, Y, sw)

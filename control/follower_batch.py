@@ -18,7 +18,9 @@ import numpy as np
 from numba import njit
 from numba.typed import List as NumbaList
 
-from azimut_env.tracks import Track
+from azimut_env.tracks import Track, project_window_kernel
+from azimut_env.tracks import _interp1 as _interp
+from azimut_env.tracks import _wrap_pi as _wrap
 
 from .path_follower import PathFollower, PathFollowerConfig
 
@@ -26,80 +28,10 @@ __all__ = ["BatchFollower"]
 
 
 @njit(cache=True)
-def _interp(S, col, s):
-    m = S.shape[0]
-    if s <= S[0]:
-        return col[0]
-    if s >= S[m - 1]:
-        return col[m - 1]
-    j = np.searchsorted(S, s, side="right") - 1
-    t = (s - S[j]) / (S[j + 1] - S[j])
-    return col[j] + t * (col[j + 1] - col[j])
-
-
-@njit(cache=True)
-def _wrap(a):
-    return math.pi - ((math.pi - a) % (2 * math.pi))
-
-
-@njit(cache=True)
 def _wrap_s(s, closed, length):
     if closed:
         return s % length
     return min(max(s, 0.0), length)
-
-
-@njit(cache=True)
-def _project(P, closed, length, rho, px, py, pth, s_hint, back, ahead):
-    """Track.project with a hint (windowed nearest reference pose, refined along the segment)."""
-    S, X, Y, TH = P[0], P[1], P[2], P[3]
-    m = S.shape[0]
-    mu = m - 1
-    if closed:
-        lap = math.floor(s_hint / length)
-        base = lap * length
-        s_loc = s_hint - base
-        lo_s = s_loc - back
-        hi_s = s_loc + ahead
-        j0 = int(math.floor(lo_s / length)) * mu + np.searchsorted(S, lo_s % length) - 1
-        j1 = int(math.floor(hi_s / length)) * mu + np.searchsorted(S, hi_s % length) + 1
-    else:
-        base = 0.0
-        j0 = max(np.searchsorted(S, s_hint - back) - 1, 0)
-        j1 = min(np.searchsorted(S, s_hint + ahead, side="right") + 1, m)
-    best = 1e300
-    bi = 0
-    boff = 0.0
-    for j in range(j0, j1):
-        if closed:
-            i = j % mu
-            off = math.floor(j / mu) * length
-        else:
-            i = j
-            off = 0.0
-        dx = X[i] - px
-        dy = Y[i] - py
-        dth = _wrap(TH[i] - pth)
-        c = dx * dx + dy * dy + (rho * dth) ** 2
-        if c < best:
-            best = c
-            bi = i
-            boff = off
-    s = S[bi] + boff + base
-    i2 = min(bi, m - 2)
-    sx = X[i2 + 1] - X[i2]
-    sy = Y[i2 + 1] - Y[i2]
-    st = rho * (TH[i2 + 1] - TH[i2])
-    seg = math.sqrt(sx * sx + sy * sy + st * st)
-    if seg > 0:
-        rx = px - X[bi]
-        ry = py - Y[bi]
-        rt = rho * _wrap(pth - TH[bi])
-        step = (rx * sx + ry * sy + rt * st) / seg
-        s += min(max(step, -seg), seg)
-    if not closed:
-        s = min(max(s, 0.0), length)
-    return s
 
 
 @njit(cache=True)
@@ -117,7 +49,7 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
         cl = closed[i]
         L = length[i]
         px, py, pth = poses[i, 0], poses[i, 1], poses[i, 2]
-        s = _project(P, cl, L, rho[i], px, py, pth, state[i, 0], 0.5, 1.0)
+        s = project_window_kernel(S, P[1], P[2], P[3], cl, L, rho[i], px, py, pth, state[i, 0], 0.5, 1.0, True)
         state[i, 0] = s
         finished = s >= L - 1e-6
         sw = _wrap_s(s, cl, L)
