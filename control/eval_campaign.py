@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from azimut_env.task import nominal_duration
 from azimut_env.tracks import make_track
 
 from .campaign import (CampaignInterrupted, Task, TaskStore, add_executor_arguments, arg_seeds, check_executor_args,
@@ -55,11 +56,6 @@ SUMMARY_COLUMNS = [
 ]
 
 
-def _nominal_duration(track, speed_scale: float) -> float:
-    """The track's duration at its speed profile × ``speed_scale`` [s] (as in ``run_episode``)."""
-    return float(np.sum(np.diff(track.s) / np.maximum(track.speed[:-1] * speed_scale, 0.05)))
-
-
 def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
               dt: float = DEFAULT_DT) -> dict:
     """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
@@ -69,7 +65,7 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     duration (or of ``max_time``, whichever is shorter).
     """
     rng = np.random.default_rng([int(seed), 0x6B1C])  # a stream of its own: not the env's
-    horizon = _nominal_duration(make_track(track, rng=np.random.default_rng(seed)), speed_scale)
+    horizon = nominal_duration(make_track(track, rng=np.random.default_rng(seed)), speed_scale)
     if max_time is not None:
         horizon = min(horizon, float(max_time))
     step = int(rng.uniform(0.2, 0.6) * horizon / dt)
@@ -122,7 +118,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
     their logs for the plots."""
     tasks = []
     for track in tracks:
-        nominal = _nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
+        nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
         for controller in controllers:
             for seed in seeds:
                 key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from azimut_env.env import AzimutEnv
+from azimut_env.task import nominal_duration
 from azimut_env.tracks import TRACK_NAMES, Track, make_track
 
 from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
@@ -168,12 +169,10 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
     else:
         ctl = SwerveController(geom, limits, dt, swerve_config)
         ctl.reset(env.measured_beta, env.measured_phidot)
-    nominal = float(np.sum(np.diff(env.track.s) / np.maximum(env.track.speed[:-1] * fcfg.speed_scale, 0.05)))
+    nominal = nominal_duration(env.track, fcfg.speed_scale)
     max_time = max_time if max_time is not None else 3.0 * nominal + 10.0
     steps = int(math.ceil(max_time / dt))
-    rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
-                                            "beta_meas", "beta_true", "motor_true", "beta_cmd", "phidot_cmd", "beta_rate", "phiddot",
-                                            "lam_hat", "mu_true", "mode", "violations")}
+    rec: dict[str, list] = {}
     log = EpisodeLog(controller, env.track, dt)
     start = time.time()
     label = f"{controller}/{env.track.name}"
@@ -193,14 +192,8 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
         if "error" in info:
             log.error = info["error"]
             break
-        for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
-                           ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
-                           ("internal_force", info["internal_force"]), ("qua", info["qua"]),
-                           ("beta_meas", env.measured_beta), ("beta_true", info["beta_true"]),
-                           ("motor_true", env.physics.motor_angles()[0]), ("beta_cmd", cmd.beta), ("phidot_cmd", cmd.phidot),
-                           ("beta_rate", cmd.beta_rate), ("phiddot", cmd.phiddot), ("lam_hat", lam_hat),
-                           ("mu_true", abs(float(info["eta_true"][1]))), ("mode", mode), ("violations", viol)):
-            rec[key].append(value)
+        record_step(rec, env, info, lam_hat, cmd.beta, cmd.phidot, beta_rate=cmd.beta_rate, phiddot=cmd.phiddot,
+                    mode=mode, violations=viol)
         done = info["progress"] >= env.track.length - 0.01 or info.get("finished", False)
         if progress and k % 50 == 0:
             _progress_bar(label, min(1.0, info["progress"] / env.track.length), start)
@@ -214,10 +207,24 @@ def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, sp
         sys.stderr.write("\n")
     for key, values in rec.items():
         setattr(log, key, np.asarray(values))
-    log.t = dt * np.arange(1, len(rec["lateral"]) + 1)
+    log.t = dt * np.arange(1, log.lateral.size + 1)
     log.events = int(ctl.state.events) if controller == "icr" and ctl.state is not None else 0
     env.close()
     return log
+
+
+def record_step(rec: dict[str, list], env: AzimutEnv, info: dict, lam_hat, beta_cmd, phidot_cmd, **extra) -> None:
+    """Append one control step's log entries to ``rec`` (key -> list; the keys of
+    :class:`EpisodeLog`): the env's info and measurements after the step, the commands, and the
+    driver's own ``extra`` entries (e.g. ``mode``, ``violations``)."""
+    for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
+                       ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
+                       ("internal_force", info["internal_force"]), ("qua", info["qua"]),
+                       ("beta_meas", env.measured_beta), ("beta_true", info["beta_true"]),
+                       ("motor_true", env.physics.motor_angles()[0]), ("beta_cmd", beta_cmd),
+                       ("phidot_cmd", phidot_cmd), ("lam_hat", lam_hat),
+                       ("mu_true", abs(float(info["eta_true"][1]))), *extra.items()):
+        rec.setdefault(key, []).append(value)
 
 
 def moving_mask(log: EpisodeLog, min_mu: float = MOVING_MU) -> np.ndarray:

@@ -45,11 +45,12 @@ import numpy as np
 
 from azimut_env.env import AzimutEnv
 from azimut_env.params import RobotParams
+from azimut_env.task import nominal_duration
 from azimut_env.tracks import TRACK_NAMES, make_track
 from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path
 from estimation import estimate_icr, eta_from_twist, quality, steering_from_lambda, wheel_speeds
 
-from .evaluate import MOVING_MU, EpisodeLog, run_episode
+from .evaluate import MOVING_MU, EpisodeLog, record_step, run_episode
 from .icr_controller import Mode
 
 __all__ = ["DRIVERS", "FeedForwardController", "run_feedforward", "stiff_params", "stable_substeps",
@@ -120,11 +121,9 @@ def run_feedforward(track: str = "paper", seed: int = 0, speed_scale: float = 1.
     ctrl.reset()
     _, info = env.reset(seed=seed)
     dt = env.control_period
-    nominal = float(np.sum(np.diff(env.track.s) / np.maximum(env.track.speed[:-1] * ctrl.speed_scale, 0.05)))
+    nominal = nominal_duration(env.track, ctrl.speed_scale)
     steps = int(math.ceil((max_time if max_time is not None else 3.0 * nominal + 10.0) / dt))
-    keys = ("pose", "lateral", "heading", "slip_power", "internal_force", "qua", "beta_meas", "beta_true",
-            "motor_true", "beta_cmd", "phidot_cmd", "lam_hat", "mu_true")
-    rec: dict[str, list] = {k: [] for k in keys}
+    rec: dict[str, list] = {}
     log = EpisodeLog("feedforward", env.track, dt)
     for _ in range(steps):
         lam_hat, _ = env.estimated_eta
@@ -133,14 +132,7 @@ def run_feedforward(track: str = "paper", seed: int = 0, speed_scale: float = 1.
         if "error" in info:
             log.error = info["error"]
             break
-        for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
-                           ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
-                           ("internal_force", info["internal_force"]), ("qua", info["qua"]),
-                           ("beta_meas", env.measured_beta), ("beta_true", info["beta_true"]),
-                           ("motor_true", env.physics.motor_angles()[0]), ("beta_cmd", beta_c),
-                           ("phidot_cmd", phidot_c), ("lam_hat", lam_hat),
-                           ("mu_true", abs(float(info["eta_true"][1])))):
-            rec[key].append(value)
+        record_step(rec, env, info, lam_hat, beta_c, phidot_c)
         if info.get("finished"):
             log.completed = True
             break
