@@ -35,6 +35,16 @@ VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "
                  "reward_obs", "other")
 
 
+def _timed(acc: dict[str, float], fn, key: str):
+    """``fn`` wrapped so that each call adds its wall time [s] to ``acc[key]`` (the stage splits)."""
+    def wrapper(*args, **kwargs):
+        t = time.perf_counter()
+        out = fn(*args, **kwargs)
+        acc[key] += time.perf_counter() - t
+        return out
+    return wrapper
+
+
 def _rss_mb() -> float:
     """Resident set size of this process [MB] (Linux /proc; NaN elsewhere)."""
     try:
@@ -82,19 +92,11 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
         wrapped.step(actions[20 + k])
     total = clock() - t0
     if kind is not None:  # a second, instrumented loop for the split
-        def timed(fn, key):
-            def wrapper(*args, **kwargs):
-                t = clock()
-                out = fn(*args, **kwargs)
-                acc[key] += clock() - t
-                return out
-            return wrapper
-
         saved = vw.icr_control_step_batch
-        vw.icr_control_step_batch = timed(saved, "controller")
-        wrapped._targets = timed(wrapped._targets, "targets")
+        vw.icr_control_step_batch = _timed(acc, saved, "controller")
+        wrapped._targets = _timed(acc, wrapped._targets, "targets")
         venv_step = venv.step
-        venv.step = timed(venv_step, "env")
+        venv.step = _timed(acc, venv_step, "env")
         try:
             t1 = clock()
             for k in range(calls):
@@ -127,21 +129,13 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     acc = {"physics": 0.0, "estimation": 0.0, "sensors": 0.0, "track": 0.0, "observe": 0.0}
     clock = time.perf_counter
 
-    def timed(fn, key):
-        def wrapper(*args, **kwargs):
-            t = clock()
-            out = fn(*args, **kwargs)
-            acc[key] += clock() - t
-            return out
-        return wrapper
-
     task = env.task
-    task.physics.step = timed(task.physics.step, "physics")
-    task._measure = timed(task._measure, "sensors")
-    task._estimate = timed(task._estimate, "estimation")
-    task._query_tracks = timed(task._query_tracks, "track")
-    task.observe = timed(task.observe, "observe")  # includes sensors, estimation, track
-    task.info = timed(task.info, "observe")
+    task.physics.step = _timed(acc, task.physics.step, "physics")
+    task._measure = _timed(acc, task._measure, "sensors")
+    task._estimate = _timed(acc, task._estimate, "estimation")
+    task._query_tracks = _timed(acc, task._query_tracks, "track")
+    task.observe = _timed(acc, task.observe, "observe")  # includes sensors, estimation, track
+    task.info = _timed(acc, task.info, "observe")
     env.reset(seed=seed)
     for key in acc:
         acc[key] = 0.0
@@ -247,21 +241,13 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     original = (task.apply_actions, phys.step, task._measure, task._estimate, task._query_tracks,
                 task_module._reward_obs_kernel, task_module._draw_normals_kernel)
 
-    def timed(fn, key):
-        def wrapper(*args, **kwargs):
-            t = clock()
-            result = fn(*args, **kwargs)
-            acc[key] += clock() - t
-            return result
-        return wrapper
-
-    task.apply_actions = timed(original[0], "actions")
+    task.apply_actions = _timed(acc, original[0], "actions")
     phys.step = lambda: AzimutPhysics.step(phys, acc)
-    task._measure = timed(original[2], "sensors")
-    task._estimate = timed(original[3], "estimation")
-    task._query_tracks = timed(original[4], "track")
-    task_module._reward_obs_kernel = timed(original[5], "reward_obs")
-    task_module._draw_normals_kernel = timed(original[6], "sensors")
+    task._measure = _timed(acc, original[2], "sensors")
+    task._estimate = _timed(acc, original[3], "estimation")
+    task._query_tracks = _timed(acc, original[4], "track")
+    task_module._reward_obs_kernel = _timed(acc, original[5], "reward_obs")
+    task_module._draw_normals_kernel = _timed(acc, original[6], "sensors")
     N = venv.num_envs
     try:
         t0 = clock()
