@@ -8,6 +8,7 @@ Modules (the maths comes from ``estimation``; the robot from ``azimut_env``):
 * ``path_follower``: Track + pose -> twist / (λ_d, μ_d) targets, shared by both;
 * ``limits``: the commanded-limit checks (limits are ``azimut_env.params.ActuatorLimits``);
 * ``wrappers``: ICR-target and twist action spaces for RL;
+* ``episode``: one episode of a controller on a track (:func:`run_episode`) and its metrics;
 * ``evaluate`` (``azimut eval``), ``robustness`` (kick study), ``record_d2`` (``azimut record-d2``),
   ``phenomenon`` (``azimut sim-paper``: qua while moving, motor lag vs compliance);
 * ``kinematic_model``: a rigid kinematic test bench.

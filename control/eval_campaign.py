@@ -86,8 +86,9 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
                  return_log: bool = False) -> dict:
     """One campaign episode: ``{"metrics": row}`` (plus ``artifacts.log``, the
-    :class:`~control.evaluate.EpisodeLog`, with ``return_log``)."""
-    from .evaluate import episode_metrics, is_policy, run_episode
+    :class:`~control.episode.EpisodeLog`, with ``return_log``)."""
+    from .episode import episode_metrics, run_episode
+    from .evaluate import is_policy
 
     kick = draw_kick(seed, track, speed_scale, max_time) if kicks else None
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None

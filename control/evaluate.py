@@ -23,33 +23,26 @@ against their limits.
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import math
 import re
 import sys
 import time
 import zipfile
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from azimut_env.env import AzimutEnv
-from azimut_env.task import nominal_duration
-from azimut_env.tracks import TRACK_NAMES, Track, make_track
-
+from azimut_env.tracks import TRACK_NAMES
 from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
 
-from .icr_controller import ICRController, ICRControllerConfig, Mode, reference_stop_mask
-from .limits import limit_violations
-from .path_follower import PathFollower, PathFollowerConfig
-from .swerve import SwerveConfig, SwerveController
+# the episode runner lives in control.episode; its names stay importable from here
+from .episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
+from .icr_controller import Mode
 
 __all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_report",
            "add_arguments", "run"]
 
-CONTROLLERS = ("icr", "twist")
 #: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
 #: ``azimut train`` wrote, its VecNormalize statistics beside it; needs the ``rl`` extra)
 POLICY_PREFIXES = ("ppo", "sac")
@@ -80,187 +73,8 @@ def arg_controllers(text: str) -> list[str]:
             raise argparse.ArgumentTypeError(f"unknown {item!r}; choose from {', '.join(CONTROLLERS)}, ppo:PATH, "
                                              "sac:PATH")
     return items
-#: |μ| [m/s] of the true chassis motion above which a step counts as moving (5% of the paper
-#: track's nominal 1 m/s; μ = ‖ξ̇‖ of the twist, ξ̇ = μ (v, −u, w)).
-MOVING_MU = 0.05
 #: Default evaluation order: the paper track first.
 DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
-
-
-@dataclass
-class EpisodeLog:
-    """Per-step records of one run (arrays of length T) and its outcome."""
-
-    controller: str
-    track: Track
-    dt: float
-    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    lateral: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    heading: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    slip_power: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    qua: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    beta_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    beta_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    motor_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    beta_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    phidot_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    beta_rate: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    phiddot: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    lam_hat: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    mu_true: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    violations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    events: int = 0
-    completed: bool = False
-    error: str | None = None
-    ret: float = float("nan")  #: the episode's return (sum of the ``Azimut-v1`` rewards)
-
-
-def _progress_bar(label: str, frac: float, start: float, stream=sys.stderr) -> None:
-    if not stream.isatty():
-        return
-    width = 30
-    k = int(round(frac * width))
-    stream.write(f"\r{label:<24} [{'#' * k}{'.' * (width - k)}] {100 * frac:5.1f}% {time.time() - start:6.1f}s")
-    stream.flush()
-
-
-def run_episode(controller: str, track: str | Track = "paper", seed: int = 0, speed_scale: float = 1.0,
-                kick: dict | None = None, max_time: float | None = None, progress: bool = False,
-                icr_config: ICRControllerConfig | None = None, swerve_config: SwerveConfig | None = None,
-                follower_config: PathFollowerConfig | None = None, env_kwargs: dict | None = None,
-                start_progress: float | None = None) -> EpisodeLog:
-    """Drive one track with one controller until the track is done (or ``max_time`` [s]).
-
-    Args:
-        controller: ``"icr"`` or ``"twist"``.
-        track: a built-in name (``random`` is drawn from ``seed``) or a Track.
-        seed: env seed (sensor noise, start noise, random track).
-        speed_scale: multiplies the track's speed profile.
-        kick: ``{"step": int, "wheels": [...], "impulse": N·m·s}`` (the env's reset option).
-        max_time: time limit [s]; default 3 × the nominal duration + 10 s.
-        start_progress: start at rest at this progress [m] (the env's reset option).
-    """
-    if controller not in CONTROLLERS:
-        raise ValueError(f"unknown controller {controller!r}; choose from {CONTROLLERS}")
-    if isinstance(track, str):
-        if track not in TRACK_NAMES:
-            raise ValueError(f"unknown track {track!r}; choose from {TRACK_NAMES}")
-        track = make_track(track, rng=np.random.default_rng(seed))
-    env = AzimutEnv(track=track, **(env_kwargs or {}))
-    options = {}
-    if kick:
-        options["kick"] = kick
-    if start_progress is not None:
-        options["start_progress"] = float(start_progress)
-    _, info = env.reset(seed=seed, options=options or None)
-    geom, limits, dt = env.geometry, env.limits, env.control_period
-    fcfg = follower_config or PathFollowerConfig(speed_scale=speed_scale)
-    stop_mask = None
-    if controller == "icr":
-        axis_margin = (icr_config or ICRControllerConfig()).axis_margin
-        stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=axis_margin)
-    follower = PathFollower(env.track, fcfg, stop_mask=stop_mask, dt=dt)
-    follower.reset(info["progress"])
-    if controller == "icr":
-        ctl = ICRController(geom, limits, dt, icr_config)
-    else:
-        ctl = SwerveController(geom, limits, dt, swerve_config)
-        ctl.reset(env.measured_beta, env.measured_phidot)
-    nominal = nominal_duration(env.track, fcfg.speed_scale)
-    max_time = max_time if max_time is not None else 3.0 * nominal + 10.0
-    steps = int(math.ceil(max_time / dt))
-    rec: dict[str, list] = {}
-    log = EpisodeLog(controller, env.track, dt)
-    start = time.time()
-    label = f"{controller}/{env.track.name}"
-    for k in range(steps):
-        lam_hat, mu_hat = env.estimated_eta
-        beta_m, phidot_m = env.measured_beta, env.measured_phidot
-        target = follower.step(env.estimated_pose)  # the true pose unless pose_source="odometry"
-        if controller == "icr":
-            cmd = ctl.step(lam_hat, mu_hat, beta_m, phidot_m, target.lam, target.mu)
-            mode = int(cmd.info["mode"])
-        else:
-            cmd = ctl.step(target.twist, beta_m)
-            mode = int(Mode.RUNNING)
-        viol = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, limits).any())
-        _, reward, terminated, truncated, info = env.step(env.action_from_setpoints(cmd.beta, cmd.phidot))
-        log.ret = reward if k == 0 else log.ret + reward
-        if "error" in info:
-            log.error = info["error"]
-            break
-        record_step(rec, env, info, lam_hat, cmd.beta, cmd.phidot, beta_rate=cmd.beta_rate, phiddot=cmd.phiddot,
-                    mode=mode, violations=viol)
-        done = info["progress"] >= env.track.length - 0.01 or info.get("finished", False)
-        if progress and k % 50 == 0:
-            _progress_bar(label, min(1.0, info["progress"] / env.track.length), start)
-        if done:
-            log.completed = True
-            break
-        if info.get("off_track"):
-            log.error = "off track"
-            break
-    if progress and sys.stderr.isatty():
-        sys.stderr.write("\n")
-    for key, values in rec.items():
-        setattr(log, key, np.asarray(values))
-    log.t = dt * np.arange(1, log.lateral.size + 1)
-    log.events = int(ctl.state.events) if controller == "icr" and ctl.state is not None else 0
-    env.close()
-    return log
-
-
-def record_step(rec: dict[str, list], env: AzimutEnv, info: dict, lam_hat, beta_cmd, phidot_cmd, **extra) -> None:
-    """Append one control step's log entries to ``rec`` (key -> list; the keys of
-    :class:`EpisodeLog`): the env's info and measurements after the step, the commands, and the
-    driver's own ``extra`` entries (e.g. ``mode``, ``violations``)."""
-    for key, value in (("pose", info["pose"]), ("lateral", info["lateral_error"]),
-                       ("heading", info["heading_error"]), ("slip_power", info["slip_power"]),
-                       ("internal_force", info["internal_force"]), ("qua", info["qua"]),
-                       ("beta_meas", env.measured_beta), ("beta_true", info["beta_true"]),
-                       ("motor_true", env.physics.motor_angles()[0]), ("beta_cmd", beta_cmd),
-                       ("phidot_cmd", phidot_cmd), ("lam_hat", lam_hat),
-                       ("mu_true", abs(float(info["eta_true"][1]))), *extra.items()):
-        rec.setdefault(key, []).append(value)
-
-
-def moving_mask(log: EpisodeLog, min_mu: float = MOVING_MU) -> np.ndarray:
-    """(T,) bool: the steps where the robot moves: the controller is RUNNING (not stopping or
-    reconfiguring in place; the twist baseline always is) and the true |μ| > ``min_mu`` [m/s]."""
-    if log.mu_true.shape != log.qua.shape:
-        return np.zeros(log.qua.shape, dtype=bool)
-    return (log.mode == int(Mode.RUNNING)) & (log.mu_true > min_mu)
-
-
-def episode_metrics(log: EpisodeLog) -> dict:
-    """The metrics table row of one run (see the module docstring); NaN where undefined."""
-    t_end = float(log.t[-1]) if log.t.size else float("nan")
-    lat = log.lateral if log.lateral.size else np.array([np.nan])
-    head = log.heading if log.heading.size else np.array([np.nan])
-    moving = moving_mask(log)
-    return {
-        "controller": log.controller,
-        "track": log.track.name,
-        "completed": bool(log.completed),
-        "error": log.error,
-        "rms_lateral_m": float(np.sqrt(np.mean(lat**2))),
-        "max_lateral_m": float(np.max(np.abs(lat))),
-        "rms_heading_rad": float(np.sqrt(np.mean(head**2))),
-        "completion_time_s": t_end if log.completed else float("nan"),
-        "slip_energy_J": float(np.sum(log.slip_power) * log.dt),
-        "mean_internal_force_N": float(np.mean(log.internal_force)) if log.internal_force.size else float("nan"),
-        "mean_qua": float(np.mean(log.qua)) if log.qua.size else float("nan"),
-        "min_qua": float(np.min(log.qua)) if log.qua.size else float("nan"),
-        "mean_qua_moving": float(np.mean(log.qua[moving])) if moving.any() else float("nan"),
-        "min_qua_moving": float(np.min(log.qua[moving])) if moving.any() else float("nan"),
-        "standstill_share": float(1.0 - np.mean(moving)) if log.qua.size else float("nan"),
-        "limit_violation_steps": int(np.sum(log.violations)),
-        "reconfigure_events": int(log.events),
-        "return": float(log.ret),
-    }
 
 
 _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
@@ -462,7 +276,7 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
         start = time.time()
         trials = kick_study_campaign(n_runs, controller, seed0=1000 + 1000 * seed,
                                      store=out / "kicks" / controller, **(run_kwargs or {}),
-                                     progress=lambda i, n, *_: _progress_bar(f"kicks/{controller}", i / n, start))
+                                     progress=lambda i, n, *_: progress_bar(f"kicks/{controller}", i / n, start))
         if sys.stderr.isatty():
             sys.stderr.write("\n")
         summ = summarize_kicks(trials)

@@ -13,7 +13,7 @@ off S even when every command is on it:
 
 This module drives a track with a rate-aware controller (default: the ICR reference controller of
 :mod:`control.icr_controller`, whose commands are on S and within the actuator limits by
-construction) and reports, **while moving** (:func:`control.evaluate.moving_mask`: controller
+construction) and reports, **while moving** (:func:`control.episode.moving_mask`: controller
 RUNNING and the true |μ| > 0.05 m/s; stops and in-place reconfigurations are left out):
 
 * ``qua(β_meas)``: qua of the measured steering angles (what the robot's sensors see; noise and
@@ -50,7 +50,7 @@ from azimut_env.tracks import TRACK_NAMES, make_track
 from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path
 from estimation import estimate_icr, eta_from_twist, quality, steering_from_lambda, wheel_speeds
 
-from .evaluate import MOVING_MU, EpisodeLog, record_step, run_episode
+from .episode import MOVING_MU, EpisodeLog, moving_mask, record_step, run_episode
 from .icr_controller import Mode
 
 __all__ = ["DRIVERS", "FeedForwardController", "run_feedforward", "stiff_params", "stable_substeps",
@@ -113,8 +113,8 @@ class FeedForwardController:
 def run_feedforward(track: str = "paper", seed: int = 0, speed_scale: float = 1.0, max_time: float | None = None,
                     controller: FeedForwardController | None = None, env_kwargs: dict | None = None) -> EpisodeLog:
     """Drive ``track`` with the feed-forward until it finishes, leaves the track or ``max_time``
-    [s] (default 3 × nominal + 10 s); the same :class:`~control.evaluate.EpisodeLog` as
-    :func:`control.evaluate.run_episode` (mode always RUNNING, no limit check)."""
+    [s] (default 3 × nominal + 10 s); the same :class:`~control.episode.EpisodeLog` as
+    :func:`control.episode.run_episode` (mode always RUNNING, no limit check)."""
     env = AzimutEnv(track=make_track(track, rng=np.random.default_rng(seed)) if isinstance(track, str) else track,
                     **(env_kwargs or {}))
     ctrl = controller if controller is not None else FeedForwardController(speed_scale=speed_scale)
@@ -195,8 +195,6 @@ def _stats(x: np.ndarray) -> tuple[float, float]:
 
 def attribute(log: EpisodeLog, geom, min_mu: float = MOVING_MU) -> dict:
     """The phenomenon's figures of one run over its moving steps (see the module docstring)."""
-    from .evaluate import moving_mask
-
     moving = moving_mask(log, min_mu)
     out: dict = {"steps": int(log.qua.size), "moving_steps": int(moving.sum()),
                  "standstill_share": float(1.0 - moving.mean()) if log.qua.size else float("nan"),
@@ -294,8 +292,6 @@ def plot_phenomenon(logs: dict, geom, path: str) -> None:
             if sp != speed or not log.qua.size:
                 continue
             if steering == "compliant":
-                from .evaluate import moving_mask
-
                 ax.fill_between(log.t, 0.0, 1.02, where=~moving_mask(log), color="0.88", step="mid", lw=0,
                                 label="not moving (excluded)")
                 ax.plot(log.t, qua_of_angles(log.beta_true, geom), lw=0.8, label="qua β (compliant)")

@@ -15,7 +15,7 @@ import numpy as np
 
 from azimut_env.tracks import make_track
 
-from .evaluate import run_episode
+from .episode import run_episode
 
 __all__ = ["KickTrial", "kick_trial", "kick_study", "kick_trial_task", "kick_study_campaign", "summarize_kicks"]
 

@@ -9,7 +9,8 @@ import pytest
 
 from azimut_env.cli import main
 from azimut_env.tracks import Track
-from control.evaluate import episode_metrics, run_episode, write_plots, write_report
+from control.episode import episode_metrics, run_episode
+from control.evaluate import write_plots, write_report
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +40,7 @@ def test_icr_scrubs_less_than_the_twist_baseline(runs):
 
 
 def test_qua_while_moving_leaves_out_stops_and_reconfigurations(runs):
-    from control.evaluate import MOVING_MU, moving_mask
+    from control.episode import MOVING_MU, moving_mask
     from control.icr_controller import Mode
 
     log = runs["icr"]
@@ -107,3 +108,15 @@ def test_robustness_study_200_kicks(tmp_path):
     assert summ["failed_runs"] == 0
     assert summ["limit_violation_steps"] == 0
     assert summ["recovered"] == 200
+
+
+def test_episode_runner_imports_none_of_its_users():
+    """control.episode is below evaluate, robustness and phenomenon: no import circle."""
+    import subprocess
+    import sys
+
+    code = ("import sys, control.episode; "
+            "print(sorted(m for m in ('control.evaluate', 'control.robustness', 'control.phenomenon', "
+            "'control.eval_campaign') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import pytest
 
-from control.evaluate import DEFAULT_TRACKS, episode_metrics, run_episode
+from control.episode import episode_metrics, run_episode
+from control.evaluate import DEFAULT_TRACKS
 
 pytestmark = pytest.mark.slow
 

@@ -2,7 +2,7 @@
 
 :func:`run_policy_episode` drives one robot (an ``AzimutVectorEnv`` of one, behind the policy's
 action space, no autoreset) until the track is finished, the robot leaves it, or the env's time
-limit, and fills a :class:`control.evaluate.EpisodeLog`, so :func:`control.evaluate.episode_metrics`
+limit, and fills a :class:`control.episode.EpisodeLog`, so :func:`control.episode.episode_metrics`
 gives the same metrics as for the controllers; the episode's return (sum of ``Azimut-v1``
 rewards) comes with it.
 """
@@ -24,13 +24,13 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
                        env_kwargs: dict | None = None):
     """(EpisodeLog, return) of ``policy`` (a :class:`train.policy.TrainedPolicy`) on ``track``.
 
-    As :func:`control.evaluate.run_episode`: the episode ends when the track is finished, off
+    As :func:`control.episode.run_episode`: the episode ends when the track is finished, off
     track, or after ``max_time`` [s] (default 3 × the track's nominal duration + 10 s, the env's
     own time limit being off); ``kick`` is the env's reset option; ``env_kwargs`` are added to the
     policy's training env arguments (e.g. ``domain_randomization``)."""
     from azimut_env.task import nominal_duration
 
-    from control.evaluate import EpisodeLog
+    from control.episode import EpisodeLog
     from control.icr_controller import Mode
     from control.limits import limit_violations
 
@@ -106,7 +106,7 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
 def policy_metrics(policy, track: str | Track, seed: int = 0, label: str | None = None,
                    max_time: float | None = None) -> tuple[dict, object]:
     """(``azimut eval`` metrics row plus ``return``, EpisodeLog) of one episode of ``policy``."""
-    from control.evaluate import episode_metrics
+    from control.episode import episode_metrics
 
     log, ret = run_policy_episode(policy, track, seed=seed, label=label, max_time=max_time)
     row = episode_metrics(log)
