@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from .physics_layout import RS_POSE, WS
 from .tracks import TRACK_NAMES
 from .validation import arg_choice_list, arg_int
 
@@ -354,8 +355,8 @@ def substep_convergence(substeps=(4, 6, 8, 12, 16, 24, 32, 48, 64, 128), referen
         for i in range(len(beta)):
             phys.set_commands(beta[i][None], phidot[i][None])
             phys.step()
-            poses[i] = phys.summary[0, :3]
-            betas[i] = phys.wheel_summary[0, :, 0]
+            poses[i] = phys.summary[0, RS_POSE]
+            betas[i] = phys.wheel_summary[0, :, WS.BETA]
         return poses, betas
 
     ref_pose, ref_beta = replay(reference)

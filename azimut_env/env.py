@@ -37,6 +37,8 @@ from estimation import estimate_eta
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import AzimutPhysics
+from .blowup import BlowUp
+from .physics_layout import RS
 from .localisation import LocalisationParams
 from .task import RESET_OPTIONS, AzimutTask, TaskConfig, observation_layout, resolve_params
 from .tracks import Track
@@ -385,7 +387,7 @@ class AzimutEnv(gym.Env):
             self._np_random, self._np_random_seed = previous  # as if this reset had not happened
             raise
         pose = self.physics.summary[0]
-        self._trail = [(float(pose[0]), float(pose[1]))]
+        self._trail = [(float(pose[RS.X]), float(pose[RS.Y]))]
         obs = self.task.obs[0].copy()
         info = self.task.info(0, with_terms=False)
         if self.render_mode == "human":
@@ -407,14 +409,14 @@ class AzimutEnv(gym.Env):
         except ValueError:
             raise ValueError(f"action contains NaN or inf: {np.asarray(action)}") from None
         code = task.step_physics()[0]
-        if code != 0:
+        if code != BlowUp.NONE:
             self._done_error = self.physics.check()[1][0]
             task.park(0)
             info = {"error": self._done_error, "reward_terms": {}, "off_track": False, "finished": False}
             return task.obs[0].copy(), -self.weights["off_track"], True, False, info
         task.observe(a, (self.np_random,))
         summ = self.physics.summary[0]
-        self._trail.append((float(summ[0]), float(summ[1])))
+        self._trail.append((float(summ[RS.X]), float(summ[RS.Y])))
         if len(self._trail) > 2000:
             del self._trail[:1000]
         off_track, finished, stalled = bool(task.off_track[0]), bool(task.finished[0]), bool(task.stalled[0])

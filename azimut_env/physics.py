@@ -118,10 +118,11 @@ from numba import njit
 
 from .actuators import steer_actuator_kernel, wheel_spin_step_kernel
 from .params import RobotParams
+from .blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
+from .physics_layout import ACC, BODY, CMD, CS, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
 from .tire import TS, stability_numbers, tire_step_kernel
-from .validation import check_positive
 
-__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS", "TS"]
+__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "WP", "MS", "JS", "TS", "ACC", "BODY", "CMD", "CS", "RS", "WS"]
 
 _STATE_FIELDS = (pb.BodyFields.POSITION | pb.BodyFields.ANGLE | pb.BodyFields.VELOCITY
                  | pb.BodyFields.ANGULAR_VELOCITY)
@@ -130,40 +131,6 @@ _FORCE_FIELDS = pb.BodyFields.FORCE | pb.BodyFields.TORQUE
 #: Collision categories: robots collide with obstacles only, never with each other.
 _CAT_ROBOT = 0b01
 _CAT_OBSTACLE = 0b10
-
-
-class WP:
-    """Column indices of the per-wheel parameter array ``wheel_params`` (N, n, WP.COUNT).
-
-    LOAD is the static normal load of the robot's current mass [N]; RR_TORQUE the rolling
-    resistance coefficient C_rr (torque C_rr N r); C_KAPPA, C_ALPHA the tire stiffnesses per unit
-    load; SIGMA_LONG, SIGMA_LAT the relaxation lengths [m]; HALF_LEN the contact half-length a
-    [m]; DAMP_TIME the bristle damping time τ_d [s] (``params.TireParams``); MOTOR_STALL,
-    MOTOR_NO_LOAD, MOTOR_INERTIA the DC steering motor's stall torque [N·m], no-load speed
-    [rad/s] and reflected rotor inertia [kg·m²] (``params.SteeringMotorParams``, used when its
-    model is "dc"). Column 5 (``UNUSED``) held the former viscous tire's slip knee; it stays free
-    so that the compiled kernels' column numbers do not move."""
-
-    B, R, ALPHA, LOAD, MU, UNUSED, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
-        STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD, \
-        C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME, \
-        MOTOR_STALL, MOTOR_NO_LOAD, MOTOR_INERTIA = range(31)
-    COUNT = 31
-
-
-class MS:
-    """Column indices of the per-wheel motor state array (N, n, MS.COUNT)."""
-
-    THETA, OMEGA, PHIDOT_REF, PHIDOT, PHI = range(5)
-    COUNT = 5
-
-
-class JS:
-    """Column indices of the per-wheel joint state array ``joint_state`` (N, n, JS.COUNT): the
-    steering angle β [rad] and the module's absolute angular velocity ω = θ̇ + β̇ [rad/s]."""
-
-    BETA, OMEGA = range(2)
-    COUNT = 2
 
 
 @dataclass(frozen=True)
@@ -204,27 +171,6 @@ class Obstacle:
         raise ValueError(f"cannot interpret {spec!r} as an obstacle: give (x, y, radius) or [(x, y), ...]")
 
 
-@dataclass(frozen=True)
-class BlowUpLimits:
-    """Thresholds beyond which the state is declared absurd (a numerical blow-up).
-
-    Attributes:
-        speed: chassis speed [m/s]. spin: |φ̇| [rad/s]. yaw_rate: chassis or module angular speed
-        [rad/s]. position: |x|, |y| [m]. joint_gap: kept for compatibility: the steering pivots
-        are exact since physics v2, so blow-up code 6 (a torn pivot) no longer occurs.
-    """
-
-    speed: float = 20.0
-    spin: float = 500.0
-    yaw_rate: float = 200.0
-    position: float = 1e4
-    joint_gap: float = 0.05
-
-    def __post_init__(self) -> None:
-        for name in ("speed", "spin", "yaw_rate", "position", "joint_gap"):  # NaN would disarm the check
-            object.__setattr__(self, name, check_positive(f"BlowUpLimits.{name}", getattr(self, name)))
-
-
 @njit(cache=True, error_model="numpy")
 def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap, com_h, gravity, restitution,
                  dc, n, dt, substeps, integrate):
@@ -234,8 +180,8 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
     place (velocities always; positions too when ``integrate``, else pymunk moves the bodies).
     js (N, n, JS), ms (N, n, MS), ts (N, n, TS): joint, motor and tire states, updated. cmd
     (N, n, 2): set-points.
-    wp (N, n, WP): parameters. en (N,): motors on. acc (N, n, 4): accumulates (ΣFx, ΣFy, Σ slip
-    power, ΣF_lat) per wheel. body (N, 2): (M, I). accel (N, 2): chassis acceleration in R from
+    wp (N, n, WP): parameters. en (N,): motors on. acc (N, n, ACC): accumulates (ΣFx, ΣFy, Σ slip
+    power) per wheel. body (N, BODY): (M, I). accel (N, 2): chassis acceleration in R from
     the tire forces at the last substep (load transfer), updated. lmap (n, 3): the load map.
     dc: the steering motor model (False: kinematic position source; True: DC motor with back-EMF,
     ``actuators.steer_actuator_kernel``).
@@ -243,11 +189,11 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
     n_robots = ms.shape[0]
     omega_new = np.empty(n)
     for i in range(n_robots):
-        mass = body[i, 0]
-        inertia = body[i, 1]
+        mass = body[i, BODY.MASS]
+        inertia = body[i, BODY.MOMENT]
         on = en[i]
-        x, y, th = state[i, 0], state[i, 1], state[i, 2]
-        vx, vy, w = state[i, 3], state[i, 4], state[i, 5]
+        x, y, th = state[i, CS.X], state[i, CS.Y], state[i, CS.TH]
+        vx, vy, w = state[i, CS.VX], state[i, CS.VY], state[i, CS.W]
         ax_r, ay_r = accel[i, 0], accel[i, 1]
         for _ in range(substeps):
             c = math.cos(th)
@@ -257,21 +203,22 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
             tau_c = 0.0
             for k in range(n):
                 p = wp[i, k]
-                b = p[0]
-                r = p[1]
-                beta = js[i, k, 0]
-                wm = js[i, k, 1]
+                b = p[WP.B]
+                r = p[WP.R]
+                beta = js[i, k, JS.BETA]
+                wm = js[i, k, JS.OMEGA]
                 beta_dot = wm - w
                 # steering motor and series spring
-                theta, omega, tau_s = steer_actuator_kernel(dc, ms[i, k, 0], ms[i, k, 1], cmd[i, k, 0], beta, beta_dot,
-                                                            on, p[8], p[14], p[15], p[16], p[6], p[7], p[28], p[29],
-                                                            p[30], dt)
-                ms[i, k, 0] = theta
-                ms[i, k, 1] = omega
+                theta, omega, tau_s = steer_actuator_kernel(
+                    dc, ms[i, k, MS.THETA], ms[i, k, MS.OMEGA], cmd[i, k, CMD.BETA], beta, beta_dot, on, p[WP.KP],
+                    p[WP.STEER_RATE], p[WP.STEER_ACCEL], p[WP.STEER_TORQUE], p[WP.K_S], p[WP.C_S], p[WP.MOTOR_STALL],
+                    p[WP.MOTOR_NO_LOAD], p[WP.MOTOR_INERTIA], dt)
+                ms[i, k, MS.THETA] = theta
+                ms[i, k, MS.OMEGA] = omega
                 # steering axis A_k (relative to the chassis centre, world axes) and contact point
                 axw = c * axis_xy[k, 0] - s * axis_xy[k, 1]
                 ayw = s * axis_xy[k, 0] + c * axis_xy[k, 1]
-                gam = th + p[2] + beta
+                gam = th + p[WP.ALPHA] + beta
                 cg = math.cos(gam)
                 sg = math.sin(gam)
                 vpx = vx - w * ayw - wm * b * sg
@@ -279,34 +226,35 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
                 v_roll = vpx * sg - vpy * cg
                 v_lat = vpx * cg + vpy * sg
                 # propulsion set-point ramp
-                ref = ms[i, k, 2]
+                ref = ms[i, k, MS.PHIDOT_REF]
                 if on:
-                    dref = cmd[i, k, 1] - ref
-                    lim = p[17] * dt
+                    dref = cmd[i, k, CMD.PHIDOT] - ref
+                    lim = p[WP.WHEEL_ACCEL] * dt
                     if dref > lim:
                         dref = lim
                     elif dref < -lim:
                         dref = -lim
                     ref += dref
                 else:
-                    ref = ms[i, k, 3]
+                    ref = ms[i, k, MS.PHIDOT]
                 # normal load: static share of the current mass plus load transfer
-                load = p[3]
+                load = p[WP.LOAD]
                 if com_h > 0.0:
                     load -= com_h * mass * (lmap[k, 1] * ax_r + lmap[k, 2] * ay_r)
                     if load < 0.0:
                         load = 0.0
                 # tire (brush model with relaxation; tire.tire_step_kernel) and wheel spin
-                phidot = ms[i, k, 3]
+                phidot = ms[i, k, MS.PHIDOT]
                 s_long = v_roll - r * phidot
-                f_long, f_lat, m_align, m_scrub, ts[i, k, 0], ts[i, k, 1], ts[i, k, 2] = tire_step_kernel(
-                    s_long, v_lat, v_roll, wm, load, ts[i, k, 0], ts[i, k, 1], ts[i, k, 2],
-                    p[4], p[22], p[23], p[24], p[25], p[26], p[27], dt)
-                phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[9], p[10], p[18], p[11],
-                                                p[12] * load * r, p[13], dt)
-                ms[i, k, 2] = ref
-                ms[i, k, 3] = phidot
-                ms[i, k, 4] += phidot * dt
+                f_long, f_lat, m_align, m_scrub, ts[i, k, TS.U_LONG], ts[i, k, TS.U_LAT], ts[i, k, TS.TWIST] = \
+                    tire_step_kernel(s_long, v_lat, v_roll, wm, load, ts[i, k, TS.U_LONG], ts[i, k, TS.U_LAT],
+                                     ts[i, k, TS.TWIST], p[WP.MU], p[WP.C_KAPPA], p[WP.C_ALPHA], p[WP.SIGMA_LONG],
+                                     p[WP.SIGMA_LAT], p[WP.HALF_LEN], p[WP.DAMP_TIME], dt)
+                phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[WP.I_W], p[WP.KV], p[WP.WHEEL_TORQUE],
+                                                p[WP.BEARING], p[WP.RR_TORQUE] * load * r, p[WP.RR_KNEE], dt)
+                ms[i, k, MS.PHIDOT_REF] = ref
+                ms[i, k, MS.PHIDOT] = phidot
+                ms[i, k, MS.PHI] += phidot * dt
                 fx = f_long * sg + f_lat * cg
                 fy = -f_long * cg + f_lat * sg
                 fx_sum += fx
@@ -314,11 +262,10 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
                 tau_c += axw * fy - ayw * fx - tau_s
                 # on the module about A_k: spring, the force's moment −b F_long, aligning and scrub couples
                 tau_m = tau_s - b * f_long + m_align + m_scrub
-                omega_new[k] = wm + dt * tau_m / p[21]
-                acc[i, k, 0] += fx
-                acc[i, k, 1] += fy
-                acc[i, k, 2] += abs(f_long * s_long + f_lat * v_lat)
-                acc[i, k, 3] += f_lat
+                omega_new[k] = wm + dt * tau_m / p[WP.I_MOD]
+                acc[i, k, ACC.FX] += fx
+                acc[i, k, ACC.FY] += fy
+                acc[i, k, ACC.SLIP] += abs(f_long * s_long + f_lat * v_lat)
             # chassis velocities (symplectic Euler: positions move with the new velocities)
             vx += dt * fx_sum / mass
             vy += dt * fy_sum / mass
@@ -327,11 +274,11 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
             ay_r = (-s * fx_sum + c * fy_sum) / mass
             # steering angles, exact hard stops by projection and a stop impulse
             for k in range(n):
-                i_m = wp[i, k, 21]
+                i_m = wp[i, k, WP.I_MOD]
                 wm = omega_new[k]
-                beta = js[i, k, 0] + dt * (wm - w)
-                lo = wp[i, k, 19]
-                hi = wp[i, k, 20]
+                beta = js[i, k, JS.BETA] + dt * (wm - w)
+                lo = wp[i, k, WP.STEER_MIN]
+                hi = wp[i, k, WP.STEER_MAX]
                 if beta > hi or beta < lo:
                     beta = hi if beta > hi else lo
                     rel = wm - w
@@ -339,63 +286,48 @@ def _step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, lmap
                         j = -(1.0 + restitution) * rel / (1.0 / i_m + 1.0 / inertia)
                         wm += j / i_m
                         w -= j / inertia
-                js[i, k, 0] = beta
-                js[i, k, 1] = wm
+                js[i, k, JS.BETA] = beta
+                js[i, k, JS.OMEGA] = wm
             if integrate:
                 x += dt * vx
                 y += dt * vy
                 th += dt * w
-        state[i, 0] = x
-        state[i, 1] = y
-        state[i, 2] = th
-        state[i, 3] = vx
-        state[i, 4] = vy
-        state[i, 5] = w
+        state[i, CS.X] = x
+        state[i, CS.Y] = y
+        state[i, CS.TH] = th
+        state[i, CS.VX] = vx
+        state[i, CS.VY] = vy
+        state[i, CS.W] = w
         accel[i, 0] = ax_r
         accel[i, 1] = ay_r
 
 
-#: robot summary columns (``AzimutPhysics.summary``): pose, world velocity, body velocity, slip
-#: power, internal force, blow-up code.
-_SUM_X, _SUM_Y, _SUM_TH, _SUM_VX, _SUM_VY, _SUM_W, _SUM_BX, _SUM_BY, _SUM_SLIP, _SUM_INTERNAL, _SUM_CODE = range(11)
-#: wheel summary columns: β, β̇, tire force in the chassis frame (x, y), P_k in the chassis frame (x, y).
-_WS_BETA, _WS_BETA_DOT, _WS_FX, _WS_FY, _WS_PX, _WS_PY = range(6)
-
-BLOWUP_MESSAGES = {
-    1: "non-finite physics state",
-    2: "body speed exceeds the blow-up limit",
-    3: "body angular speed exceeds the blow-up limit",
-    4: "wheel spin exceeds the blow-up limit",
-    5: "position exceeds the blow-up limit",
-    6: "steering pivot torn apart (module away from its axis)",
-}
-
-
 @njit(cache=True)
-def _summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out_w):
+def _summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, speed_max, yaw_rate_max, spin_max, position_max,
+                    out_r, out_w):
     """Per-step derived quantities for all robots (see the column constants), one call.
 
     Internal force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
     least-norm forces with the same wrench are F* = Gᵀ (G Gᵀ)⁻¹ W, and ‖F − F*‖ is the internal part.
-    lim = (speed, yaw_rate, spin, position, joint_gap).
+    The blow-up code (:class:`~azimut_env.blowup.BlowUp`) compares with the ``*_max`` limits.
     """
     n_robots = ms.shape[0]
     P = np.zeros((n, 2))
     F = np.zeros((n, 2))
     for i in range(n_robots):
-        x, y, th = state[i, 0], state[i, 1], state[i, 2]
-        vx, vy, w = state[i, 3], state[i, 4], state[i, 5]
+        x, y, th = state[i, CS.X], state[i, CS.Y], state[i, CS.TH]
+        vx, vy, w = state[i, CS.VX], state[i, CS.VY], state[i, CS.W]
         c, s = math.cos(th), math.sin(th)
-        out_r[i, 0] = x
-        out_r[i, 1] = y
-        out_r[i, 2] = th
-        out_r[i, 3] = vx
-        out_r[i, 4] = vy
-        out_r[i, 5] = w
-        out_r[i, 6] = c * vx + s * vy
-        out_r[i, 7] = -s * vx + c * vy
+        out_r[i, RS.X] = x
+        out_r[i, RS.Y] = y
+        out_r[i, RS.TH] = th
+        out_r[i, RS.VX] = vx
+        out_r[i, RS.VY] = vy
+        out_r[i, RS.W] = w
+        out_r[i, RS.BX] = c * vx + s * vy
+        out_r[i, RS.BY] = -s * vx + c * vy
         slip = 0.0
-        code = 0
+        code = BlowUp.NONE.value
         finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(th) and math.isfinite(vx) \
             and math.isfinite(vy) and math.isfinite(w)
         vmax = math.hypot(vx, vy)
@@ -409,28 +341,28 @@ def _summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out
             for j in range(ms.shape[2]):
                 if not math.isfinite(ms[i, k, j]):
                     finite = False
-            wmax = max(wmax, abs(js[i, k, 1]))
-            spin = max(spin, abs(ms[i, k, 3]))
-            beta = js[i, k, 0]
-            out_w[i, k, 0] = beta
-            out_w[i, k, 1] = js[i, k, 1] - w
-            fxw = acc[i, k, 0] * inv_sub
-            fyw = acc[i, k, 1] * inv_sub
+            wmax = max(wmax, abs(js[i, k, JS.OMEGA]))
+            spin = max(spin, abs(ms[i, k, MS.PHIDOT]))
+            beta = js[i, k, JS.BETA]
+            out_w[i, k, WS.BETA] = beta
+            out_w[i, k, WS.BETA_DOT] = js[i, k, JS.OMEGA] - w
+            fxw = acc[i, k, ACC.FX] * inv_sub
+            fyw = acc[i, k, ACC.FY] * inv_sub
             fx = c * fxw + s * fyw
             fy = -s * fxw + c * fyw
-            out_w[i, k, 2] = fx
-            out_w[i, k, 3] = fy
-            gam = wp[i, k, 2] + beta
-            px = axis_xy[k, 0] + wp[i, k, 0] * math.cos(gam)
-            py = axis_xy[k, 1] + wp[i, k, 0] * math.sin(gam)
-            out_w[i, k, 4] = px
-            out_w[i, k, 5] = py
-            slip += acc[i, k, 2] * inv_sub
+            out_w[i, k, WS.FX] = fx
+            out_w[i, k, WS.FY] = fy
+            gam = wp[i, k, WP.ALPHA] + beta
+            px = axis_xy[k, 0] + wp[i, k, WP.B] * math.cos(gam)
+            py = axis_xy[k, 1] + wp[i, k, WP.B] * math.sin(gam)
+            out_w[i, k, WS.PX] = px
+            out_w[i, k, WS.PY] = py
+            slip += acc[i, k, ACC.SLIP] * inv_sub
             P[k, 0] = px
             P[k, 1] = py
             F[k, 0] = fx
             F[k, 1] = fy
-        out_r[i, 8] = slip
+        out_r[i, RS.SLIP] = slip
         internal = 0.0
         if finite:
             # G Gᵀ = [[n, 0, −Σp_y], [0, n, Σp_x], [−Σp_y, Σp_x, Σ|p|²]], solved in closed form
@@ -463,18 +395,18 @@ def _summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, lim, out_r, out
                 dy = F[k, 1] - (x1 + px * x2)
                 internal += dx * dx + dy * dy
             internal = math.sqrt(internal)
-        out_r[i, 9] = internal
+        out_r[i, RS.INTERNAL] = internal
         if not finite:
-            code = 1
-        elif vmax > lim[0]:
-            code = 2
-        elif wmax > lim[1]:
-            code = 3
-        elif spin > lim[2]:
-            code = 4
-        elif pmax > lim[3]:
-            code = 5
-        out_r[i, 10] = code
+            code = BlowUp.NON_FINITE.value
+        elif vmax > speed_max:
+            code = BlowUp.SPEED.value
+        elif wmax > yaw_rate_max:
+            code = BlowUp.YAW_RATE.value
+        elif spin > spin_max:
+            code = BlowUp.SPIN.value
+        elif pmax > position_max:
+            code = BlowUp.POSITION.value
+        out_r[i, RS.CODE] = code
 
 
 class AzimutPhysics:
@@ -519,22 +451,20 @@ class AzimutPhysics:
         self._module_mass = float(p.steering.module_mass)
         self._module_axis_moment = float(p.steering.module_mass * np.sum(p.geometry.l ** 2))
         self.wheel_params = self._default_wheel_params()
-        self.motor_state = np.zeros((self.n_robots, self.n, MS.COUNT))
-        self.joint_state = np.zeros((self.n_robots, self.n, JS.COUNT))
-        #: (N, n, TS.COUNT) tire states (contact patch deflections u_long, u_lat [m], twist [rad])
-        self.tire_state = np.zeros((self.n_robots, self.n, TS.COUNT))
-        self.commands = np.zeros((self.n_robots, self.n, 2))
+        self.motor_state = np.zeros((self.n_robots, self.n, len(MS)))
+        self.joint_state = np.zeros((self.n_robots, self.n, len(JS)))
+        #: (N, n, len(TS)) tire states (contact patch deflections u_long, u_lat [m], twist [rad])
+        self.tire_state = np.zeros((self.n_robots, self.n, len(TS)))
+        self.commands = np.zeros((self.n_robots, self.n, len(CMD)))
         self.enabled = np.ones(self.n_robots, dtype=np.bool_)
-        self.acc = np.zeros((self.n_robots, self.n, 4))
+        self.acc = np.zeros((self.n_robots, self.n, len(ACC)))
         #: (N, 2) body mass M [kg] and moment I [kg·m²] about the centre (modules at their axes)
         self.body_inertia = np.tile(self._body_inertia(p.chassis.mass), (self.n_robots, 1))
         #: (N, 2) chassis acceleration in R from the tire forces of the last substep [m/s²]
         self.chassis_accel = np.zeros((self.n_robots, 2))
         self.obstacles: tuple[Obstacle, ...] = ()
-        self.summary = np.zeros((self.n_robots, 11))
-        self.wheel_summary = np.zeros((self.n_robots, self.n, 6))
-        self._lim = np.array([self.blowup.speed, self.blowup.yaw_rate, self.blowup.spin, self.blowup.position,
-                              self.blowup.joint_gap])
+        self.summary = np.zeros((self.n_robots, len(RS)))
+        self.wheel_summary = np.zeros((self.n_robots, self.n, len(WS)))
         self._axis_xy = np.ascontiguousarray(self.params.geometry.axis_xy)
         self._build_space()
 
@@ -585,7 +515,7 @@ class AzimutPhysics:
 
     def _default_wheel_params(self) -> np.ndarray:
         p, g = self.params, self.params.geometry
-        wp = np.zeros((self.n_robots, self.n, WP.COUNT))
+        wp = np.zeros((self.n_robots, self.n, len(WP)))
         wp[..., WP.B] = g.b
         wp[..., WP.R] = g.r
         wp[..., WP.ALPHA] = g.alpha
@@ -646,13 +576,6 @@ class AzimutPhysics:
         for ob in self.obstacles:
             self._add_obstacle(ob)
         self._setup_buffers()
-
-    def renew_joints(self, robot: int) -> None:
-        """Kept for compatibility: physics v1 replaced a robot's pymunk joints here (their
-        warm-start impulses). Since v2 the steering modules are joint coordinates, not pymunk
-        constraints, and a robot reset inside a running Space replays bit for bit as it is."""
-        if not 0 <= robot < self.n_robots:
-            raise ValueError(f"robot index {robot} out of range 0..{self.n_robots - 1}")
 
     def _setup_buffers(self) -> None:
         """(Re)create the batch buffers; check that pymunk.batch lists our bodies first, in order."""
@@ -722,7 +645,8 @@ class AzimutPhysics:
 
     def _summarize(self) -> None:
         _summary_kernel(self._state, self.joint_state, self.motor_state, self.acc, self.wheel_params, self._axis_xy,
-                        self.n, 1.0 / self.substeps, self._lim, self.summary, self.wheel_summary)
+                        self.n, 1.0 / self.substeps, self.blowup.speed, self.blowup.yaw_rate,
+                        self.blowup.spin, self.blowup.position, self.summary, self.wheel_summary)
 
     def _read_state(self) -> np.ndarray:
         self._get_bodies()
@@ -737,8 +661,9 @@ class AzimutPhysics:
         self._state[robot] = (p.x, p.y, b.angle, v.x, v.y, b.angular_velocity)
         sl = slice(robot, robot + 1)
         _summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl],
-                        self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self._lim,
-                        self.summary[sl], self.wheel_summary[sl])
+                        self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self.blowup.speed,
+                        self.blowup.yaw_rate, self.blowup.spin, self.blowup.position, self.summary[sl],
+                        self.wheel_summary[sl])
 
     def _add_obstacle(self, ob: Obstacle) -> None:
         body = self.space.static_body
@@ -801,7 +726,7 @@ class AzimutPhysics:
     # ------------------------------------------------------------------ reset and commands
 
     def set_wheel_params(self, wheel_params: np.ndarray) -> None:
-        """Replace the per-robot, per-wheel parameter array (N, n, WP.COUNT), e.g. randomised."""
+        """Replace the per-robot, per-wheel parameter array (N, n, len(WP)), e.g. randomised."""
         wp = np.asarray(wheel_params, dtype=np.float64)
         if wp.shape != self.wheel_params.shape or not np.all(np.isfinite(wp)):
             raise ValueError(f"wheel_params must be finite with shape {self.wheel_params.shape}")
@@ -832,7 +757,7 @@ class AzimutPhysics:
         loads = self.wheel_params[..., WP.LOAD].copy()
         h = self.params.chassis.com_height
         if h > 0:
-            m = self.body_inertia[:, 0:1]
+            m = self.body_inertia[:, BODY.MASS, None]
             a = self.chassis_accel
             loads -= h * m * (self._load_map[None, :, 1] * a[:, 0:1] + self._load_map[None, :, 2] * a[:, 1:2])
             np.maximum(loads, 0.0, out=loads)
@@ -880,8 +805,8 @@ class AzimutPhysics:
         ms[:, MS.PHIDOT_REF] = phidot
         ms[:, MS.PHIDOT] = phidot
         ms[:, MS.PHI] = 0.0
-        self.commands[robot, :, 0] = beta
-        self.commands[robot, :, 1] = phidot
+        self.commands[robot, :, CMD.BETA] = beta
+        self.commands[robot, :, CMD.PHIDOT] = phidot
         self.enabled[robot] = True
         self.acc[robot] = 0.0
         self._read_robot_state(robot)
@@ -904,8 +829,8 @@ class AzimutPhysics:
         phidot_cmd = np.asarray(phidot_cmd, dtype=np.float64).reshape(self.n_robots, self.n)
         if not (np.all(np.isfinite(beta_cmd)) and np.all(np.isfinite(phidot_cmd))):
             raise ValueError("set_commands: set-points contain NaN or inf")
-        self.commands[..., 0] = np.clip(beta_cmd, lim.steer_min, lim.steer_max)
-        self.commands[..., 1] = np.clip(phidot_cmd, -lim.wheel_speed_max, lim.wheel_speed_max)
+        self.commands[..., CMD.BETA] = np.clip(beta_cmd, lim.steer_min, lim.steer_max)
+        self.commands[..., CMD.PHIDOT] = np.clip(phidot_cmd, -lim.wheel_speed_max, lim.wheel_speed_max)
 
     def set_motors_enabled(self, enabled) -> None:
         """Motors on (True) or off (False) per robot: off means zero propulsion torque and the
@@ -958,11 +883,11 @@ class AzimutPhysics:
                     self._get_bodies()
                     if tm is not None:
                         t = _lap(tm, "read", t)
-                before[:] = state[:N, 3:6]
+                before[:] = state[:N, CS.VX:CS.W + 1]
                 _step_kernel(state, *args, 1, False)
                 # the same velocity change, as the force and torque pymunk applies in its step
-                forces[:N, 0:2] = (state[:N, 3:5] - before[:, 0:2]) * (self.body_inertia[:, 0:1] / dt)
-                forces[:N, 2] = (state[:N, 5] - before[:, 2]) * (self.body_inertia[:, 1] / dt)
+                forces[:N, 0:2] = (state[:N, CS.VX:CS.VY + 1] - before[:, 0:2]) * (self.body_inertia[:, BODY.MASS, None] / dt)
+                forces[:N, 2] = (state[:N, CS.W] - before[:, 2]) * (self.body_inertia[:, BODY.MOMENT] / dt)
                 self._put_forces()
                 if tm is not None:
                     t = _lap(tm, "force", t)
@@ -980,23 +905,19 @@ class AzimutPhysics:
 
     def chassis_pose(self) -> np.ndarray:
         """(N, 3) chassis pose (x, y, θ) in the world [m, m, rad]."""
-        return self.summary[:, 0:3].copy()
-
-    def chassis_twist_world(self) -> np.ndarray:
-        """(N, 3) chassis velocity (v_x, v_y) in the world and yaw rate θ̇ [m/s, m/s, rad/s]."""
-        return self.summary[:, 3:6].copy()
+        return self.summary[:, RS_POSE].copy()
 
     def chassis_twist(self) -> np.ndarray:
         """(N, 3) chassis twist ξ̇ = (ẋ, ẏ, θ̇) in the chassis frame R [m/s, m/s, rad/s]."""
-        return self.summary[:, [6, 7, 5]]
+        return self.summary[:, RS_TWIST_BODY]
 
     def steering_angles(self) -> np.ndarray:
         """(N, n) true steering angles β (wheel side of the spring) [rad]."""
-        return self.wheel_summary[..., 0].copy()
+        return self.wheel_summary[..., WS.BETA].copy()
 
     def steering_rates(self) -> np.ndarray:
         """(N, n) true steering rates β̇ [rad/s]."""
-        return self.wheel_summary[..., 1].copy()
+        return self.wheel_summary[..., WS.BETA_DOT].copy()
 
     def motor_angles(self) -> np.ndarray:
         """(N, n) steering motor angles θ_m [rad]."""
@@ -1006,38 +927,26 @@ class AzimutPhysics:
         """(N, n) true wheel spin rates φ̇ [rad/s]."""
         return self.motor_state[..., MS.PHIDOT].copy()
 
-    def wheel_angles(self) -> np.ndarray:
-        """(N, n) accumulated wheel angles φ [rad] (what the encoders count)."""
-        return self.motor_state[..., MS.PHI].copy()
-
     def axis_points(self) -> np.ndarray:
         """(N, n, 2) steering axes A_k in the world [m]."""
-        x, y, th = self.summary[:, 0:1], self.summary[:, 1:2], self.summary[:, 2:3]
+        x, y, th = (self.summary[:, col, None] for col in (RS.X, RS.Y, RS.TH))
         c, s = np.cos(th), np.sin(th)
         a = self._axis_xy
         return np.stack([x + c * a[:, 0] - s * a[:, 1], y + s * a[:, 0] + c * a[:, 1]], axis=-1)
 
     def contact_points(self) -> np.ndarray:
         """(N, n, 2) contact points P_k = A_k + b_k (cos γ, sin γ) in the world [m]."""
-        gam = self.summary[:, 2:3] + self.wheel_params[..., WP.ALPHA] + self.joint_state[..., JS.BETA]
+        gam = self.summary[:, RS.TH, None] + self.wheel_params[..., WP.ALPHA] + self.joint_state[..., JS.BETA]
         b = self.wheel_params[..., WP.B]
         return self.axis_points() + b[..., None] * np.stack([np.cos(gam), np.sin(gam)], axis=-1)
 
-    def tire_forces(self) -> np.ndarray:
-        """(N, n, 2) tire forces on the robot in the world, averaged over the last step [N]."""
-        return self.acc[..., :2] / self.substeps
-
     def tire_forces_body(self) -> np.ndarray:
         """(N, n, 2) tire forces in the chassis frame, averaged over the last step [N]."""
-        return self.wheel_summary[..., 2:4].copy()
-
-    def lateral_tire_forces(self) -> np.ndarray:
-        """(N, n) tire force along the propulsion axis (lateral, no-slip direction), step mean [N]."""
-        return self.acc[..., 3] / self.substeps
+        return self.wheel_summary[..., WS_FORCE].copy()
 
     def slip_power(self) -> np.ndarray:
         """(N,) power dissipated by tire slip Σ_k |F_k · v_slip,k|, averaged over the last step [W]."""
-        return self.summary[:, 8].copy()
+        return self.summary[:, RS.SLIP].copy()
 
     def internal_force(self) -> np.ndarray:
         """(N,) norm of the internal (antagonistic) part of the tire forces, step mean [N].
@@ -1046,14 +955,14 @@ class AzimutPhysics:
         (force and moment about the centre). The least-norm forces that give the same W are
         F* = Gᵀ(G Gᵀ)⁻¹ W; F − F* lies in the null space of G: forces that cancel out.
         """
-        return self.summary[:, 9].copy()
+        return self.summary[:, RS.INTERNAL].copy()
 
     def energy(self) -> np.ndarray:
         """(N,) kinetic energy (chassis with the module masses, module rotations, wheel spins)
         plus the elastic energy of the steering springs and the tires' contact patches [J]."""
         st = self._state[: self.n_robots]
-        m, inertia = self.body_inertia[:, 0], self.body_inertia[:, 1]
-        e = 0.5 * m * (st[:, 3] ** 2 + st[:, 4] ** 2) + 0.5 * inertia * st[:, 5] ** 2
+        m, inertia = self.body_inertia[:, BODY.MASS], self.body_inertia[:, BODY.MOMENT]
+        e = 0.5 * m * (st[:, CS.VX] ** 2 + st[:, CS.VY] ** 2) + 0.5 * inertia * st[:, CS.W] ** 2
         wp = self.wheel_params
         e += 0.5 * np.sum(wp[..., WP.I_MOD] * self.joint_state[..., JS.OMEGA] ** 2, axis=1)
         e += 0.5 * np.sum(wp[..., WP.I_W] * self.motor_state[..., MS.PHIDOT] ** 2, axis=1)
@@ -1071,8 +980,8 @@ class AzimutPhysics:
 
     def check(self) -> tuple[np.ndarray, list[str]]:
         """Blow-up detection: (ok (N,) bool, reason per robot, '' where ok)."""
-        codes = self.summary[:, 10]
-        ok = codes == 0
+        codes = self.summary[:, RS.CODE]
+        ok = codes == BlowUp.NONE
         if ok.all():
             return ok, [""] * self.n_robots
         return ok, [BLOWUP_MESSAGES.get(int(c), "") if c else "" for c in codes]

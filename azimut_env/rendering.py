@@ -16,6 +16,8 @@ import os
 
 import numpy as np
 
+from .physics_layout import RS_POSE, RS_TWIST_BODY, WS
+
 __all__ = ["Renderer"]
 
 _SIZE = 640
@@ -82,7 +84,7 @@ class Renderer:
                 pg.draw.circle(surf, (90, 90, 90), self._px((ob.x, ob.y)), max(1, int(ob.radius * self._scale)))
         if len(env._trail) > 1:
             pg.draw.lines(surf, (60, 120, 220), False, [self._px(p) for p in env._trail[-1000:]], 2)
-        x, y, th = phys.summary[robot, :3]
+        x, y, th = phys.summary[robot, RS_POSE]
         c, s = math.cos(th), math.sin(th)
 
         def world(p):
@@ -93,7 +95,7 @@ class Renderer:
         pg.draw.polygon(surf, (60, 60, 80), [self._px(world(p)) for p in ((L, W), (-L, W), (-L, -W), (L, -W))], 2)
         pg.draw.line(surf, (60, 60, 80), self._px(world((0, 0))), self._px(world((L, 0))), 2)
         g = env.geometry
-        beta = phys.wheel_summary[robot, :, 0]
+        beta = phys.wheel_summary[robot, :, WS.BETA]
         reach = 4.0 * max(L, W) + 10.0
         for k in range(g.n):
             gam = th + g.alpha[k] + beta[k]
@@ -114,7 +116,7 @@ class Renderer:
             icr = world((lam[0] / lam[2], lam[1] / lam[2]))
             if abs(icr[0]) < 1e4 and abs(icr[1]) < 1e4:
                 pg.draw.circle(surf, (220, 30, 30), self._px(icr), 5)
-        tw = phys.summary[robot, [6, 7, 5]]
+        tw = phys.summary[robot, RS_TWIST_BODY]
         if abs(tw[2]) > 1e-3:
             icr = world((-tw[1] / tw[2], tw[0] / tw[2]))
             if abs(icr[0]) < 1e4 and abs(icr[1]) < 1e4:

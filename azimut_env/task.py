@@ -33,7 +33,8 @@ from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_tw
 
 from .localisation import LocalisationParams, check_pose_source
 from .params import RobotParams, SensorParams, _setpoints_row, action_from_setpoints
-from .physics import WP, AzimutPhysics, BlowUpLimits, Obstacle
+from .physics import AzimutPhysics, BlowUpLimits, Obstacle
+from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
 from .sensors import _measure_kernel
 from .tracks import TRACK_NAMES, Track, make_track, query_tracks
 from .validation import (check_finite, check_index_list, check_int, check_nonnegative, check_positive,
@@ -294,7 +295,7 @@ def _reward_obs_kernel(rows, summ, track_out, look, obs_track, obs_look, obs_vel
         head = track_out[i, 2]
         v_ref = track_out[i, 3]
         psi = track_out[i, 4]
-        va = summ[i, 3] * math.cos(psi) + summ[i, 4] * math.sin(psi)
+        va = summ[i, RS.VX] * math.cos(psi) + summ[i, RS.VY] * math.sin(psi)
         v_along[i] = va
         off = abs(lat) > max_lat
         off_track[i] = off
@@ -309,8 +310,8 @@ def _reward_obs_kernel(rows, summ, track_out, look, obs_track, obs_look, obs_vel
         t1 = -weights[1] * (1.0 - math.exp(-abs(lat) / scales[0]))
         t2 = -weights[2] * (1.0 - math.exp(-abs(head) / scales[1]))
         t3 = -weights[3] * max(0.0, va - v_ref) / v_max
-        t4 = -min(weights[4] * summ[i, 8], scales[2])
-        t5 = -min(weights[5] * summ[i, 9], scales[2])
+        t4 = -min(weights[4] * summ[i, RS.SLIP], scales[2])
+        t5 = -min(weights[5] * summ[i, RS.INTERNAL], scales[2])
         t6 = -weights[6] * da2
         t7 = -weights[7] if off else 0.0
         terms[i, 0] = t0
@@ -606,7 +607,7 @@ class AzimutTask:
         if clash:
             raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
                              "move them off the start of the track")
-        self.phi_prev[i] = phys.motor_state[i, :, 4]
+        self.phi_prev[i] = phys.motor_state[i, :, MS.PHI]
         self.prev_action[i] = action_from_setpoints(beta, np.zeros(n), self.params.limits)
         self.steps[i] = 0
         self.reward[i] = 0.0
@@ -623,14 +624,14 @@ class AzimutTask:
         rng.standard_normal(out=self._normals[i])
         self._measure(sl)
         self._estimate(sl)
-        s_, look = track.query_many(phys.summary[sl, :3], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+        s_, look = track.query_many(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
         self.track_out[i] = s_[0]
         self.look[i] = look[0]
         self._unpack_track(sl)
         self.s_best[i] = self.s[i]
         psi = self.track_out[i, 4]
         summ = phys.summary[i]
-        self.v_along[i] = summ[3] * math.cos(psi) + summ[4] * math.sin(psi)
+        self.v_along[i] = summ[RS.VX] * math.cos(psi) + summ[RS.VY] * math.sin(psi)
         obs_track, obs_look, va = self.track_out[i], self.look[i], self.v_along[i]
         if self._odometry:
             # the localisation system's generator, spawned from the robot's; the first fix now
@@ -715,7 +716,7 @@ class AzimutTask:
 
     def step_physics(self) -> np.ndarray:
         """Kicks due now, then one control period of physics for all robots. Returns the blow-up
-        codes (N,) (0: fine; see ``physics.BLOWUP_MESSAGES``)."""
+        codes (N,) (:class:`~azimut_env.blowup.BlowUp`, 0: fine)."""
         phys = self.physics
         if self._kick_step.max() >= 0:
             for i in np.flatnonzero(self._kick_step == self.steps):
@@ -723,7 +724,7 @@ class AzimutTask:
                 phys.kick(int(i), kick["wheels"], kick["impulse"])
         phys.step()
         self.steps += 1
-        return phys.summary[:, 10]
+        return phys.summary[:, RS.CODE]
 
     def observe(self, action: np.ndarray, rngs: Sequence[np.random.Generator], rows: np.ndarray | None = None) -> None:
         """After :meth:`step_physics`: measurements, IT estimate, track state, reward and
@@ -784,11 +785,11 @@ class AzimutTask:
         """Sensors (``sensors`` models, compiled) on views of the physics arrays for ``rows``."""
         phys = self.physics
         ms = phys.motor_state
-        beta_true = phys.wheel_summary[rows, :, 0] + self.steer_bias[rows]
+        beta_true = phys.wheel_summary[rows, :, WS.BETA] + self.steer_bias[rows]
         out = self._meas[rows]
-        _measure_kernel(beta_true, ms[rows, :, 0], ms[rows, :, 4], self.phi_prev[rows], ms[rows, :, 3],
+        _measure_kernel(beta_true, ms[rows, :, MS.THETA], ms[rows, :, MS.PHI], self.phi_prev[rows], ms[rows, :, MS.PHIDOT],
                         *self._sensor_args, self._normals[rows], out)
-        self.phi_prev[rows] = ms[rows, :, 4]
+        self.phi_prev[rows] = ms[rows, :, MS.PHI]
         self.beta_m[rows] = out[:, 0]
         self.motor_m[rows] = out[:, 1]
         self.phidot_m[rows] = out[:, 2]
@@ -804,19 +805,19 @@ class AzimutTask:
 
     def _fix(self, i: int) -> np.ndarray:
         """A localisation fix of robot i: its true pose plus Gaussian noise (draws 3 normals)."""
-        return self.physics.summary[i, :3] + self._fix_sigma * self._loc_rngs[i].standard_normal(3)
+        return self.physics.summary[i, RS_POSE] + self._fix_sigma * self._loc_rngs[i].standard_normal(3)
 
     def pose_estimate(self, i: int) -> np.ndarray:
         """Robot i's pose (x, y, θ) as the observation sees it: the estimate with
         ``pose_source="odometry"``, the true pose otherwise."""
-        return self.pose_est[i].copy() if self._odometry else self.physics.summary[i, :3].copy()
+        return self.pose_est[i].copy() if self._odometry else self.physics.summary[i, RS_POSE].copy()
 
     def _pose_source_state(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The track state (N, 5), look-ahead (N, K, 3) and world velocity (N, 2) that the
         observation uses: the true ones, or (odometry) those of the pose estimate, which this
         advances for ``rows`` by one control period of dead reckoning (and a fix where one is due)."""
         if not self._odometry:
-            return self.track_out, self.look, self.physics.summary[:, 3:5]
+            return self.track_out, self.look, self.physics.summary[:, RS_VEL_WORLD]
         cfg, geom = self.config, self.params.geometry
         dt = cfg.control_period
         idx = np.flatnonzero(rows)
@@ -842,7 +843,7 @@ class AzimutTask:
         """Every robot's track state, each on its own track, in one compiled call."""
         cfg = self.config
         out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho,
-                                 self.physics.summary[:, :3], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
+                                 self.physics.summary[:, RS_POSE], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
         self.track_out[:] = out
         self.look[:] = look
         self._unpack_track(slice(None))
@@ -871,7 +872,7 @@ class AzimutTask:
         """Robot i's info dict of the single env (ground truth, estimate, reward terms)."""
         phys = self.physics
         summ = phys.summary[i]
-        twist = summ[[6, 7, 5]]
+        twist = summ[RS_TWIST_BODY]
         # true η from the twist, ξ̇ = μ (v, −u, w): λ ∝ (−ẏ, ẋ, θ̇), μ = ‖ξ̇‖ ≥ 0
         mu = math.sqrt(float(twist @ twist))
         lam = np.array([-twist[1], twist[0], twist[2]]) / mu if mu > 0 else np.array([0.0, 0.0, 1.0])
@@ -881,16 +882,16 @@ class AzimutTask:
                 lam, mu = -lam, -mu
         terms = {name: float(self.reward_terms[i, j]) for j, name in enumerate(REWARD_TERMS)} if with_terms else {}
         return {
-            "pose": summ[0:3].copy(),
+            "pose": summ[RS_POSE].copy(),
             "pose_estimate": self.pose_estimate(i),
             "twist": twist,
             "eta_true": (lam, mu),
             "eta_hat": (self.lam_hat[i].copy(), float(self.mu_hat[i])),
-            "beta_true": phys.wheel_summary[i, :, 0].copy(),
+            "beta_true": phys.wheel_summary[i, :, WS.BETA].copy(),
             "beta_est": self.beta_est[i].copy(),
-            "tire_forces": phys.wheel_summary[i, :, 2:4].copy(),
-            "slip_power": float(summ[8]),
-            "internal_force": float(summ[9]),
+            "tire_forces": phys.wheel_summary[i, :, WS_FORCE].copy(),
+            "slip_power": float(summ[RS.SLIP]),
+            "internal_force": float(summ[RS.INTERNAL]),
             "qua": float(self.qua[i]),
             "progress": float(self.s[i]),
             "lateral_error": float(self.lat[i]),

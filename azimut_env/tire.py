@@ -114,6 +114,7 @@ wheels). :func:`tire_step` runs the same kernel over arrays, :func:`brush_forces
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -132,11 +133,11 @@ __all__ = [
 ]
 
 
-class TS:
-    """Column indices of the per-wheel tire state (u_x [m], u_y [m], φ [rad])."""
+class TS(IntEnum):
+    """Columns of the per-wheel tire state (..., len(TS)): the contact patch's deflections
+    u_x, u_y [m] and its twist φ [rad]."""
 
     U_LONG, U_LAT, TWIST = range(3)
-    COUNT = 3
 
 
 #: speed [m/s] below which the aligning moment fades out (sgn_ε(v_x) = v_x/√(v_x² + ε²)).
@@ -243,15 +244,15 @@ def tire_step_kernel(s_long: float, s_lat: float, v_x: float, omega_z: float, lo
 def _tire_step_batch(s_long, s_lat, v_x, omega_z, load, state, prm, dt, out, new_state):
     for i in range(s_long.shape[0]):
         p = prm[i]
-        r = tire_step_kernel(s_long[i], s_lat[i], v_x[i], omega_z[i], load[i], state[i, 0], state[i, 1],
-                             state[i, 2], p[0], p[1], p[2], p[3], p[4], p[5], p[6], dt)
+        r = tire_step_kernel(s_long[i], s_lat[i], v_x[i], omega_z[i], load[i], state[i, TS.U_LONG],
+                             state[i, TS.U_LAT], state[i, TS.TWIST], p[0], p[1], p[2], p[3], p[4], p[5], p[6], dt)
         out[i, 0] = r[0]
         out[i, 1] = r[1]
         out[i, 2] = r[2]
         out[i, 3] = r[3]
-        new_state[i, 0] = r[4]
-        new_state[i, 1] = r[5]
-        new_state[i, 2] = r[6]
+        new_state[i, TS.U_LONG] = r[4]
+        new_state[i, TS.U_LAT] = r[5]
+        new_state[i, TS.TWIST] = r[6]
 
 
 def _tire_param_row(tire) -> np.ndarray:
@@ -272,17 +273,17 @@ def tire_step(s_long, s_lat, v_x, omega_z, load, state, tire, dt: float):
     arrays = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (s_long, s_lat, v_x, omega_z, load)))
     shape = arrays[0].shape
     st = np.asarray(state, dtype=np.float64)
-    if st.shape[-1:] != (TS.COUNT,):
-        raise ValueError(f"state must have a trailing axis of {TS.COUNT}, got shape {st.shape}")
+    if st.shape[-1:] != (len(TS),):
+        raise ValueError(f"state must have a trailing axis of {len(TS)}, got shape {st.shape}")
     shape = np.broadcast_shapes(shape, st.shape[:-1])
     flat = [np.ascontiguousarray(np.broadcast_to(a, shape)).ravel() for a in arrays]
-    st = np.ascontiguousarray(np.broadcast_to(st, shape + (TS.COUNT,))).reshape(-1, TS.COUNT)
+    st = np.ascontiguousarray(np.broadcast_to(st, shape + (len(TS),))).reshape(-1, len(TS))
     m = flat[0].shape[0]
     prm = np.ascontiguousarray(np.broadcast_to(_tire_param_row(tire), (m, 7)))
     out = np.empty((m, 4))
-    new = np.empty((m, TS.COUNT))
+    new = np.empty((m, len(TS)))
     _tire_step_batch(*flat, st, prm, float(dt), out, new)
-    return out.reshape(shape + (4,)), new.reshape(shape + (TS.COUNT,))
+    return out.reshape(shape + (4,)), new.reshape(shape + (len(TS),))
 
 
 def brush_forces(slip_ratio, slip_angle, load, tire) -> tuple[np.ndarray, np.ndarray]:

@@ -27,6 +27,8 @@ from numba.typed import List as NumbaList
 
 from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
 from .physics import AzimutPhysics
+from .blowup import BlowUp
+from .physics_layout import RS, RS_POSE
 from .localisation import LocalisationParams
 from .task import REWARD_TERMS, AzimutTask, TaskConfig, resolve_params
 from .tracks import Track
@@ -358,7 +360,7 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         active = ~resetting if any_reset else None
         a = task.apply_actions(actions, active)
         codes = task.step_physics()
-        errored = codes != 0
+        errored = codes != BlowUp.NONE
         if any_reset:
             errored &= active
         any_error = bool(errored.any())
@@ -436,13 +438,13 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         task, N = self.task, self.num_envs
         summ = self.physics.summary
         info: dict[str, Any] = {
-            "pose": summ[:, 0:3].copy(),
+            "pose": summ[:, RS_POSE].copy(),
             "progress": task.s.copy(),
             "lateral_error": task.lat.copy(),
             "heading_error": task.head.copy(),
             "qua": task.qua.copy(),
-            "slip_power": summ[:, 8].copy(),
-            "internal_force": summ[:, 9].copy(),
+            "slip_power": summ[:, RS.SLIP].copy(),
+            "internal_force": summ[:, RS.INTERNAL].copy(),
             "off_track": task.off_track.copy(),
             "finished": task.finished.copy(),
             "stalled": task.stalled.copy(),
@@ -470,12 +472,12 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     def _start_trail(self) -> None:
         if self.render_mode is not None and self.render_index < self.num_envs:
             p = self.physics.summary[self.render_index]
-            self._trail = [(float(p[0]), float(p[1]))]
+            self._trail = [(float(p[RS.X]), float(p[RS.Y]))]
 
     def _extend_trail(self) -> None:
         if self.render_mode is not None and self.render_index < self.num_envs:
             p = self.physics.summary[self.render_index]
-            self._trail.append((float(p[0]), float(p[1])))
+            self._trail.append((float(p[RS.X]), float(p[RS.Y])))
             if len(self._trail) > 2000:
                 del self._trail[:1000]
 

@@ -8,6 +8,7 @@ import pytest
 
 from azimut_env.params import RobotParams, TireParams
 from azimut_env.physics import AzimutPhysics
+from azimut_env.physics_layout import WS_CONTACT
 from azimut_env.tire import brush_forces
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
@@ -171,7 +172,7 @@ def test_internal_force_is_the_null_space_part_of_the_tire_forces():
     phys = AzimutPhysics()
     _drive(phys, beta, phidot, 0.5)
     f = phys.tire_forces_body()[0].ravel()
-    p = phys.wheel_summary[0, :, 4:6]
+    p = phys.wheel_summary[0, :, WS_CONTACT]
     G = np.zeros((3, 8))
     G[0, 0::2] = 1
     G[1, 1::2] = 1

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from azimut_env.params import ChassisParams, RobotParams, SteeringParams, TireParams
-from azimut_env.physics import JS, WP, AzimutPhysics
+from azimut_env.physics import JS, RS, TS, WP, AzimutPhysics
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
 V1 = np.load(Path(__file__).parent / "data" / "physics_v1_reference.npz")
@@ -28,7 +28,7 @@ def _angular_momentum(phys, i=0):
     """Total angular momentum about the world origin [kg·m²/s]: chassis with the module masses
     (centre of mass at the chassis origin) plus the modules' own spins."""
     m, inertia = phys.body_inertia[i]
-    x, y, _, vx, vy, w = phys.summary[i, :6]
+    x, y, vx, vy, w = (phys.summary[i, col] for col in (RS.X, RS.Y, RS.VX, RS.VY, RS.W))
     return m * (x * vy - y * vx) + inertia * w + np.sum(phys.wheel_params[i, :, WP.I_MOD] * phys.joint_state[i, :, JS.OMEGA])
 
 
@@ -262,7 +262,7 @@ def test_scrub_torque_resists_steering_a_loaded_wheel_at_standstill():
     lag_loaded, phys = _steer_at_rest(9.81)
     lag_free, _ = _steer_at_rest(1e-6)
     assert lag_loaded > lag_free + np.deg2rad(0.5)
-    assert np.max(np.abs(phys.tire_state[0, :, 2])) > 0  # the patch twisted
+    assert np.max(np.abs(phys.tire_state[0, :, TS.TWIST])) > 0  # the patch twisted
     # the robot itself stays put (static friction): the chassis barely moves
     assert np.hypot(*phys.chassis_pose()[0, :2]) < 2e-3
 
