@@ -624,7 +624,7 @@ class AzimutTask:
         rng.standard_normal(out=self._normals[i])
         self._measure(sl)
         self._estimate(sl)
-        s_, look = track.query_many(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+        s_, look = track.query_batch(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
         self.track_out[i] = s_[0]
         self.look[i] = look[0]
         self._unpack_track(sl)
@@ -639,7 +639,7 @@ class AzimutTask:
             self.beta_m_prev[i] = self.beta_m[i]
             self.pose_est[i] = self._fix(i)
             self.vel_est[i] = 0.0
-            s_, look = track.query_many(self.pose_est[sl], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+            s_, look = track.query_batch(self.pose_est[sl], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
             self.track_out_est[i] = s_[0]
             self.look_est[i] = look[0]
             obs_track, obs_look, va = self.track_out_est[i], self.look_est[i], 0.0

@@ -18,9 +18,7 @@ import numpy as np
 from numba import njit
 from numba.typed import List as NumbaList
 
-from azimut_env.tracks import Track, project_window_kernel
-from azimut_env.tracks import _interp1 as _interp
-from azimut_env.tracks import _wrap_pi as _wrap
+from azimut_env.tracks import Track, interp1, project_window_kernel, wrap_pi
 
 from .path_follower import PathFollower, PathFollowerConfig
 
@@ -53,26 +51,26 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
         state[i, 0] = s
         finished = s >= L - 1e-6
         sw = _wrap_s(s, cl, L)
-        x_r = _interp(S, P[1], sw)
-        y_r = _interp(S, P[2], sw)
-        th_r = _interp(S, P[3], sw)
-        v_r = _interp(S, P[4], sw) * speed_scale
+        x_r = interp1(S, P[1], sw)
+        y_r = interp1(S, P[2], sw)
+        th_r = interp1(S, P[3], sw)
+        v_r = interp1(S, P[4], sw) * speed_scale
         s_ff = s + max(v_r * preview, preview_min)
         if not cl:
             s_ff = min(s_ff, L)
-        psi_ff = _interp(S, P[5], _wrap_s(s_ff, cl, L))
-        psi_s = _interp(S, P[5], sw)
-        if abs(_wrap(psi_ff - psi_s)) > corner_angle:
+        psi_ff = interp1(S, P[5], _wrap_s(s_ff, cl, L))
+        psi_s = interp1(S, P[5], sw)
+        if abs(wrap_pi(psi_ff - psi_s)) > corner_angle:
             s_ff = min(s + preview_min, L) if not cl else s + preview_min
         sffw = _wrap_s(s_ff, cl, L)
-        v_ff = _interp(S, P[4], sffw) * speed_scale
+        v_ff = interp1(S, P[4], sffw) * speed_scale
         kappa = 0.0
         stop = s_ff + 0.05
         step = (stop - s) / 5.0
         for k in range(6):
             x = s + k * step if k < 5 else stop
             x = x % L if cl else min(max(x, 0.0), L)
-            kappa = max(kappa, abs(_interp(S, P[9], x)))
+            kappa = max(kappa, abs(interp1(S, P[9], x)))
         if 1e-6 < kappa < 20.0:
             v_ff = min(v_ff, math.sqrt(max_lateral_accel / kappa))
         st = stops[i]
@@ -96,9 +94,9 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
             tw1 = 0.0
             tw2 = 0.0
         else:
-            tw0 = _interp(S, P[6], sffw) * v_ff
-            tw1 = _interp(S, P[7], sffw) * v_ff
-            tw2 = _interp(S, P[8], sffw) * v_ff
+            tw0 = interp1(S, P[6], sffw) * v_ff
+            tw1 = interp1(S, P[7], sffw) * v_ff
+            tw2 = interp1(S, P[8], sffw) * v_ff
         ex = x_r - px
         ey = y_r - py
         nx = -math.sin(psi_s)
@@ -115,7 +113,7 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
         if norm > max_correction:
             cx *= max_correction / norm
             cy *= max_correction / norm
-        w_corr = min(max(k_heading * _wrap(th_r - pth), -max_heading_correction), max_heading_correction)
+        w_corr = min(max(k_heading * wrap_pi(th_r - pth), -max_heading_correction), max_heading_correction)
         vx = tw0 + cx
         vy = tw1 + cy
         c = math.cos(pth)

@@ -96,12 +96,19 @@ def test_wrap_angle():
     assert np.allclose(wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.1]), [np.pi, np.pi, np.pi, 0.1])
 
 
-def test_query_many_matches_query():
+def test_query_batch_matches_query_and_the_old_name_warns():
     t = make_track("figure8")
     rng = np.random.default_rng(4)
     s0 = rng.uniform(0, t.length, 16)
     poses = t.sample(s0)[:, :3] + rng.normal(0, 0.05, (16, 3))
-    scal, look = t.query_many(poses, s0, 4, 0.3)
+    scal, look = t.query_batch(poses, s0, 4, 0.3)
     for i in range(16):
         q = t.query(poses[i], s0[i], 4, 0.3)
-        assert np.allclose(scal[i], q[:5]) and np.allclose(look[i], q[5])
+        assert np.array_equal(scal[i], q[:5]) and np.array_equal(look[i], q[5])
+        s = t.project(poses[i], s_hint=s0[i])
+        assert scal[i, 0] == pytest.approx(s, abs=1e-9)
+    with pytest.deprecated_call():
+        old = t.query_many(poses, s0, 4, 0.3)
+    assert np.array_equal(old[0], scal) and np.array_equal(old[1], look)
+    with pytest.raises(ValueError, match="one s_hint per pose"):
+        t.query_batch(poses, s0[:3], 4, 0.3)

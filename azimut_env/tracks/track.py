@@ -1,5 +1,5 @@
-"""Reference tracks for an omnidirectional robot: a path, a heading profile independent of the path
-direction, and a speed profile.
+"""A reference track for an omnidirectional robot: a path, a heading profile independent of the
+path direction, and a speed profile.
 
 A :class:`Track` is a dense polyline of reference poses (x, y, θ) in the world with a speed v per
 sample. Because the robot can turn in place, progress along a track is not the path length alone:
@@ -7,185 +7,22 @@ the progress coordinate s grows by ``ds = sqrt(dℓ² + (ρ dθ)²)`` between sa
 length and ρ (``progress_radius``, [m]) converts heading change to length. A pure rotation in place
 therefore still has progress, and ``v`` [m/s] is the rate of s.
 
-Built-in tracks (:func:`make_track`): ``paper`` (spiral, circle, rounded square, after the paper's
-Fig. 9), ``circle``, ``figure8``, ``square`` (sharp corners: stop and reconfigure), ``crab``
-(translation at a fixed heading, rotation in place, translation), ``random`` (seeded smooth closed
-curves). :meth:`Track.from_waypoints` builds one from user waypoints.
+:meth:`Track.from_waypoints` builds one from user waypoints; :mod:`azimut_env.tracks.library` holds
+the built-in ones; the compiled queries are in :mod:`azimut_env.tracks.query`.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
-from .validation import check_bool, check_nonnegative, check_positive, check_real_array
+from ..validation import check_bool, check_nonnegative, check_positive, check_real_array
+from .query import query_batch_kernel, wrap_angle
 
-__all__ = ["Track", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle"]
-
-TRACK_NAMES = ("paper", "circle", "figure8", "square", "crab", "random")
-
-
-def wrap_angle(a):
-    """Wrap angles to ]−π, π]."""
-    a = np.asarray(a, dtype=np.float64)
-    return np.pi - np.mod(np.pi - a, 2 * np.pi)
-
-
-@njit(cache=True)
-def _interp1(S, col, s):
-    """np.interp for a scalar on sorted S."""
-    m = S.shape[0]
-    if s <= S[0]:
-        return col[0]
-    if s >= S[m - 1]:
-        return col[m - 1]
-    j = np.searchsorted(S, s, side="right") - 1
-    t = (s - S[j]) / (S[j + 1] - S[j])
-    return col[j] + t * (col[j + 1] - col[j])
-
-
-@njit(cache=True)
-def _wrap_pi(a):
-    return math.pi - ((math.pi - a) % (2 * math.pi))
-
-
-@njit(cache=True)
-def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, always_wrap):
-    """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
-    s_hint + ahead], metric ‖Δxy‖² + (ρ Δθ)², refined along the segment (the compiled
-    :meth:`Track.project`; unwrapped on a closed track). ``always_wrap``: wrap every heading
-    difference as ``Track.project`` does (``control.follower_batch`` matches ``PathFollower``
-    to the last bit that way); otherwise only those outside ]−π, π] (the env's hot loop)."""
-    m = S.shape[0]
-    mu = m - 1
-    if closed:
-        lap = math.floor(s_hint / length)
-        base = lap * length
-        s_loc = s_hint - base
-        lo_s = s_loc - back
-        hi_s = s_loc + ahead
-        j0 = int(math.floor(lo_s / length)) * mu + np.searchsorted(S, lo_s % length) - 1
-        j1 = int(math.floor(hi_s / length)) * mu + np.searchsorted(S, hi_s % length) + 1
-    else:
-        base = 0.0
-        j0 = max(np.searchsorted(S, s_hint - back) - 1, 0)
-        j1 = min(np.searchsorted(S, s_hint + ahead, side="right") + 1, m)
-    best = 1e300
-    bi = 0
-    boff = 0.0
-    for j in range(j0, j1):
-        if closed:
-            i = j % mu
-            off = math.floor(j / mu) * length
-        else:
-            i = j
-            off = 0.0
-        dx = X[i] - px
-        dy = Y[i] - py
-        dth = TH[i] - pth
-        if always_wrap or dth > math.pi or dth <= -math.pi:  # the float modulo only when needed
-            dth = _wrap_pi(dth)
-        c = dx * dx + dy * dy + (rho * dth) ** 2
-        if c < best:
-            best = c
-            bi = i
-            boff = off
-    s = S[bi] + boff + base
-    i2 = min(bi, m - 2)
-    sx = X[i2 + 1] - X[i2]
-    sy = Y[i2 + 1] - Y[i2]
-    st = rho * (TH[i2 + 1] - TH[i2])
-    seg = math.sqrt(sx * sx + sy * sy + st * st)
-    if seg > 0:
-        rx = px - X[bi]
-        ry = py - Y[bi]
-        rt = rho * _wrap_pi(pth - TH[bi])
-        step = (rx * sx + ry * sy + rt * st) / seg
-        s += min(max(step, -seg), seg)
-    if not closed:
-        s = min(max(s, 0.0), length)
-    return s
-
-
-@njit(cache=True)
-def _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, px, py, pth, s_hint, back, ahead,
-                        spacing, look):
-    """Windowed projection, errors, reference speed and look-ahead in one call (see Track.query)."""
-    s = project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, False)
-    sw = s % length if closed else s
-    xr = _interp1(S, X, sw)
-    yr = _interp1(S, Y, sw)
-    thr = _interp1(S, TH, sw)
-    vr = _interp1(S, V, sw)
-    psi = _interp1(S, PSI, sw)
-    lat = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
-    head = _wrap_pi(pth - thr)
-    c, sn = math.cos(pth), math.sin(pth)
-    for k in range(look.shape[0]):
-        sk = s + spacing * (k + 1)
-        sk = sk % length if closed else min(max(sk, 0.0), length)
-        dx = _interp1(S, X, sk) - px
-        dy = _interp1(S, Y, sk) - py
-        look[k, 0] = c * dx + sn * dy
-        look[k, 1] = -sn * dx + c * dy
-        look[k, 2] = _wrap_pi(_interp1(S, TH, sk) - pth)
-    return s, lat, head, vr, psi
-
-
-@njit(cache=True)
-def _track_query_many_kernel(S, X, Y, TH, V, PSI, closed, length, rho, poses, hints, back, ahead, spacing, out,
-                             look):
-    for i in range(poses.shape[0]):
-        s, lat, head, vr, psi = _track_query_kernel(S, X, Y, TH, V, PSI, closed, length, rho, poses[i, 0],
-                                                    poses[i, 1], poses[i, 2], hints[i], back, ahead, spacing,
-                                                    look[i])
-        out[i, 0] = s
-        out[i, 1] = lat
-        out[i, 2] = head
-        out[i, 3] = vr
-        out[i, 4] = psi
-
-
-@njit(cache=True)
-def _track_query_multi_kernel(packs, closed, length, rho, poses, hints, back, ahead, spacing, out, look):
-    """:func:`_track_query_kernel` for N robots, each on its own track: ``packs[i]`` is robot i's
-    :meth:`Track.packed` array (6, m); closed, length, rho (N,) its flags and scalars."""
-    for i in range(poses.shape[0]):
-        p = packs[i]
-        s, lat, head, vr, psi = _track_query_kernel(p[0], p[1], p[2], p[3], p[4], p[5], closed[i], length[i],
-                                                    rho[i], poses[i, 0], poses[i, 1], poses[i, 2], hints[i],
-                                                    back, ahead, spacing, look[i])
-        out[i, 0] = s
-        out[i, 1] = lat
-        out[i, 2] = head
-        out[i, 3] = vr
-        out[i, 4] = psi
-
-
-def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: int, spacing: float,
-                 back: float = 0.5, ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`Track.query` for N robots on N tracks in one compiled call.
-
-    Args:
-        packs: a ``numba.typed.List`` of the robots' :meth:`Track.packed` arrays.
-        closed (N,) bool, length (N,) [m], rho (N,) [m]: each track's ``closed``, ``length`` and
-            ``progress_radius``. poses (N, 3), s_hints (N,): as :meth:`Track.query_many`.
-
-    Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``,
-    the same numbers as :meth:`Track.query` robot by robot.
-    """
-    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
-    hints = np.ascontiguousarray(np.asarray(s_hints, dtype=np.float64).reshape(-1))
-    n = poses.shape[0]
-    if hints.shape[0] != n or len(packs) != n or closed.shape[0] != n or length.shape[0] != n or rho.shape[0] != n:
-        raise ValueError("query_tracks needs one track, flag, length, radius and s_hint per pose")
-    out = np.empty((n, 5))
-    look = np.empty((n, int(lookahead_count), 3))
-    _track_query_multi_kernel(packs, closed, length, rho, poses, hints, back, ahead, spacing, out, look)
-    return out, look
+__all__ = ["Track"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -482,27 +319,33 @@ class Track:
         """Everything the env needs per step, in one compiled call: ``(s, lateral error, heading
         error, v_ref, ψ, lookahead (K, 3))``, the same as :meth:`project` (windowed at ``s_hint``),
         :meth:`errors`, :meth:`sample`, :meth:`tangent_at` and :meth:`lookahead`."""
-        look = np.empty((int(lookahead_count), 3))
-        s, lat, head, v, psi = _track_query_kernel(
-            self.s, self._x, self._y, self.heading, self.speed,
-            self.tangent, self.closed, self.length, self.progress_radius, float(pose[0]), float(pose[1]),
-            float(pose[2]), float(s_hint), back, ahead, spacing, look)
-        return s, lat, head, v, psi, look
+        pose = np.array([[float(pose[0]), float(pose[1]), float(pose[2])]])
+        out, look = self.query_batch(pose, np.array([float(s_hint)]), lookahead_count, spacing, back, ahead)
+        s, lat, head, v, psi = (float(x) for x in out[0])
+        return s, lat, head, v, psi, look[0]
 
-    def query_many(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
-                   ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    def query_batch(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
+                    ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`query` for N robots on this track in one compiled call.
 
         Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``."""
         poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
         hints = np.ascontiguousarray(np.asarray(s_hints, dtype=np.float64).reshape(-1))
-        if hints.shape[0] != poses.shape[0]:
-            raise ValueError("query_many needs one s_hint per pose")
-        out = np.empty((poses.shape[0], 5))
-        look = np.empty((poses.shape[0], int(lookahead_count), 3))
-        _track_query_many_kernel(self.s, self._x, self._y, self.heading, self.speed, self.tangent, self.closed,
-                                 self.length, self.progress_radius, poses, hints, back, ahead, spacing, out, look)
+        n = poses.shape[0]
+        if hints.shape[0] != n:
+            raise ValueError("query_batch needs one s_hint per pose")
+        out = np.empty((n, 5))
+        look = np.empty((n, int(lookahead_count), 3))
+        query_batch_kernel(self.packed()[None], np.zeros(n, dtype=np.int64), np.array([self.closed]),
+                           np.array([self.length]), np.array([self.progress_radius]), poses, hints, back, ahead,
+                           spacing, out, look)
         return out, look
+
+    def query_many(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
+                   ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Deprecated name of :meth:`query_batch` (the project spells batched calls ``*_batch``)."""
+        warnings.warn("Track.query_many is deprecated; use Track.query_batch", DeprecationWarning, stacklevel=2)
+        return self.query_batch(poses, s_hints, lookahead_count, spacing, back, ahead)
 
     def packed(self) -> np.ndarray:
         """(6, m) C-contiguous rows (s, x, y, heading, speed, tangent), what the compiled queries
@@ -522,154 +365,3 @@ class Track:
     def max_speed(self) -> float:
         """Largest reference speed [m/s]."""
         return float(np.max(self.speed))
-
-
-# ---------------------------------------------------------------------- built-in tracks
-
-
-def _arc(center, radius, a0, a1, spacing):
-    count = max(2, int(math.ceil(abs(a1 - a0) * radius / spacing)))
-    a = np.linspace(a0, a1, count, endpoint=False)
-    return np.stack([center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)], axis=1), a
-
-
-def _line(p0, p1, spacing):
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    count = max(1, int(math.ceil(np.hypot(*(p1 - p0)) / spacing)))
-    t = np.arange(count) / count
-    return p0 + t[:, None] * (p1 - p0)
-
-
-def paper_track(speed: float = 1.0, spacing: float = 0.02) -> Track:
-    """Spiral, then circle, then square with rounded corners (after the paper's Fig. 9), at a nominal
-    ``speed`` of 1 m/s (the path follower slows for curvature and stops).
-
-    As in the paper (§4): the spiral is a continuously moving ICR with concurrent axes, the circle a
-    constant ICR, and the rounded square switches between parallel propulsion axes (straight
-    sides: a translation) and concurrent ones (corners: a rotation about the corner's centre), with
-    sharp transitions in between. The robot's X axis points away from the centre of the spiral and
-    circle, and away from the square's side (path direction minus π/2) on the square.
-    """
-    R = 1.5
-    # spiral: r from 0.5 to R over 1.5 turns, ending at angle 0 (point (R, 0))
-    turns = 1.5
-    a = np.linspace(-2 * np.pi * turns, 0.0, int(2 * np.pi * turns * 1.0 / spacing), endpoint=False)
-    rad = R - (R - 0.5) * (-a) / (2 * np.pi * turns)
-    spiral = np.stack([rad * np.cos(a), rad * np.sin(a)], axis=1)
-    h_sp = a.copy()  # car-like as on the circle: the ICR is the spiral's centre
-    # circle: one turn from angle 0, heading along the tangent (tangent = angle + π/2, minus π/2 offset)
-    circ, ac = _arc((0.0, 0.0), R, 0.0, 2 * np.pi, spacing)
-    h_c = ac  # heading = tangent − π/2: ICR at the circle's centre, robot's X axis pointing outward
-    # rounded square, side 2R centred at the origin, entered at (R, 0) going up (tangent continuous)
-    rc = 0.4
-    h_end = 2 * np.pi
-    pieces = []
-    pieces.append(_line((R, 0.0), (R, R - rc), spacing))
-    corners = [((R - rc, R - rc), 0.0), ((-R + rc, R - rc), np.pi / 2), ((-R + rc, -R + rc), np.pi),
-               ((R - rc, -R + rc), 3 * np.pi / 2)]
-    ends = [(-R + rc, R), (-R, -R + rc), (R - rc, -R), (R, 0.0)]
-    for (c, a0), e in zip(corners, ends):
-        arc, _ = _arc(c, rc, a0, a0 + np.pi / 2, spacing)
-        pieces.append(arc)
-        start = np.array([c[0] + rc * math.cos(a0 + np.pi / 2), c[1] + rc * math.sin(a0 + np.pi / 2)])
-        pieces.append(_line(start, e, spacing))
-    square = np.vstack(pieces + [np.array([[R, 0.0]])])
-    d = np.diff(square, axis=0)
-    tang = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    tang = np.append(tang, tang[-1])
-    h_sq = tang - np.pi / 2
-    h_sq += h_end - h_sq[0]  # continuous with the end of the circle
-    xy = np.vstack([spiral, circ, square])
-    th = np.concatenate([h_sp, h_c, h_sq])
-    v = np.full(len(xy), speed)
-    return Track("paper", xy, th, v, closed=False).with_ramps(0.3)
-
-
-def circle_track(radius: float = 1.5, speed: float = 0.5, spacing: float = 0.02) -> Track:
-    """A closed circle driven car-like (heading along the path; ICR at the centre)."""
-    xy, a = _arc((0.0, 0.0), radius, -np.pi / 2, 3 * np.pi / 2, spacing)
-    return Track("circle", xy + np.array([0.0, radius]), a + np.pi / 2, speed, closed=True)
-
-
-def figure8_track(size: float = 2.0, speed: float = 0.5, spacing: float = 0.02) -> Track:
-    """A closed lemniscate of Gerono (x = a sin t, y = a sin t cos t), heading along the path."""
-    t = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
-    x, y = size * np.sin(t), size * np.sin(t) * np.cos(t)
-    d = np.hypot(np.diff(x, append=x[0]), np.diff(y, append=y[0]))
-    s = np.concatenate([[0], np.cumsum(d)])[:-1]
-    ss = np.arange(0, s[-1] + d[-1], spacing)
-    tt = np.interp(ss, np.append(s, s[-1] + d[-1]), np.append(t, 2 * np.pi))
-    xy = np.stack([size * np.sin(tt), size * np.sin(tt) * np.cos(tt)], axis=1)
-    dx = np.stack([np.cos(tt), np.cos(2 * tt)], axis=1)  # derivative direction
-    th = np.unwrap(np.arctan2(dx[:, 1], dx[:, 0]))
-    return Track("figure8", xy, th, speed, closed=True)
-
-
-def square_track(side: float = 3.0, speed: float = 0.5, heading: float = 0.0, spacing: float = 0.02,
-                 stop_ramp: float = 0.4) -> Track:
-    """A closed square with sharp corners at a fixed heading: the speed falls to 0 at each corner,
-    where the translation direction turns by 90°, so the robot must stop and reconfigure its wheels."""
-    h = side / 2
-    corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
-    pts = np.vstack([_line(corners[j], corners[(j + 1) % 4], spacing) for j in range(4)])
-    # distance to the nearest corner
-    dist = np.min(np.hypot(pts[:, None, 0] - corners[None, :, 0], pts[:, None, 1] - corners[None, :, 1]), axis=1)
-    v = speed * np.sqrt(np.clip(dist / stop_ramp, 0.0, 1.0))
-    v = np.maximum(v, 0.02)
-    return Track("square", pts + np.array([h, h]), heading, v, closed=True)
-
-
-def crab_track(speed: float = 0.4, heading: float = 0.5, spacing: float = 0.02) -> Track:
-    """Translation at a fixed heading (diagonally), a rotation in place by π/2, then a sideways
-    translation: the ICR jumps from the horizon to the chassis centre and back."""
-    a = _line((0.0, 0.0), (2.0, 1.0), spacing)
-    rot_n = int(math.ceil(0.3 * (np.pi / 2) / spacing))
-    rot_xy = np.repeat(np.array([[2.0, 1.0]]), rot_n, axis=0)
-    rot_th = heading + np.linspace(0, np.pi / 2, rot_n, endpoint=False)
-    b = _line((2.0, 1.0), (2.0, 3.0), spacing)
-    xy = np.vstack([a, rot_xy, b, [[2.0, 3.0]]])
-    th = np.concatenate([np.full(len(a), heading), rot_th, np.full(len(b) + 1, heading + np.pi / 2)])
-    # stop before and after the rotation in place
-    track = Track("crab", xy, th, speed, closed=False)
-    s_rot0 = track.s[len(a)]
-    s_rot1 = track.s[min(len(a) + rot_n, track.s.size - 1)]
-    dist = np.minimum(np.abs(track.s - s_rot0), np.abs(track.s - s_rot1))
-    inside = (track.s > s_rot0) & (track.s < s_rot1)
-    v = track.speed * np.where(inside, 1.0, np.sqrt(np.clip(dist / 0.3, 0.05, 1.0)))
-    return Track("crab", track.xy, track.heading, v, closed=False).with_ramps(0.3)
-
-
-def random_track(seed: int | None = None, rng: np.random.Generator | None = None, spacing: float = 0.02) -> Track:
-    """A seeded smooth closed curve: a radius profile with a few random harmonics, a heading that
-    either follows the path or stays near a fixed value with a slow oscillation, a random speed."""
-    rng = np.random.default_rng(seed) if rng is None else rng
-    r0 = rng.uniform(1.2, 2.5)
-    harm = np.arange(2, 5)
-    amp = rng.uniform(0, 0.12, size=harm.size)
-    ph = rng.uniform(0, 2 * np.pi, size=harm.size)
-    t = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
-    rad = r0 * (1 + np.sum(amp[:, None] * np.cos(harm[:, None] * t[None] + ph[:, None]), axis=0))
-    x, y = rad * np.cos(t), rad * np.sin(t)
-    d = np.hypot(np.diff(x, append=x[0]), np.diff(y, append=y[0]))
-    s = np.concatenate([[0], np.cumsum(d)])
-    ss = np.arange(0, s[-1], spacing)
-    xy = np.stack([np.interp(ss, s, np.append(x, x[0])), np.interp(ss, s, np.append(y, y[0]))], axis=1)
-    if rng.random() < 0.5:
-        dxy = np.diff(np.vstack([xy, xy[:1]]), axis=0)
-        th = np.unwrap(np.arctan2(dxy[:, 1], dxy[:, 0])) + rng.uniform(-np.pi, np.pi)
-    else:
-        th = rng.uniform(-np.pi, np.pi) + rng.uniform(0, 0.8) * np.sin(2 * np.pi * ss / ss[-1] * rng.integers(1, 4)
-                                                                       + rng.uniform(0, 2 * np.pi))
-    speed = rng.uniform(0.3, 0.7)
-    return Track("random", xy - xy[0], th, speed, closed=True)
-
-
-def make_track(name: str, rng: np.random.Generator | None = None, **kwargs) -> Track:
-    """A built-in track by name (see ``TRACK_NAMES``); ``random`` draws from ``rng``."""
-    builders = {"paper": paper_track, "circle": circle_track, "figure8": figure8_track, "square": square_track,
-                "crab": crab_track}
-    if name == "random":
-        return random_track(rng=rng if rng is not None else np.random.default_rng(), **kwargs)
-    if name not in builders:
-        raise ValueError(f"unknown track {name!r}; choose from {TRACK_NAMES} or pass a Track")
-    return builders[name](**kwargs)

@@ -1,0 +1,18 @@
+"""Reference tracks for an omnidirectional robot: a path, a heading profile independent of the path
+direction, and a speed profile.
+
+- :mod:`.track`: :class:`Track` (progress s with ``ds = sqrt(dℓ² + (ρ dθ)²)``, so that a rotation in
+  place has progress; sampling, projection, errors, look-ahead, :meth:`Track.from_waypoints`).
+- :mod:`.library`: the built-in tracks, :func:`make_track` and :data:`TRACK_NAMES`.
+- :mod:`.query`: the compiled queries (one kernel for one robot, N robots on one track and N
+  robots on N tracks) and the scalar helpers other compiled code shares.
+"""
+
+from .library import (TRACK_NAMES, circle_track, crab_track, figure8_track, make_track, paper_track, random_track,
+                      square_track)
+from .query import interp1, project_window_kernel, query_batch_kernel, query_tracks, wrap_angle, wrap_pi
+from .track import Track
+
+__all__ = ["Track", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle", "wrap_pi", "interp1",
+           "project_window_kernel", "query_batch_kernel", "paper_track", "circle_track", "figure8_track",
+           "square_track", "crab_track", "random_track"]

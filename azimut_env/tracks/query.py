@@ -1,0 +1,165 @@
+"""Compiled track queries: the windowed projection onto a track and the per-step track state
+(progress, tracking errors, reference speed, look-ahead) of N robots, each on its own track.
+
+The tracks enter as :meth:`~azimut_env.tracks.Track.packed` arrays (6, m) = rows (s, x, y, θ, v, ψ).
+One kernel, :func:`query_batch_kernel`, serves :meth:`Track.query` (one robot),
+:meth:`Track.query_batch` (N robots on one track) and :func:`query_tracks` (N robots on N tracks).
+The scalar helpers :func:`interp1` and :func:`wrap_pi` are public for other compiled code that
+reads packed tracks (``control.follower_batch``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["wrap_angle", "wrap_pi", "interp1", "project_window_kernel", "query_batch_kernel", "query_tracks"]
+
+
+def wrap_angle(a):
+    """Wrap angles to ]−π, π]."""
+    a = np.asarray(a, dtype=np.float64)
+    return np.pi - np.mod(np.pi - a, 2 * np.pi)
+
+
+@njit(cache=True)
+def interp1(S, col, s):
+    """``np.interp(s, S, col)`` for a scalar s on sorted S (compiled; constant beyond the ends)."""
+    m = S.shape[0]
+    if s <= S[0]:
+        return col[0]
+    if s >= S[m - 1]:
+        return col[m - 1]
+    j = np.searchsorted(S, s, side="right") - 1
+    t = (s - S[j]) / (S[j + 1] - S[j])
+    return col[j] + t * (col[j + 1] - col[j])
+
+
+@njit(cache=True)
+def wrap_pi(a):
+    """A scalar angle wrapped to ]−π, π] (compiled :func:`wrap_angle`)."""
+    return math.pi - ((math.pi - a) % (2 * math.pi))
+
+
+@njit(cache=True)
+def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, always_wrap):
+    """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
+    s_hint + ahead], metric ‖Δxy‖² + (ρ Δθ)², refined along the segment (the compiled
+    :meth:`Track.project`; unwrapped on a closed track). ``always_wrap``: wrap every heading
+    difference as ``Track.project`` does (``control.follower_batch`` matches ``PathFollower``
+    to the last bit that way); otherwise only those outside ]−π, π] (the env's hot loop)."""
+    m = S.shape[0]
+    mu = m - 1
+    if closed:
+        lap = math.floor(s_hint / length)
+        base = lap * length
+        s_loc = s_hint - base
+        lo_s = s_loc - back
+        hi_s = s_loc + ahead
+        j0 = int(math.floor(lo_s / length)) * mu + np.searchsorted(S, lo_s % length) - 1
+        j1 = int(math.floor(hi_s / length)) * mu + np.searchsorted(S, hi_s % length) + 1
+    else:
+        base = 0.0
+        j0 = max(np.searchsorted(S, s_hint - back) - 1, 0)
+        j1 = min(np.searchsorted(S, s_hint + ahead, side="right") + 1, m)
+    best = 1e300
+    bi = 0
+    boff = 0.0
+    for j in range(j0, j1):
+        if closed:
+            i = j % mu
+            off = math.floor(j / mu) * length
+        else:
+            i = j
+            off = 0.0
+        dx = X[i] - px
+        dy = Y[i] - py
+        dth = TH[i] - pth
+        if always_wrap or dth > math.pi or dth <= -math.pi:  # the float modulo only when needed
+            dth = wrap_pi(dth)
+        c = dx * dx + dy * dy + (rho * dth) ** 2
+        if c < best:
+            best = c
+            bi = i
+            boff = off
+    s = S[bi] + boff + base
+    i2 = min(bi, m - 2)
+    sx = X[i2 + 1] - X[i2]
+    sy = Y[i2 + 1] - Y[i2]
+    st = rho * (TH[i2 + 1] - TH[i2])
+    seg = math.sqrt(sx * sx + sy * sy + st * st)
+    if seg > 0:
+        rx = px - X[bi]
+        ry = py - Y[bi]
+        rt = rho * wrap_pi(pth - TH[bi])
+        step = (rx * sx + ry * sy + rt * st) / seg
+        s += min(max(step, -seg), seg)
+    if not closed:
+        s = min(max(s, 0.0), length)
+    return s
+
+
+@njit(cache=True)
+def query_batch_kernel(packs, which, closed, length, rho, poses, hints, back, ahead, spacing, out, look):
+    """The track state of N robots: robot i is on track ``which[i]``, whose packed rows are
+    ``packs[which[i]]`` (a ``numba.typed.List`` of (6, m) arrays, or a (T, 6, m) array) and whose
+    flag, length [m] and progress radius [m] are ``closed``, ``length``, ``rho`` at ``which[i]``.
+
+    Per robot: the windowed projection from ``hints[i]`` (:func:`project_window_kernel`), then at
+    that progress s the lateral error (positive to the left of the path direction ψ), the heading
+    error θ − θ_ref, v_ref and ψ into ``out[i]`` = (s, lateral, heading, v_ref, ψ), and the K
+    look-ahead points at s + spacing·(1..K) in the robot's chassis frame into ``look[i]`` (K, 3)."""
+    for i in range(poses.shape[0]):
+        t = which[i]
+        p = packs[t]
+        S = p[0]
+        cl = closed[t]
+        L = length[t]
+        px = poses[i, 0]
+        py = poses[i, 1]
+        pth = poses[i, 2]
+        s = project_window_kernel(S, p[1], p[2], p[3], cl, L, rho[t], px, py, pth, hints[i], back, ahead, False)
+        sw = s % L if cl else s
+        xr = interp1(S, p[1], sw)
+        yr = interp1(S, p[2], sw)
+        thr = interp1(S, p[3], sw)
+        psi = interp1(S, p[5], sw)
+        out[i, 0] = s
+        out[i, 1] = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
+        out[i, 2] = wrap_pi(pth - thr)
+        out[i, 3] = interp1(S, p[4], sw)
+        out[i, 4] = psi
+        c, sn = math.cos(pth), math.sin(pth)
+        for k in range(look.shape[1]):
+            sk = s + spacing * (k + 1)
+            sk = sk % L if cl else min(max(sk, 0.0), L)
+            dx = interp1(S, p[1], sk) - px
+            dy = interp1(S, p[2], sk) - py
+            look[i, k, 0] = c * dx + sn * dy
+            look[i, k, 1] = -sn * dx + c * dy
+            look[i, k, 2] = wrap_pi(interp1(S, p[3], sk) - pth)
+
+
+def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: int, spacing: float,
+                 back: float = 0.5, ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Track.query` for N robots on N tracks in one compiled call.
+
+    Args:
+        packs: a ``numba.typed.List`` of the robots' :meth:`Track.packed` arrays.
+        closed (N,) bool, length (N,) [m], rho (N,) [m]: each track's ``closed``, ``length`` and
+            ``progress_radius``. poses (N, 3), s_hints (N,): as :meth:`Track.query_batch`.
+
+    Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``,
+    the same numbers as :meth:`Track.query` robot by robot.
+    """
+    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 3))
+    hints = np.ascontiguousarray(np.asarray(s_hints, dtype=np.float64).reshape(-1))
+    n = poses.shape[0]
+    if hints.shape[0] != n or len(packs) != n or closed.shape[0] != n or length.shape[0] != n or rho.shape[0] != n:
+        raise ValueError("query_tracks needs one track, flag, length, radius and s_hint per pose")
+    out = np.empty((n, 5))
+    look = np.empty((n, int(lookahead_count), 3))
+    query_batch_kernel(packs, np.arange(n), closed, length, rho, poses, hints, back, ahead, spacing, out, look)
+    return out, look
