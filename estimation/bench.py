@@ -42,7 +42,7 @@ def _valid_unit(lam: np.ndarray) -> np.ndarray:
     return np.all(np.isfinite(lam), axis=-1) & (np.abs(np.linalg.norm(lam, axis=-1) - 1) < 1e-9)
 
 
-def _time_batched(fns: dict, q: np.ndarray, rounds: int) -> dict[str, float]:
+def _time_batch(fns: dict, q: np.ndarray, rounds: int) -> dict[str, float]:
     """Best time per point [s] of each method over ``rounds`` rounds. Methods are interleaved
     within each round so that a change in machine load hits all of them alike, keeping the
     ratios between methods fair on a noisy machine."""
@@ -129,7 +129,7 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
     }
     for name, q in datasets.items():
         log(f"[{name}] {len(q)} points ...")
-        batched = _time_batched(fns, q, repeat)
+        batched = _time_batch(fns, q, repeat)
         single = _time_single(fns, q, single_calls)
         table = {}
         for m in methods:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import RobotGeometry
-from .hrep import _canonicalize_rows
+from .hrep import _canonicalize_batch
 from .it import ITParams, it_kernel_batch
 from .kinematics import _eta_kernel
 from .operational import ls_kernel_batch, ne_kernel_batch, ns_batch
@@ -133,7 +133,7 @@ def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnos
         raise TypeError(f"params must be ITParams, got {type(params).__name__}")
     flat, batch = _prepare(q, geom)
     lam, d2, iters, starts, conv = _it_flat(flat, geom, params)
-    _canonicalize_rows(lam)
+    _canonicalize_batch(lam)
     lam = lam.reshape(batch + (3,))
     if not diagnostics:
         return lam
@@ -164,7 +164,7 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
     _check_method(method)
     flat, batch = _prepare(q, geom)
     lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
-    _canonicalize_rows(lam)
+    _canonicalize_batch(lam)
     return lam.reshape(batch + (3,))
 
 

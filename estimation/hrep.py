@@ -64,7 +64,7 @@ def _hemisphere_sign(lam0: float, lam1: float, lam2: float) -> float:
 
 
 @njit(cache=True)
-def _canonicalize_rows(lam) -> None:
+def _canonicalize_batch(lam) -> None:
     """In place, for (N, 3) rows: the hemisphere rule of :func:`canonical_lambda`."""
     for p in range(lam.shape[0]):
         if _hemisphere_sign(lam[p, 0], lam[p, 1], lam[p, 2]) < 0.0:
@@ -78,7 +78,7 @@ def canonical_lambda(lam: np.ndarray) -> np.ndarray:
     (ties on the equator broken by u > 0, then v > 0)."""
     lam = normalize(lam)
     flat = np.ascontiguousarray(lam.reshape(-1, 3))  # normalize returned a new array
-    _canonicalize_rows(flat)
+    _canonicalize_batch(flat)
     return flat.reshape(lam.shape)
 
 
@@ -92,7 +92,7 @@ def _canonical_eta_sign(lam0: float, lam1: float, lam2: float, mu: float, mu_tol
 
 
 @njit(cache=True)
-def _canonical_eta_rows(lam, mu, mu_tol: float) -> None:
+def _canonical_eta_batch(lam, mu, mu_tol: float) -> None:
     for p in range(lam.shape[0]):
         sign = _canonical_eta_sign(lam[p, 0], lam[p, 1], lam[p, 2], mu[p], mu_tol)
         mu[p] *= sign
@@ -112,7 +112,7 @@ def canonical_eta(lam: np.ndarray, mu: np.ndarray, mu_tol: float = 0.0) -> tuple
     batch = lam.shape[:-1]
     lam2 = np.ascontiguousarray(lam.reshape(-1, 3))
     mu2 = np.ascontiguousarray(np.broadcast_to(mu, batch).reshape(-1)).copy()
-    _canonical_eta_rows(lam2, mu2, float(mu_tol))
+    _canonical_eta_batch(lam2, mu2, float(mu_tol))
     return lam2.reshape(batch + (3,)), mu2.reshape(batch)
 
 

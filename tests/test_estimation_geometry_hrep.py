@@ -21,7 +21,7 @@ from estimation import (
     select_chart,
     twist_from_eta,
 )
-from estimation.hrep import _canonicalize_rows, chart_tangents
+from estimation.hrep import _canonicalize_batch, chart_tangents
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 vec3 = arrays(np.float64, 3, elements=st.floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 1e-3)
@@ -150,7 +150,7 @@ def test_canonical_lambda_rules_and_numba_agree():
     c = canonical_lambda(lam)
     assert np.all((c[:, 2] > 0) | ((c[:, 2] == 0) & ((c[:, 0] > 0) | ((c[:, 0] == 0) & (c[:, 1] > 0)))))
     k = lam.copy()
-    _canonicalize_rows(k)
+    _canonicalize_batch(k)
     np.testing.assert_allclose(k, c, rtol=0, atol=1e-15)
     np.testing.assert_allclose(canonical_lambda(-lam), c)
 
