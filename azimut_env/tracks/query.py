@@ -102,6 +102,32 @@ def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint,
 
 
 @njit(cache=True)
+def _query_one(p, closed, length, rho, px, py, pth, s_hint, back, ahead, spacing, out, look):
+    """One robot at pose (px, py, pth) on the packed track ``p`` (6, m): see :func:`query_batch_kernel`."""
+    S = p[0]
+    s = project_window_kernel(S, p[1], p[2], p[3], closed, length, rho, px, py, pth, s_hint, back, ahead, False)
+    sw = s % length if closed else s
+    xr = interp1(S, p[1], sw)
+    yr = interp1(S, p[2], sw)
+    thr = interp1(S, p[3], sw)
+    psi = interp1(S, p[5], sw)
+    out[0] = s
+    out[1] = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
+    out[2] = wrap_pi(pth - thr)
+    out[3] = interp1(S, p[4], sw)
+    out[4] = psi
+    c, sn = math.cos(pth), math.sin(pth)
+    for k in range(look.shape[0]):
+        sk = s + spacing * (k + 1)
+        sk = sk % length if closed else min(max(sk, 0.0), length)
+        dx = interp1(S, p[1], sk) - px
+        dy = interp1(S, p[2], sk) - py
+        look[k, 0] = c * dx + sn * dy
+        look[k, 1] = -sn * dx + c * dy
+        look[k, 2] = wrap_pi(interp1(S, p[3], sk) - pth)
+
+
+@njit(cache=True)
 def query_batch_kernel(packs, which, closed, length, rho, poses, hints, back, ahead, spacing, out, look):
     """The track state of N robots: robot i is on track ``which[i]``, whose packed rows are
     ``packs[which[i]]`` (a ``numba.typed.List`` of (6, m) arrays, or a (T, 6, m) array) and whose
@@ -113,33 +139,8 @@ def query_batch_kernel(packs, which, closed, length, rho, poses, hints, back, ah
     look-ahead points at s + spacing·(1..K) in the robot's chassis frame into ``look[i]`` (K, 3)."""
     for i in range(poses.shape[0]):
         t = which[i]
-        p = packs[t]
-        S = p[0]
-        cl = closed[t]
-        L = length[t]
-        px = poses[i, 0]
-        py = poses[i, 1]
-        pth = poses[i, 2]
-        s = project_window_kernel(S, p[1], p[2], p[3], cl, L, rho[t], px, py, pth, hints[i], back, ahead, False)
-        sw = s % L if cl else s
-        xr = interp1(S, p[1], sw)
-        yr = interp1(S, p[2], sw)
-        thr = interp1(S, p[3], sw)
-        psi = interp1(S, p[5], sw)
-        out[i, 0] = s
-        out[i, 1] = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
-        out[i, 2] = wrap_pi(pth - thr)
-        out[i, 3] = interp1(S, p[4], sw)
-        out[i, 4] = psi
-        c, sn = math.cos(pth), math.sin(pth)
-        for k in range(look.shape[1]):
-            sk = s + spacing * (k + 1)
-            sk = sk % L if cl else min(max(sk, 0.0), L)
-            dx = interp1(S, p[1], sk) - px
-            dy = interp1(S, p[2], sk) - py
-            look[i, k, 0] = c * dx + sn * dy
-            look[i, k, 1] = -sn * dx + c * dy
-            look[i, k, 2] = wrap_pi(interp1(S, p[3], sk) - pth)
+        _query_one(packs[t], closed[t], length[t], rho[t], poses[i, 0], poses[i, 1], poses[i, 2], hints[i], back,
+                   ahead, spacing, out[i], look[i])
 
 
 def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: int, spacing: float,
