@@ -10,36 +10,13 @@ from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
 from .it import ITParams
 from .oracle import OracleParams
 from .quality import QUALITY_F, quality
-from .hrep import (
-    canonical_eta,
-    canonical_lambda,
-    chart_params,
-    eta_from_twist,
-    lambda_distance,
-    lambda_from_chart,
-    lambda_from_plane,
-    normalize,
-    plane_from_lambda,
-    point_velocity,
-    select_chart,
-    twist_from_eta,
-)
-from .kinematics import (
-    integrate_pose,
-    mu_from_wheel_speeds,
-    odometry_twist,
-    propulsion_circle_normals,
-    s_perp,
-    singular_wheels,
-    steering_chart_jacobian,
-    steering_from_lambda,
-    steering_gradient,
-    steering_path_derivatives,
-    twist_from_wheels,
-    wheel_speed_coefficients,
-    wheel_speed_path_derivative,
-    wheel_speeds,
-)
+from .hrep import (canonical_eta, canonical_lambda, chart_params, eta_from_twist, lambda_distance,
+                   lambda_from_chart, lambda_from_plane, normalize, plane_from_lambda, point_velocity,
+                   select_chart, twist_from_eta)
+from .kinematics import (integrate_pose, mu_from_wheel_speeds, odometry_twist, propulsion_circle_normals, s_perp,
+                         singular_wheels, steering_chart_jacobian, steering_from_lambda, steering_gradient,
+                         steering_path_derivatives, twist_from_wheels, wheel_speed_coefficients,
+                         wheel_speed_path_derivative, wheel_speeds)
 
 __all__ = [
     "AZIMUT3_ASSUMPTIONS",
