@@ -36,6 +36,16 @@ __all__ = ["steer_rate_step_kernel", "steer_motor_kernel", "spring_torque_kernel
 
 
 @njit(cache=True, inline="always")
+def _clamp_sym(x: float, lim: float) -> float:
+    """x clipped to [−lim, lim] (lim >= 0)."""
+    if x > lim:
+        return lim
+    if x < -lim:
+        return -lim
+    return x
+
+
+@njit(cache=True, inline="always")
 def steer_rate_step_kernel(theta: float, omega: float, target: float, gain: float, rate_max: float,
                            accel_max: float, dt: float) -> float:
     """The change of the steering motor's rate over one substep [rad/s] that its position loop
@@ -47,12 +57,7 @@ def steer_rate_step_kernel(theta: float, omega: float, target: float, gain: floa
     if e < 0:
         v = -v
     dv = v - omega
-    lim = accel_max * dt
-    if dv > lim:
-        dv = lim
-    elif dv < -lim:
-        dv = -lim
-    return dv
+    return _clamp_sym(dv, accel_max * dt)
 
 
 @njit(cache=True, inline="always")
@@ -83,12 +88,7 @@ def spring_torque_kernel(theta: float, omega: float, beta: float, beta_dot: floa
                          stiffness: float, damping: float, torque_max: float) -> float:
     """Torque [N·m] of the series spring + damper on the module (the chassis gets the opposite)."""
     tau = stiffness * (theta - beta) + damping * (omega - beta_dot)
-    if enabled:
-        if tau > torque_max:
-            tau = torque_max
-        elif tau < -torque_max:
-            tau = -torque_max
-    return tau
+    return _clamp_sym(tau, torque_max) if enabled else tau
 
 
 @njit(cache=True, inline="always")
