@@ -35,6 +35,15 @@ def _exp_pose(twist, dt):
     return np.array([(s * vx - (1 - c) * vy) / w, ((1 - c) * vx + s * vy) / w, w])
 
 
+def _drive(ctl, robot, twist, steps: int, dt: float = 0.02):
+    """Drive the kinematic robot for ``steps`` control periods at a constant twist target;
+    returns the last (twist, slip) of the robot."""
+    for _ in range(steps):
+        cmd = ctl.step(np.asarray(twist, dtype=float), robot.beta)
+        out = robot.step(cmd.beta, cmd.phidot, dt)
+    return out
+
+
 @pytest.mark.parametrize("twist", [(1.0, 0.0, 0.0), (0.5, -0.2, 1.5), (0.0, 0.3, -2.0)])
 def test_discretize_is_the_log_of_the_one_period_pose(twist):
     dt = 0.1
@@ -71,15 +80,11 @@ def test_swerve_drives_straight_without_slip_and_holds_at_zero():
     ctl = SwerveController(GEOM, LIM, 0.02)
     robot = KinematicRobot.at_rest(GEOM)
     ctl.reset(robot.beta)
-    for _ in range(100):
-        cmd = ctl.step(np.array([0.6, 0.2, 0.0]), robot.beta)
-        twist, slip = robot.step(cmd.beta, cmd.phidot, 0.02)
+    twist, slip = _drive(ctl, robot, [0.6, 0.2, 0.0], 100)
     assert slip < 1e-9
     np.testing.assert_allclose(twist, [0.6, 0.2, 0.0], atol=1e-9)
     beta_stop = robot.beta.copy()
-    for _ in range(50):
-        cmd = ctl.step(np.zeros(3), robot.beta)
-        robot.step(cmd.beta, cmd.phidot, 0.02)
+    _drive(ctl, robot, [0.0, 0.0, 0.0], 50)
     np.testing.assert_allclose(robot.beta, beta_stop)  # WPILib keeps headings at zero speed
     np.testing.assert_allclose(robot.phidot, 0.0, atol=1e-12)
 
@@ -89,9 +94,7 @@ def test_swerve_rotation_uses_contact_point_speed():
     ctl = SwerveController(GEOM, LIM, 0.02, SwerveConfig(discretize=False))
     robot = KinematicRobot.at_rest(GEOM, beta=np.zeros(4))
     ctl.reset(robot.beta)
-    for _ in range(200):
-        cmd = ctl.step(np.array([0.3, 0.0, 0.8]), robot.beta)
-        twist, slip = robot.step(cmd.beta, cmd.phidot, 0.02)
+    twist, slip = _drive(ctl, robot, [0.3, 0.0, 0.8], 200)
     assert slip < 1e-9
     np.testing.assert_allclose(twist, [0.3, 0.0, 0.8], atol=1e-9)
 
