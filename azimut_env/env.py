@@ -31,16 +31,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from estimation import estimate_eta
 
-from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
-from .physics import AzimutPhysics
-from .blowup import BlowUp
-from .physics_layout import RS
-from .localisation import LocalisationParams
-from .task import RESET_OPTIONS, AzimutTask, TaskConfig, observation_layout, resolve_params
+from .config import front_signature
+from .frontend import AzimutFrontEnd
+from .params import RobotParams, SensorParams
+from .task import observation_layout
 from .tracks import Track
 from .validation import ResetNeeded, check_finite, check_index_list, check_seed
 
@@ -62,7 +59,7 @@ def h_state_from_measurements(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np
     return lam, float(mu), beta_est, float(qua)
 
 
-class AzimutEnv(gym.Env):
+class AzimutEnv(AzimutFrontEnd, gym.Env):
     """
     ## Description
     A four-wheel AZIMUT-3-like nonholonomic omnidirectional robot (sidewise-offset steerable
@@ -220,144 +217,25 @@ class AzimutEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+    _robots = 0  # the controller interface reads row 0 of the task's arrays
 
-    def __init__(self, track: str | Track = "paper", control_period: float = 0.02, substeps: int = 8,
-                 params: RobotParams | None = None, sensors: SensorParams | str | None = None,
-                 noise_scale: float = 1.0, domain_randomization: float = 0.0, progress_weight: float = 1.0, lateral_weight: float = 0.5,
-                 heading_weight: float = 0.3, slip_weight: float = 0.02,
-                 overspeed_weight: float = 2.0, internal_force_weight: float = 0.01, lateral_scale: float = 0.05,
-                 heading_scale: float = 0.1, antagonism_cap: float = 2.0, stall_time: float = 0.0,
-                 stall_distance: float = 0.05, time_limit_factor: float = 3.0, action_rate_weight: float = 0.05,
-                 off_track_penalty: float = 10.0, max_lateral_error: float = 0.5, lookahead_count: int = 5,
-                 lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, solver_iterations: int = 20, action_latency: int = 0,
-                 pose_source: str = "true", localisation: LocalisationParams | None = None) -> None:
-        params = resolve_params(params, sensors, noise_scale)
-        config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
-                            domain_randomization=domain_randomization, progress_weight=progress_weight,
-                            lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
-                            overspeed_weight=overspeed_weight, internal_force_weight=internal_force_weight,
-                            lateral_scale=lateral_scale, heading_scale=heading_scale, antagonism_cap=antagonism_cap,
-                            stall_time=stall_time, stall_distance=stall_distance,
-                            time_limit_factor=time_limit_factor,
-                            action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
-                            max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
-                            lookahead_spacing=lookahead_spacing, start_noise=start_noise,
-                            action_latency=action_latency, pose_source=pose_source,
-                            localisation=localisation or LocalisationParams())
-        if render_mode is not None and (not isinstance(render_mode, str)
-                                        or render_mode not in self.metadata["render_modes"]):
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
-        self.params = params
-        self.config = config
-        self.task = AzimutTask(params, config, n_robots=1, track=track, obstacles=obstacles)
-        self.control_period = float(config.control_period)
-        self.domain_randomization = float(config.domain_randomization)
-        self.weights = config.weights
-        self.max_lateral_error = float(config.max_lateral_error)
-        self.lookahead_count = int(config.lookahead_count)
-        self.lookahead_spacing = float(config.lookahead_spacing)
-        self.start_noise = float(config.start_noise)
-        self.render_mode = render_mode
-        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.control_period))}
-        self.n = params.n
-        self.action_space = spaces.Box(-1.0, 1.0, (2 * self.n,), dtype=np.float32)
-        self._layout = self.task.layout
-        self.observation_space = spaces.Box(self.task.obs_low, self.task.obs_high, dtype=np.float32)
-        self._renderer = None
-        self._trail: list[tuple[float, float]] = []
+    def __init__(self, track: str | Track = "paper", *, params: RobotParams | None = None,
+                 sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
+                 render_mode: str | None = None, **config: Any) -> None:
+        # **config: the TaskConfig fields (see "Arguments"; __signature__ below spells them out)
+        self._build(1, track, obstacles, render_mode, dict(params=params, sensors=sensors, noise_scale=noise_scale,
+                                                             **config))
+        self.action_space = self._single_action_space
+        self.observation_space = self._single_observation_space
         self._done_error: str | None = None
-
-    # ------------------------------------------------------------------ controller interface
-
-    @property
-    def physics(self) -> AzimutPhysics:
-        """The physics (one robot)."""
-        return self.task.physics
 
     @property
     def track(self) -> Track:
         """The track of the current episode."""
         return self.task.tracks[0]
 
-    @property
-    def limits(self) -> ActuatorLimits:
-        """The actuator limits (steering rate/accel/torque, wheel speed/accel/torque)."""
-        return self.params.limits
-
-    @property
-    def geometry(self):
-        """The robot's :class:`~estimation.geometry.RobotGeometry`."""
-        return self.params.geometry
-
-    def setpoints_from_action(self, action) -> tuple[np.ndarray, np.ndarray]:
-        """Normalised action (2n,) -> (β_cmd [rad], φ̇_cmd [rad/s]), each (n,)."""
-        return setpoints_from_action(action, self.params.limits, self.n)
-
-    def action_from_setpoints(self, beta_cmd, phidot_cmd) -> np.ndarray:
-        """(β_cmd [rad], φ̇_cmd [rad/s]) -> normalised float32 action (2n,), clipped to [−1, 1]."""
-        return action_from_setpoints(beta_cmd, phidot_cmd, self.params.limits)
-
-    @property
-    def measured_beta(self) -> np.ndarray:
-        """Measured steering angles β (n,) [rad] of the last step."""
-        return self.task.beta_m[0].copy()
-
-    @property
-    def measured_phidot(self) -> np.ndarray:
-        """Measured wheel spin rates φ̇ (n,) [rad/s] of the last step."""
-        return self.task.phidot_m[0].copy()
-
-    @property
-    def measured_motor_angles(self) -> np.ndarray:
-        """Measured steering motor angles (n,) [rad] of the last step."""
-        return self.task.motor_m[0].copy()
-
-    @property
-    def estimated_eta(self) -> tuple[np.ndarray, float]:
-        """IT-estimated H state (λ̂ (3,), μ̂ [m/s]) from the last measurements (canonical sign)."""
-        return self.task.lam_hat[0].copy(), float(self.task.mu_hat[0])
-
-    @property
-    def _lam_hat(self) -> np.ndarray:
-        return self.task.lam_hat[0]
-
-    @property
-    def progress(self) -> float:
-        """Progress s along the track [m] (unwrapped over laps)."""
-        return float(self.task.s[0])
-
-    @property
-    def pose_source(self) -> str:
-        """``"true"`` or ``"odometry"``: where the observation's pose comes from."""
-        return self.task.pose_source
-
-    @property
-    def estimated_pose(self) -> np.ndarray:
-        """The pose (x, y, θ) [m, m, rad] the observation was computed from (the true pose with
-        ``pose_source="true"``; dead reckoning + localisation fixes with ``"odometry"``)."""
-        return self.task.pose_estimate(0)
-
-    @property
-    def true_pose(self) -> np.ndarray:
-        """Ground-truth chassis pose (x, y, θ) [m, m, rad] (not observed; for evaluation)."""
-        return self.physics.chassis_pose()[0]
-
-    @property
-    def true_twist(self) -> np.ndarray:
-        """Ground-truth chassis twist (ẋ, ẏ, θ̇) in the chassis frame (for evaluation)."""
-        return self.physics.chassis_twist()[0]
-
-    def observation_slices(self) -> dict[str, slice]:
-        """Names and slices of the observation vector (see the class docstring)."""
-        return dict(self._layout)
-
-    def decode_observation(self, obs) -> dict[str, np.ndarray]:
-        """Split an observation into named arrays (lookahead reshaped to (K, 3))."""
-        obs = np.asarray(obs)
-        out = {name: obs[..., sl].copy() for name, sl in self._layout.items()}
-        out["lookahead"] = out["lookahead"].reshape(obs.shape[:-1] + (self.lookahead_count, 3))
-        return out
+    def _render_robot(self) -> int:
+        return 0
 
     def kick(self, wheels, impulse: float) -> None:
         """Knock the modules ``wheels`` (distinct indices in 0..n−1) with an angular impulse
@@ -386,8 +264,7 @@ class AzimutEnv(gym.Env):
         except BaseException:
             self._np_random, self._np_random_seed = previous  # as if this reset had not happened
             raise
-        pose = self.physics.summary[0]
-        self._trail = [(float(pose[RS.X]), float(pose[RS.Y]))]
+        self._start_trail()
         obs = self.task.obs[0].copy()
         info = self.task.info(0, with_terms=False)
         if self.render_mode == "human":
@@ -408,17 +285,13 @@ class AzimutEnv(gym.Env):
             a = task.apply_actions(a[None])
         except ValueError:
             raise ValueError(f"action contains NaN or inf: {np.asarray(action)}") from None
-        code = task.step_physics()[0]
-        if code != BlowUp.NONE:
-            self._done_error = self.physics.check()[1][0]
-            task.park(0)
+        errored, messages = task.end_blown_up(task.step_physics())
+        if errored[0]:
+            self._done_error = messages[0]
             info = {"error": self._done_error, "reward_terms": {}, "off_track": False, "finished": False}
-            return task.obs[0].copy(), -self.weights["off_track"], True, False, info
+            return task.obs[0].copy(), float(task.reward[0]), True, False, info
         task.observe(a, (self.np_random,))
-        summ = self.physics.summary[0]
-        self._trail.append((float(summ[RS.X]), float(summ[RS.Y])))
-        if len(self._trail) > 2000:
-            del self._trail[:1000]
+        self._extend_trail()
         off_track, finished, stalled = bool(task.off_track[0]), bool(task.finished[0]), bool(task.stalled[0])
         info = task.info(0)
         info["off_track"] = off_track
@@ -427,29 +300,13 @@ class AzimutEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         terminated = off_track or finished or stalled
-        truncated = bool(task.steps[0] >= task.step_limit[0])
+        truncated = bool(task.truncated()[0])
         return task.obs[0].copy(), float(task.reward[0]), terminated, truncated, info
 
     # ------------------------------------------------------------------ rendering
 
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("You are calling render method without specifying any render mode. "
-                            "You can specify the render_mode at initialization, "
-                            'e.g. gym.make("Azimut-v1", render_mode="rgb_array")')
-            return None
-        if self._renderer is None:
-            from .rendering import Renderer
-
-            self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        return self._renderer.draw(self)
-
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._close_renderer()
 
-    def __getstate__(self) -> dict:
-        d = self.__dict__.copy()
-        d["_renderer"] = None
-        return d
+
+AzimutEnv.__init__.__signature__ = front_signature(AzimutEnv.__init__)

@@ -1,4 +1,9 @@
-"""Top-down rendering of :class:`~azimut_env.env.AzimutEnv` with pygame (imported lazily).
+"""Top-down rendering of one robot with pygame (imported lazily).
+
+:meth:`Renderer.draw` takes what it draws as explicit inputs (the track, the robot's pose, twist
+and steering angles, its estimated ICR, its trail, the obstacles, the chassis size and the wheel
+geometry); both envs gather them in ``AzimutFrontEnd.render``. :class:`Trail` keeps the drawn
+robot's recent positions.
 
 The view shows the track (grey), the trail (blue), obstacles, the chassis, the wheels at their real
 steering angles, each wheel's propulsion axis as a long line (if the axes concur, they meet at the
@@ -16,15 +21,31 @@ import os
 
 import numpy as np
 
-from .physics_layout import RS_POSE, RS_TWIST_BODY, WS
-
-__all__ = ["Renderer"]
+__all__ = ["Renderer", "Trail"]
 
 _SIZE = 640
 
 
+class Trail:
+    """The recent chassis positions (x, y) [m] of the drawn robot: at most ``max_points``, the
+    oldest half dropped when full."""
+
+    def __init__(self, max_points: int = 2000) -> None:
+        self.max_points = int(max_points)
+        self.points: list[tuple[float, float]] = []
+
+    def start(self, x: float, y: float) -> None:
+        """A new episode: the trail is the starting position only."""
+        self.points = [(float(x), float(y))]
+
+    def add(self, x: float, y: float) -> None:
+        self.points.append((float(x), float(y)))
+        if len(self.points) > self.max_points:
+            del self.points[: self.max_points // 2]
+
+
 class Renderer:
-    """Draws an env's current state; ``draw(env)`` returns an (H, W, 3) uint8 array for
+    """Draws one robot on its track; :meth:`draw` returns an (H, W, 3) uint8 array for
     ``rgb_array`` and None for ``human``."""
 
     def __init__(self, render_mode: str, fps: int = 50, size: int = _SIZE) -> None:
@@ -49,8 +70,7 @@ class Renderer:
         self._scale = 1.0
         self._origin = np.zeros(2)
 
-    def _fit_view(self, env) -> None:
-        track = env.track
+    def _fit_view(self, track) -> None:
         key = id(track)
         if key == self._view_key:
             return
@@ -66,36 +86,42 @@ class Renderer:
         y = self.size - (p[1] - self._origin[1]) * self._scale
         return int(round(x)), int(round(y))
 
-    def draw(self, env, robot: int = 0):
-        """Draw robot ``robot`` of ``env`` (its physics, track, trail and estimated ICR)."""
+    def draw(self, track, pose, twist, beta, lam_hat, trail, obstacles, chassis, geometry):
+        """Draw one robot.
+
+        Args:
+            track: its :class:`~azimut_env.tracks.Track`.
+            pose: chassis pose (x, y, θ) [m, m, rad]. twist: chassis-frame twist (ẋ, ẏ, θ̇)
+                (the true ICR). beta: (n,) true steering angles [rad].
+            lam_hat: (3,) the estimated ICR λ̂. trail: sequence of (x, y) positions [m].
+            obstacles: :class:`~azimut_env.physics.Obstacle` sequence.
+            chassis: ``ChassisParams`` (length, width [m]). geometry: ``RobotGeometry``.
+        """
         pg = self.pygame
-        self._fit_view(env)
+        self._fit_view(track)
         surf = self.surface
         surf.fill((250, 250, 250))
-        track = env.track
         pts = [self._px(p) for p in track.xy[:: max(1, len(track.xy) // 400)]]
         if len(pts) > 1:
             pg.draw.lines(surf, (180, 180, 180), track.closed, pts, 3)
-        phys = env.physics
-        for ob in phys.obstacles:
+        for ob in obstacles:
             if ob.vertices:
                 pg.draw.polygon(surf, (90, 90, 90), [self._px(v) for v in ob.vertices])
             else:
                 pg.draw.circle(surf, (90, 90, 90), self._px((ob.x, ob.y)), max(1, int(ob.radius * self._scale)))
-        if len(env._trail) > 1:
-            pg.draw.lines(surf, (60, 120, 220), False, [self._px(p) for p in env._trail[-1000:]], 2)
-        x, y, th = phys.summary[robot, RS_POSE]
+        if len(trail) > 1:
+            pg.draw.lines(surf, (60, 120, 220), False, [self._px(p) for p in trail[-1000:]], 2)
+        x, y, th = (float(v) for v in pose)
         c, s = math.cos(th), math.sin(th)
 
         def world(p):
             return (x + c * p[0] - s * p[1], y + s * p[0] + c * p[1])
 
-        L, W = env.params.chassis.length / 2, env.params.chassis.width / 2
+        L, W = chassis.length / 2, chassis.width / 2
         pg.draw.polygon(surf, (200, 200, 215), [self._px(world(p)) for p in ((L, W), (-L, W), (-L, -W), (L, -W))])
         pg.draw.polygon(surf, (60, 60, 80), [self._px(world(p)) for p in ((L, W), (-L, W), (-L, -W), (L, -W))], 2)
         pg.draw.line(surf, (60, 60, 80), self._px(world((0, 0))), self._px(world((L, 0))), 2)
-        g = env.geometry
-        beta = phys.wheel_summary[robot, :, WS.BETA]
+        g = geometry
         reach = 4.0 * max(L, W) + 10.0
         for k in range(g.n):
             gam = th + g.alpha[k] + beta[k]
@@ -111,12 +137,12 @@ class Renderer:
                        for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
             pg.draw.polygon(surf, (20, 20, 20), [self._px(q) for q in corners])
             pg.draw.line(surf, (20, 20, 20), self._px(a), self._px(p), 2)
-        lam = env._lam_hat
+        lam = lam_hat
         if abs(lam[2]) > 1e-3:
             icr = world((lam[0] / lam[2], lam[1] / lam[2]))
             if abs(icr[0]) < 1e4 and abs(icr[1]) < 1e4:
                 pg.draw.circle(surf, (220, 30, 30), self._px(icr), 5)
-        tw = phys.summary[robot, RS_TWIST_BODY]
+        tw = twist
         if abs(tw[2]) > 1e-3:
             icr = world((-tw[1] / tw[2], tw[0] / tw[2]))
             if abs(icr[0]) < 1e4 and abs(icr[1]) < 1e4:

@@ -22,7 +22,6 @@ the same order whatever N is, so robot i of a batch replays a single env seeded 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -31,14 +30,14 @@ from numba.typed import List as NumbaList
 
 from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_twist, steering_from_lambda
 
-from .localisation import LocalisationParams, check_pose_source
-from .params import RobotParams, SensorParams, _setpoints_row, action_from_setpoints
+from .blowup import BlowUp
+from .config import TaskConfig, resolve_params
+from .params import RobotParams, _setpoints_row, action_from_setpoints
 from .physics import AzimutPhysics, BlowUpLimits, Obstacle
 from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
 from .sensors import _measure_kernel
 from .tracks import TRACK_NAMES, Track, make_track, query_tracks
-from .validation import (check_finite, check_index_list, check_int, check_nonnegative, check_positive,
-                         check_range)
+from .validation import check_finite, check_index_list, check_int
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
            "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles"]
@@ -79,127 +78,6 @@ def observation_bounds(n: int, lookahead_count: int, wheel_speed_max: float) -> 
     lo[la] = -hi[la]
     lo[layout["speed_ref"]] = 0.0
     return lo.astype(np.float32), hi.astype(np.float32)
-
-
-def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:
-    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied."""
-    params = params if params is not None else RobotParams()
-    if not isinstance(params, RobotParams):
-        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
-    if sensors is not None:
-        if isinstance(sensors, str):
-            if sensors != "ideal":
-                raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
-            sensors = SensorParams.ideal()
-        if not isinstance(sensors, SensorParams):
-            raise TypeError(f"sensors must be SensorParams or 'ideal', got {type(sensors).__name__}")
-        params = replace(params, sensors=sensors)
-    noise_scale = check_nonnegative("noise_scale", noise_scale)
-    if noise_scale != 1.0:
-        sp = params.sensors
-        params = replace(params, sensors=replace(sp, steer_noise=sp.steer_noise * noise_scale,
-                                                 motor_noise=sp.motor_noise * noise_scale,
-                                                 wheel_speed_noise=sp.wheel_speed_noise * noise_scale))
-    return params
-
-
-@dataclass(frozen=True)
-class TaskConfig:
-    """Settings of the task (see :class:`~azimut_env.env.AzimutEnv`, "Arguments").
-
-    Attributes:
-        control_period: seconds per step [s]. substeps: physics substeps per step.
-        solver_iterations: pymunk solver iterations per substep (see ``AzimutPhysics``).
-        domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
-            damping, chassis mass (the loads follow), tire slip stiffness (with its relaxation
-            lengths) and contact patch size, drawn per reset.
-        progress_weight, lateral_weight, heading_weight, overspeed_weight, slip_weight [1/W],
-        internal_force_weight [1/N], action_rate_weight, off_track_penalty: reward weights (the
-            terms are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
-        lateral_scale [m], heading_scale [rad]: scales of the bounded tracking terms
-            w·(1 − exp(−|e|/scale)).
-        antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
-        stall_time: end the episode (terminated, with the off-track penalty) after this long [s]
-            without ``stall_distance`` [m] of new progress; 0: never.
-        time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the time to drive the
-            track's reference speed profile exactly (:func:`nominal_duration`; 3 by default); 0: no
-            limit of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
-        max_lateral_error: lateral error that ends the episode [m].
-        lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
-            [m of progress]. start_noise: uniform start pose noise [m, rad].
-        action_latency: command latency k [control periods] (default 0): the set-points of the
-            action given at step t drive the motors during step t + k (a per-robot FIFO, emptied
-            at each reset; for the first k steps of an episode the motors hold the reset
-            set-points). Models the transport delay of a real robot's command path for
-            sim-to-real work. The observation's ``prev_action`` is the action given, not the
-            one being applied.
-        pose_source: ``"true"`` (the observation's tracking errors and look-ahead come from the
-            true pose) or ``"odometry"`` (from dead reckoning corrected by localisation fixes;
-            :mod:`azimut_env.localisation`).
-        localisation: :class:`~azimut_env.localisation.LocalisationParams` (used with
-            ``pose_source="odometry"``).
-    """
-
-    control_period: float = 0.02
-    substeps: int = 8
-    solver_iterations: int = 20
-    domain_randomization: float = 0.0
-    progress_weight: float = 1.0
-    lateral_weight: float = 0.5
-    heading_weight: float = 0.3
-    overspeed_weight: float = 2.0
-    slip_weight: float = 0.02
-    internal_force_weight: float = 0.01
-    action_rate_weight: float = 0.05
-    off_track_penalty: float = 10.0
-    lateral_scale: float = 0.05
-    heading_scale: float = 0.1
-    antagonism_cap: float = 2.0
-    stall_time: float = 0.0
-    stall_distance: float = 0.05
-    time_limit_factor: float = 3.0
-    max_lateral_error: float = 0.5
-    lookahead_count: int = 5
-    lookahead_spacing: float = 0.3
-    start_noise: float = 0.02
-    action_latency: int = 0
-    pose_source: str = "true"
-    localisation: LocalisationParams = field(default_factory=LocalisationParams)
-
-    def __post_init__(self) -> None:
-        # every field checked (and stored as its canonical type) here, once, with the field's name
-        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
-        # 0.1 ms .. 1 s: below, step counts of the time limit overflow and the render rate is absurd
-        fix("control_period", check_range("control_period", self.control_period, 1e-4, 1.0))
-        fix("substeps", check_int("substeps", self.substeps, min_value=1, max_value=10_000))
-        fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
-                                           max_value=10_000))
-        fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
-        for name in ("progress_weight", "lateral_weight", "heading_weight", "overspeed_weight", "slip_weight",
-                     "internal_force_weight", "action_rate_weight", "off_track_penalty", "start_noise", "stall_time",
-                     "time_limit_factor"):
-            fix(name, check_nonnegative(name, getattr(self, name)))
-        for name in ("lateral_scale", "heading_scale", "antagonism_cap", "stall_distance"):
-            fix(name, check_positive(name, getattr(self, name)))
-        fix("max_lateral_error", check_positive("max_lateral_error", self.max_lateral_error))
-        fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
-        fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
-        fix("action_latency", check_int("action_latency", self.action_latency, min_value=0, max_value=1000))
-        check_pose_source(self.pose_source)
-        if not isinstance(self.localisation, LocalisationParams):
-            raise TypeError(f"localisation must be LocalisationParams, got {type(self.localisation).__name__}")
-
-    @property
-    def weights(self) -> dict[str, float]:
-        """Reward weights by term name (``off_track`` is the penalty)."""
-        return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
-                    overspeed=self.overspeed_weight, slip=self.slip_weight, internal_force=self.internal_force_weight,
-                    action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
-
-    @property
-    def reward_scales(self) -> np.ndarray:
-        """(lateral_scale, heading_scale, antagonism_cap) as the reward kernel takes them."""
-        return np.array([self.lateral_scale, self.heading_scale, self.antagonism_cap])
 
 
 def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
@@ -689,6 +567,35 @@ class AzimutTask:
         self._cmd_fifo[i] = self.physics.commands[i]
         self.phi_prev[i] = 0.0
 
+    def end_blown_up(self, codes: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
+        """End the episodes of the robots (among ``rows``, default all) whose physics blew up in the
+        last :meth:`step_physics` (``codes`` != 0): each is parked (:meth:`park`) and its step gets
+        the reward −``off_track_penalty``, no reward terms and false ``off_track``, ``finished``,
+        ``stalled`` flags. Call before :meth:`observe`, which leaves these robots out. Returns the
+        mask of those robots and the blow-up message of every robot (``""`` where fine)."""
+        errored = codes != BlowUp.NONE
+        if rows is not None:
+            errored &= rows
+        if not errored.any():
+            return errored, [""] * self.n_robots
+        messages = self.physics.check()[1]
+        for i in np.flatnonzero(errored):
+            self.park(int(i))
+        self.reward[errored] = -self.config.off_track_penalty
+        self.reward_terms[errored] = 0.0
+        self.off_track[errored] = False
+        self.finished[errored] = False
+        self.stalled[errored] = False
+        return errored, messages
+
+    def terminated(self) -> np.ndarray:
+        """(N,) bool: the last step ended the episode (off the track, finished or stalled)."""
+        return self.off_track | self.finished | self.stalled
+
+    def truncated(self) -> np.ndarray:
+        """(N,) bool: the episode reached its step limit (``time_limit_factor``)."""
+        return self.steps >= self.step_limit
+
     # ------------------------------------------------------------------ step
 
     def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -811,6 +718,10 @@ class AzimutTask:
         """Robot i's pose (x, y, θ) as the observation sees it: the estimate with
         ``pose_source="odometry"``, the true pose otherwise."""
         return self.pose_est[i].copy() if self._odometry else self.physics.summary[i, RS_POSE].copy()
+
+    def pose_estimates(self) -> np.ndarray:
+        """(N, 3) :meth:`pose_estimate` of every robot."""
+        return self.pose_est.copy() if self._odometry else self.physics.chassis_pose()
 
     def _pose_source_state(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The track state (N, 5), look-ahead (N, K, 3) and world velocity (N, 2) that the

@@ -14,30 +14,27 @@ its own track) and one compiled reward/observation fill. Robots never collide wi
 
 from __future__ import annotations
 
-import types
 from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 from numba.typed import List as NumbaList
 
-from .params import ActuatorLimits, RobotParams, SensorParams, action_from_setpoints, setpoints_from_action
-from .physics import AzimutPhysics
-from .blowup import BlowUp
+from .config import front_signature
+from .frontend import AzimutFrontEnd
+from .params import RobotParams, SensorParams
 from .physics_layout import RS, RS_POSE
-from .localisation import LocalisationParams
-from .task import REWARD_TERMS, AzimutTask, TaskConfig, resolve_params
+from .task import REWARD_TERMS
 from .tracks import Track
 from .validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
 __all__ = ["AzimutVectorEnv"]
 
 
-class AzimutVectorEnv(gym.vector.VectorEnv):
+class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     """
     ## Description
     ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) that share
@@ -101,19 +98,14 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50, "autoreset_mode": AutoresetMode.NEXT_STEP}
+    _robots = slice(None)  # the controller interface reads the task's arrays over all robots
 
-    def __init__(self, num_envs: int = 1, track: str | Track = "paper", control_period: float = 0.02,
-                 substeps: int = 8, params: RobotParams | None = None, sensors: SensorParams | str | None = None,
-                 noise_scale: float = 1.0, domain_randomization: float = 0.0, progress_weight: float = 1.0,
-                 lateral_weight: float = 0.5, heading_weight: float = 0.3, slip_weight: float = 0.02,
-                 overspeed_weight: float = 2.0, internal_force_weight: float = 0.01, lateral_scale: float = 0.05,
-                 heading_scale: float = 0.1, antagonism_cap: float = 2.0, stall_time: float = 0.0,
-                 stall_distance: float = 0.05, time_limit_factor: float = 3.0,
-                 action_rate_weight: float = 0.05, off_track_penalty: float = 10.0, max_lateral_error: float = 0.5,
-                 lookahead_count: int = 5, lookahead_spacing: float = 0.3, obstacles=(), start_noise: float = 0.02,
-                 render_mode: str | None = None, solver_iterations: int = 20, max_episode_steps: int | None = None,
+    def __init__(self, num_envs: int = 1, track: str | Track = "paper", *, params: RobotParams | None = None,
+                 sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
+                 render_mode: str | None = None, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
-                 action_latency: int = 0, pose_source: str = "true", localisation: LocalisationParams | None = None) -> None:
+                 **config: Any) -> None:
+        # **config: the TaskConfig fields (as the single env's; __signature__ below spells them out)
         num_envs = check_int("num_envs", num_envs, min_value=1, max_value=1_000_000)
         if max_episode_steps is not None:
             max_episode_steps = check_int("max_episode_steps", max_episode_steps, min_value=1)
@@ -122,36 +114,15 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
             autoreset_mode = AutoresetMode(autoreset_mode)
         except (ValueError, TypeError):
             raise ValueError(f"autoreset_mode must be an AutoresetMode, got {autoreset_mode!r}") from None
-        if render_mode is not None and (not isinstance(render_mode, str)
-                                        or render_mode not in self.metadata["render_modes"]):
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
-        params = resolve_params(params, sensors, noise_scale)
-        config = TaskConfig(control_period=control_period, substeps=substeps, solver_iterations=solver_iterations,
-                            domain_randomization=domain_randomization, progress_weight=progress_weight,
-                            lateral_weight=lateral_weight, heading_weight=heading_weight, slip_weight=slip_weight,
-                            overspeed_weight=overspeed_weight, internal_force_weight=internal_force_weight,
-                            lateral_scale=lateral_scale, heading_scale=heading_scale, antagonism_cap=antagonism_cap,
-                            stall_time=stall_time, stall_distance=stall_distance,
-                            time_limit_factor=time_limit_factor,
-                            action_rate_weight=action_rate_weight, off_track_penalty=off_track_penalty,
-                            max_lateral_error=max_lateral_error, lookahead_count=lookahead_count,
-                            lookahead_spacing=lookahead_spacing, start_noise=start_noise,
-                            action_latency=action_latency, pose_source=pose_source,
-                            localisation=localisation or LocalisationParams())
+        self._build(num_envs, track, obstacles, render_mode, dict(params=params, sensors=sensors,
+                                                                   noise_scale=noise_scale, **config))
         self.num_envs = N = int(num_envs)
-        self.params = params
-        self.config = config
-        self.task = AzimutTask(params, config, n_robots=N, track=track, obstacles=obstacles)
-        self.n = params.n
-        self.control_period = float(config.control_period)
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self.autoreset_mode = autoreset_mode
-        self.render_mode = render_mode
         self.render_index = int(render_index)
-        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.control_period)),
-                         "autoreset_mode": autoreset_mode}
-        self.single_action_space = spaces.Box(-1.0, 1.0, (2 * self.n,), dtype=np.float32)
-        self.single_observation_space = spaces.Box(self.task.obs_low, self.task.obs_high, dtype=np.float32)
+        self.metadata["autoreset_mode"] = autoreset_mode
+        self.single_action_space = self._single_action_space
+        self.single_observation_space = self._single_observation_space
         self.action_space = batch_space(self.single_action_space, N)
         self.observation_space = batch_space(self.single_observation_space, N)
         self._rngs: list[np.random.Generator] = [None] * N  # type: ignore[list-item]
@@ -160,15 +131,8 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         self._autoreset = np.zeros(N, dtype=np.bool_)
         self._needs_reset = True
         self._errors: list[str | None] = [None] * N
-        self._renderer = None
-        self._trail: list[tuple[float, float]] = []
 
     # ------------------------------------------------------------------ controller interface (batched)
-
-    @property
-    def physics(self) -> AzimutPhysics:
-        """The shared physics (N robots)."""
-        return self.task.physics
 
     @property
     def tracks(self) -> list[Track]:
@@ -176,85 +140,9 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         return list(self.task.tracks)
 
     @property
-    def limits(self) -> ActuatorLimits:
-        """The actuator limits (shared)."""
-        return self.params.limits
-
-    @property
-    def geometry(self):
-        """The robots' :class:`~estimation.geometry.RobotGeometry`."""
-        return self.params.geometry
-
-    @property
     def np_random(self) -> list[np.random.Generator]:
         """The sub-envs' generators (sub-env i's is that of a single env seeded with seed + i)."""
         return list(self._rngs)
-
-    def setpoints_from_action(self, action) -> tuple[np.ndarray, np.ndarray]:
-        """Normalised actions (N, 2n) -> (β_cmd [rad], φ̇_cmd [rad/s]), each (N, n)."""
-        return setpoints_from_action(action, self.params.limits, self.n)
-
-    def action_from_setpoints(self, beta_cmd, phidot_cmd) -> np.ndarray:
-        """(β_cmd [rad], φ̇_cmd [rad/s]), each (N, n) -> normalised float32 actions (N, 2n)."""
-        return action_from_setpoints(beta_cmd, phidot_cmd, self.params.limits)
-
-    @property
-    def measured_beta(self) -> np.ndarray:
-        """Measured steering angles β (N, n) [rad] of the last step."""
-        return self.task.beta_m.copy()
-
-    @property
-    def measured_phidot(self) -> np.ndarray:
-        """Measured wheel spin rates φ̇ (N, n) [rad/s] of the last step."""
-        return self.task.phidot_m.copy()
-
-    @property
-    def measured_motor_angles(self) -> np.ndarray:
-        """Measured steering motor angles (N, n) [rad] of the last step."""
-        return self.task.motor_m.copy()
-
-    @property
-    def estimated_eta(self) -> tuple[np.ndarray, np.ndarray]:
-        """IT-estimated H states (λ̂ (N, 3), μ̂ (N,) [m/s]) from the last measurements."""
-        return self.task.lam_hat.copy(), self.task.mu_hat.copy()
-
-    @property
-    def progress(self) -> np.ndarray:
-        """Progress s (N,) along each sub-env's track [m]."""
-        return self.task.s.copy()
-
-    @property
-    def pose_source(self) -> str:
-        """``"true"`` or ``"odometry"``: where the observations' poses come from (see
-        :class:`~azimut_env.env.AzimutEnv`, "What is privileged")."""
-        return self.task.pose_source
-
-    @property
-    def estimated_pose(self) -> np.ndarray:
-        """(N, 3) poses the observations were computed from (the true poses with
-        ``pose_source="true"``; dead reckoning + localisation fixes with ``"odometry"``)."""
-        return np.stack([self.task.pose_estimate(i) for i in range(self.num_envs)])
-
-    @property
-    def true_pose(self) -> np.ndarray:
-        """Ground-truth chassis poses (N, 3) (x, y, θ) (for evaluation)."""
-        return self.physics.chassis_pose()
-
-    @property
-    def true_twist(self) -> np.ndarray:
-        """Ground-truth chassis twists (N, 3) (ẋ, ẏ, θ̇) in the chassis frame (for evaluation)."""
-        return self.physics.chassis_twist().copy()
-
-    def observation_slices(self) -> dict[str, slice]:
-        """Names and slices of the observation vector (last axis)."""
-        return dict(self.task.layout)
-
-    def decode_observation(self, obs) -> dict[str, np.ndarray]:
-        """Split observations (..., D) into named arrays (lookahead reshaped to (..., K, 3))."""
-        obs = np.asarray(obs)
-        out = {name: obs[..., sl].copy() for name, sl in self.task.layout.items()}
-        out["lookahead"] = out["lookahead"].reshape(obs.shape[:-1] + (self.config.lookahead_count, 3))
-        return out
 
     def kick(self, env_index: int, wheels, impulse: float) -> None:
         """Knock sub-env ``env_index``'s modules ``wheels`` with an angular impulse [N·m·s]."""
@@ -359,17 +247,11 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         any_reset = resetting is not None and bool(resetting.any())
         active = ~resetting if any_reset else None
         a = task.apply_actions(actions, active)
-        codes = task.step_physics()
-        errored = codes != BlowUp.NONE
-        if any_reset:
-            errored &= active
+        errored, messages = task.end_blown_up(task.step_physics(), active)
         any_error = bool(errored.any())
         if any_error:
-            err_idx = np.flatnonzero(errored)
-            messages = self.physics.check()[1]
-            for i in err_idx:
+            for i in np.flatnonzero(errored):
                 self._errors[i] = messages[i]
-                task.park(int(i))
         if any_reset or any_error:
             ok = np.ones(N, dtype=np.bool_)
             if any_reset:
@@ -380,17 +262,10 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
         else:
             task.observe(a, self._typed_rngs())
         reward = task.reward.copy()
-        terminated = task.off_track | task.finished | task.stalled
-        truncated = task.steps >= task.step_limit
+        terminated = task.terminated() | errored
+        truncated = task.truncated()
         if self.max_episode_steps is not None:
             truncated |= task.steps >= self.max_episode_steps
-        if any_error:
-            reward[errored] = -self.config.off_track_penalty
-            terminated[errored] = True
-            task.reward_terms[errored] = 0.0
-            task.off_track[errored] = False
-            task.finished[errored] = False
-            task.stalled[errored] = False
         if any_reset:
             for i in np.flatnonzero(resetting):
                 self._autoreset_robot(int(i))
@@ -469,35 +344,11 @@ class AzimutVectorEnv(gym.vector.VectorEnv):
 
     # ------------------------------------------------------------------ rendering
 
-    def _start_trail(self) -> None:
-        if self.render_mode is not None and self.render_index < self.num_envs:
-            p = self.physics.summary[self.render_index]
-            self._trail = [(float(p[RS.X]), float(p[RS.Y]))]
-
-    def _extend_trail(self) -> None:
-        if self.render_mode is not None and self.render_index < self.num_envs:
-            p = self.physics.summary[self.render_index]
-            self._trail.append((float(p[RS.X]), float(p[RS.Y])))
-            if len(self._trail) > 2000:
-                del self._trail[:1000]
-
-    def render(self):
-        """Draw sub-env ``render_index`` (an RGB array in ``"rgb_array"`` mode)."""
-        if self.render_mode is None:
-            gym.logger.warn("You are calling render method without specifying any render mode.")
-            return None
-        i = self.render_index
-        if not 0 <= i < self.num_envs:
-            raise ValueError(f"render_index {i} out of range 0..{self.num_envs - 1}")
-        if self._renderer is None:
-            from .rendering import Renderer
-
-            self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        view = types.SimpleNamespace(track=self.task.tracks[i], physics=self.physics, _trail=self._trail,
-                                     _lam_hat=self.task.lam_hat[i], params=self.params, geometry=self.geometry)
-        return self._renderer.draw(view, robot=i)
+    def _render_robot(self) -> int:
+        return self.render_index
 
     def close_extras(self, **kwargs: Any) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._close_renderer()
+
+
+AzimutVectorEnv.__init__.__signature__ = front_signature(AzimutVectorEnv.__init__)

@@ -50,6 +50,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from azimut_env.interface import VectorControllerInterface, missing_members
 from azimut_env.validation import ResetNeeded, check_bool, check_positive, check_range, check_real_array
 from estimation.hrep import eta_from_twist
 
@@ -98,10 +99,9 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         if not isinstance(controller, str) or controller not in ("icr", "swerve") or (action != "twist" and controller != "icr"):
             raise ValueError(f"controller must be 'icr' (or 'swerve' for twists), got {controller!r}")
         base = env.unwrapped
-        for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
-                     "action_from_setpoints", "tracks", "true_pose"):
-            if not hasattr(base, attr):
-                raise ValueError(f"the wrapped env must be AzimutVectorEnv (missing {attr!r})")
+        missing = missing_members(base, VectorControllerInterface)
+        if missing:
+            raise ValueError(f"the wrapped env must be AzimutVectorEnv (missing {', '.join(map(repr, missing))})")
         for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max, residual_angle=residual_angle, residual_mu=residual_mu,
                                 lambda_rate_max=lambda_rate_max, mu_accel=mu_accel, target_rate=target_rate,
                                 cross_push=cross_push).items():

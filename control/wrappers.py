@@ -30,6 +30,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from azimut_env.interface import ControllerInterface, missing_members
 from azimut_env.validation import (ResetNeeded, check_bool, check_positive, check_range,
                                    check_real_array)
 from estimation.hrep import eta_from_twist
@@ -73,10 +74,9 @@ class _ControllerWrapper(gym.Wrapper):
         if controller not in ("icr", "swerve"):
             raise ValueError(f"controller must be 'icr' or 'swerve', got {controller!r}")
         base = env.unwrapped
-        for attr in ("geometry", "limits", "control_period", "estimated_eta", "measured_beta", "measured_phidot",
-                     "action_from_setpoints"):
-            if not hasattr(base, attr):
-                raise ValueError(f"the wrapped env must be Azimut-v1 (missing {attr!r})")
+        missing = missing_members(base, ControllerInterface)
+        if missing:
+            raise ValueError(f"the wrapped env must be Azimut-v1 (missing {', '.join(map(repr, missing))})")
         self._kind = controller
         self._icr_config, self._swerve_config = icr_config, swerve_config
         self._ctl: ICRController | SwerveController | None = None
