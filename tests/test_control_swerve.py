@@ -9,7 +9,6 @@ import pytest
 
 from azimut_env.tracks import Track
 from control.kinematic_model import KinematicRobot
-from control.limits import ActuatorLimits
 from control.path_follower import PathFollower, PathFollowerConfig
 from control.swerve import (
     SwerveConfig,
@@ -20,11 +19,6 @@ from control.swerve import (
     optimize_module,
     slew_limit,
 )
-from estimation import RobotGeometry
-
-GEOM = RobotGeometry.azimut3()
-LIM = ActuatorLimits()
-
 
 def _exp_pose(twist, dt):
     """Pose reached from the origin after dt at a constant chassis twist (SE(2) exponential)."""
@@ -53,18 +47,18 @@ def test_discretize_is_the_log_of_the_one_period_pose(twist):
         np.testing.assert_allclose(d, twist)
 
 
-def test_module_states_translation_and_rotation():
-    heading, speed = module_states(np.array([0.0, 1.0, 0.0]), GEOM)
+def test_module_states_translation_and_rotation(geom):
+    heading, speed = module_states(np.array([0.0, 1.0, 0.0]), geom)
     np.testing.assert_allclose(heading, np.pi / 2)
     np.testing.assert_allclose(speed, 1.0)
-    heading, speed = module_states(np.array([0.0, 0.0, 1.0]), GEOM)
-    np.testing.assert_allclose(speed, GEOM.l)
-    np.testing.assert_allclose(np.cos(heading - GEOM.alpha), 0.0, atol=1e-12)  # tangential
+    heading, speed = module_states(np.array([0.0, 0.0, 1.0]), geom)
+    np.testing.assert_allclose(speed, geom.l)
+    np.testing.assert_allclose(np.cos(heading - geom.alpha), 0.0, atol=1e-12)  # tangential
 
 
-def test_optimize_flips_and_stays_in_range():
-    beta, speed = optimize_module(np.array([1.4, 1.0, -1.0, 3.0]), np.ones(4), np.array([-1.4, 1.0, 0.0, 0.0]), GEOM)
-    assert np.all(beta > GEOM.steer_min) and np.all(beta <= GEOM.steer_max)
+def test_optimize_flips_and_stays_in_range(geom):
+    beta, speed = optimize_module(np.array([1.4, 1.0, -1.0, 3.0]), np.ones(4), np.array([-1.4, 1.0, 0.0, 0.0]), geom)
+    assert np.all(beta > geom.steer_min) and np.all(beta <= geom.steer_max)
     # wheel 0: 2.8 rad from −1.4, WPILib would flip, but 1.4 − π is past the stop: flipped back
     np.testing.assert_allclose(beta, [1.4, 1.0, -1.0, 3.0 - np.pi])
     np.testing.assert_allclose(speed, [1, 1, 1, -1])
@@ -76,9 +70,9 @@ def test_desaturate_and_slew():
     np.testing.assert_allclose(slew_limit([1.0, -1.0, 0.0], [0.0, 0.0, 0.0], [2.0, 2.0, 2.0], 0.1), [0.2, -0.2, 0.0])
 
 
-def test_swerve_drives_straight_without_slip_and_holds_at_zero():
-    ctl = SwerveController(GEOM, LIM, 0.02)
-    robot = KinematicRobot.at_rest(GEOM)
+def test_swerve_drives_straight_without_slip_and_holds_at_zero(geom, limits):
+    ctl = SwerveController(geom, limits, 0.02)
+    robot = KinematicRobot.at_rest(geom)
     ctl.reset(robot.beta)
     twist, slip = _drive(ctl, robot, [0.6, 0.2, 0.0], 100)
     assert slip < 1e-9
@@ -89,18 +83,18 @@ def test_swerve_drives_straight_without_slip_and_holds_at_zero():
     np.testing.assert_allclose(robot.phidot, 0.0, atol=1e-12)
 
 
-def test_swerve_rotation_uses_contact_point_speed():
+def test_swerve_rotation_uses_contact_point_speed(geom, limits):
     """With offset b, r φ̇ = v(A)·d − ω b realises the twist exactly (no slip)."""
-    ctl = SwerveController(GEOM, LIM, 0.02, SwerveConfig(discretize=False))
-    robot = KinematicRobot.at_rest(GEOM, beta=np.zeros(4))
+    ctl = SwerveController(geom, limits, 0.02, SwerveConfig(discretize=False))
+    robot = KinematicRobot.at_rest(geom, beta=np.zeros(4))
     ctl.reset(robot.beta)
     twist, slip = _drive(ctl, robot, [0.3, 0.0, 0.8], 200)
     assert slip < 1e-9
     np.testing.assert_allclose(twist, [0.3, 0.0, 0.8], atol=1e-9)
 
 
-def test_swerve_bad_input():
-    ctl = SwerveController(GEOM, LIM, 0.02)
+def test_swerve_bad_input(geom, limits):
+    ctl = SwerveController(geom, limits, 0.02)
     with pytest.raises(ValueError):
         ctl.step(np.array([np.nan, 0, 0]), np.zeros(4))
     with pytest.raises(ValueError):

@@ -44,11 +44,10 @@ def test_gymnasium_check_env_without_warnings():
         check_env(env)
 
 
-def test_sb3_check_env_without_warnings():
+def test_sb3_check_env_without_warnings(env):
     pytest.importorskip("stable_baselines3")
     from stable_baselines3.common.env_checker import check_env
 
-    env = AzimutEnv()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env, warn=True)
@@ -94,8 +93,7 @@ def test_pickle_round_trip():
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_nan_action_raises_without_changing_state(bad):
-    env = AzimutEnv()
+def test_nan_action_raises_without_changing_state(bad, env):
     env.reset(seed=0)
     pose = env.physics.chassis_pose().copy()
     action = np.zeros(8, dtype=np.float32)
@@ -107,8 +105,8 @@ def test_nan_action_raises_without_changing_state(bad):
         env.step(np.zeros(5, dtype=np.float32))
 
 
-def test_out_of_range_actions_are_clipped():
-    a, b = AzimutEnv(), AzimutEnv()
+def test_out_of_range_actions_are_clipped(make_env):
+    a, b = make_env(), make_env()
     a.reset(seed=0)
     b.reset(seed=0)
     big = np.array([3, -3, 5, -9, 2, -2, 7, -7], dtype=np.float32)
@@ -139,8 +137,7 @@ def test_observation_layout_and_bounds():
     assert 0.0 <= info["qua"] <= 1.0
 
 
-def test_setpoint_map_round_trip_and_controller_interface():
-    env = AzimutEnv()
+def test_setpoint_map_round_trip_and_controller_interface(env):
     env.reset(seed=0)
     lim = env.limits
     assert isinstance(lim, ActuatorLimits)
@@ -156,10 +153,8 @@ def test_setpoint_map_round_trip_and_controller_interface():
     assert env.track.length > 0 and env.control_period == 0.02
 
 
-def test_h_state_matches_estimation():
+def test_h_state_matches_estimation(geom):
     rng = np.random.default_rng(0)
-    env = AzimutEnv()
-    geom = env.geometry
     for _ in range(50):
         q = rng.uniform(-1.5, 1.5, size=4)
         phidot = rng.uniform(-10, 10, size=4)
@@ -231,11 +226,10 @@ def test_constructor_validation():
     env.step(env.action_space.sample())
 
 
-def test_h_state_batch_matches_single():
+def test_h_state_batch_matches_single(geom):
     from azimut_env.env import h_state_batch
 
     rng = np.random.default_rng(3)
-    geom = AzimutEnv().geometry
     q = rng.uniform(-1.5, 1.5, size=(20, 4))
     w = rng.uniform(-10, 10, size=(20, 4))
     lam, mu, be, qua = h_state_batch(q, w, geom)
@@ -245,17 +239,17 @@ def test_h_state_batch_matches_single():
         assert np.allclose(be[i], b1, atol=1e-12) and qua[i] == pytest.approx(q1, abs=1e-12)
 
 
-def test_domain_randomization_varies_parameters_per_reset():
+def test_domain_randomization_varies_parameters_per_reset(make_env):
     from azimut_env.physics import WP
 
-    env = AzimutEnv(domain_randomization=0.3)
+    env = make_env(domain_randomization=0.3)
     env.reset(seed=1)
     mu1, k1 = env.physics.wheel_params[0, 0, WP.MU], env.physics.wheel_params[0, 0, WP.K_S]
     m1 = env.physics.chassis[0].mass
     env.reset(seed=2)
     assert env.physics.wheel_params[0, 0, WP.MU] != mu1 and env.physics.wheel_params[0, 0, WP.K_S] != k1
     assert env.physics.chassis[0].mass != m1
-    plain = AzimutEnv()
+    plain = make_env()
     plain.reset(seed=1)
     assert plain.physics.wheel_params[0, 0, WP.MU] == plain.params.tire.friction
 

@@ -68,15 +68,14 @@ def test_fuzz_1e5_steps():
     assert stats["steps"] >= 100_000
 
 
-def test_blow_up_terminates_with_error_and_finite_observation():
-    env = AzimutEnv()
+def test_blow_up_terminates_with_error_and_finite_observation(env, zero_action):
     env.reset(seed=0)
-    env.step(np.zeros(8, dtype=np.float32))
+    env.step(zero_action)
     env.physics.chassis[0].velocity = (float("nan"), 0.0)
-    obs, rew, term, trunc, info = env.step(np.zeros(8, dtype=np.float32))
+    obs, rew, term, trunc, info = env.step(zero_action)
     assert term and "error" in info and "non-finite" in info["error"]
     assert np.all(np.isfinite(obs)) and np.isfinite(rew)
     with pytest.raises(RuntimeError, match="reset"):
-        env.step(np.zeros(8, dtype=np.float32))
+        env.step(zero_action)
     obs, _ = env.reset(seed=1)
     assert np.all(np.isfinite(obs))

@@ -14,7 +14,6 @@ from azimut_env.env import AzimutEnv
 from azimut_env.task import TaskConfig
 from azimut_env.tracks import Track, make_track
 from azimut_env.validation import ResetNeeded
-from azimut_env.vector_env import AzimutVectorEnv
 
 
 def rollout(env, seed=3, steps=8, options=None):
@@ -27,14 +26,22 @@ def rollout(env, seed=3, steps=8, options=None):
     return np.array(out[1:])
 
 
+@pytest.fixture(scope="module")
+def reference():
+    """``rollout`` of a fresh default env (the episode every refused call must leave intact)."""
+    env = AzimutEnv()
+    out = rollout(env)
+    env.close()
+    return out
+
+
 def test_reset_needed_is_gymnasium_and_runtime_error():
     assert issubclass(ResetNeeded, gym.error.ResetNeeded) and issubclass(ResetNeeded, RuntimeError)
 
 
-def test_unwrapped_env_refuses_step_and_kick_before_reset():
-    env = AzimutEnv()
+def test_unwrapped_env_refuses_step_and_kick_before_reset(env, zero_action):
     with pytest.raises(ResetNeeded):
-        env.step(np.zeros(8, np.float32))
+        env.step(zero_action)
     with pytest.raises(ResetNeeded):
         env.kick([0], 0.1)
 
@@ -53,22 +60,19 @@ def test_unwrapped_env_refuses_step_and_kick_before_reset():
     ({"bogus": 1}, ValueError),
     ([0, 1], TypeError),
 ])
-def test_bad_kick_refused_at_reset_and_changes_nothing(kick, err):
-    ref = rollout(AzimutEnv())
-    env = AzimutEnv()
+def test_bad_kick_refused_at_reset_and_changes_nothing(kick, err, env, zero_action, reference):
     env.reset(seed=11)
     before = env.true_pose.copy()
     with pytest.raises(err):
         env.reset(seed=99, options={"kick": kick})
     assert np.array_equal(env.true_pose, before)  # the refused reset changed nothing...
-    env.step(np.zeros(8, np.float32))  # ...and the running episode goes on
-    assert np.array_equal(rollout(env), ref)
+    env.step(zero_action)  # ...and the running episode goes on
+    assert np.array_equal(rollout(env), reference)
 
 
-def test_good_kick_option_still_works():
-    env = AzimutEnv()
+def test_good_kick_option_still_works(env, reference):
     a = rollout(env, options={"kick": {"step": 2, "wheels": [np.int64(1), 3], "impulse": 0.2}})
-    assert np.all(np.isfinite(a)) and not np.array_equal(a, rollout(AzimutEnv()))
+    assert np.all(np.isfinite(a)) and not np.array_equal(a, reference)
 
 
 @pytest.mark.parametrize("options, err", [
@@ -82,36 +86,33 @@ def test_good_kick_option_still_works():
     ({"unknown": 1}, ValueError),
     ("paper", TypeError),
 ])
-def test_bad_reset_options_refused_without_side_effects(options, err):
-    env = AzimutEnv()
-    ref = rollout(AzimutEnv())
+def test_bad_reset_options_refused_without_side_effects(options, err, env, zero_action, reference):
     with pytest.raises(err):
         env.reset(seed=5, options=options)
     with pytest.raises(ResetNeeded):  # a refused first reset leaves it un-reset
-        env.step(np.zeros(8, np.float32))
-    assert np.array_equal(rollout(env), ref)
+        env.step(zero_action)
+    assert np.array_equal(rollout(env), reference)
 
 
 @pytest.mark.parametrize("seed", [-1, 1.5, "3", True])
-def test_bad_seed_refused(seed):
+def test_bad_seed_refused(seed, env):
     with pytest.raises((ValueError, TypeError)):
-        AzimutEnv().reset(seed=seed)
+        env.reset(seed=seed)
 
 
-def test_failed_reset_refuses_step_until_a_reset_succeeds():
-    env = AzimutEnv()
+def test_failed_reset_refuses_step_until_a_reset_succeeds(env, zero_action, reference):
     env.reset(seed=0)
     start = make_track("paper").sample(0.0)
     with pytest.raises(ValueError, match="overlap"):
         env.reset(seed=1, options={"obstacles": [(float(start[0]), float(start[1]), 0.3)]})
     for _ in range(3):
         with pytest.raises(ResetNeeded):
-            env.step(np.zeros(8, np.float32))
-    assert np.array_equal(rollout(env), rollout(AzimutEnv()))
+            env.step(zero_action)
+    assert np.array_equal(rollout(env), reference)
 
 
-def test_failed_reset_without_seed_does_not_consume_the_generator():
-    a, b = AzimutEnv(), AzimutEnv()
+def test_failed_reset_without_seed_does_not_consume_the_generator(make_env):
+    a, b = make_env(), make_env()
     a.reset(seed=4)
     b.reset(seed=4)
     start = make_track("paper").sample(0.0)
@@ -122,26 +123,24 @@ def test_failed_reset_without_seed_does_not_consume_the_generator():
     assert np.array_equal(oa, ob)
 
 
-def test_track_named_like_a_builtin_does_not_replace_it():
+def test_track_named_like_a_builtin_does_not_replace_it(env, make_env):
     paper = make_track("paper")
     fake = Track("paper", np.array([[0.0, 0.0], [5.0, 0.0]]), 0.0, 0.5)
-    env = AzimutEnv()
     env.reset(seed=0, options={"track": fake})
     assert env.track is fake
     env.reset(seed=0)
     assert env.track.length == pytest.approx(paper.length) and env.track is not fake
     fake_circle = Track("circle", np.array([[0.0, 0.0], [3.0, 0.0]]), 0.0, 0.5)
-    env2 = AzimutEnv(track="circle")
+    env2 = make_env(track="circle")
     env2.reset(seed=0, options={"track": fake_circle})
     env2.reset(seed=0)
     assert env2.track.length == pytest.approx(make_track("circle").length)
 
 
-def test_track_far_from_origin_refused_where_it_enters():
+def test_track_far_from_origin_refused_where_it_enters(env):
     far = Track("far", np.array([[1e5, 0.0], [1e5 + 5, 0.0]]), 0.0, 0.5)
     with pytest.raises(ValueError, match="translate"):
         AzimutEnv(track=far)
-    env = AzimutEnv()
     with pytest.raises(ValueError, match="translate"):
         env.reset(options={"track": far})
 
@@ -167,8 +166,8 @@ def test_task_config_stores_canonical_types():
 # ---------------------------------------------------------------------- vector env
 
 
-def test_vector_bad_kick_in_one_sub_env_is_refused_before_any_reset():
-    env = AzimutVectorEnv(num_envs=3)
+def test_vector_bad_kick_in_one_sub_env_is_refused_before_any_reset(make_vector_env):
+    env = make_vector_env(num_envs=3)
     env.reset(seed=0)
     pose = env.true_pose.copy()
     with pytest.raises(ValueError):
@@ -177,8 +176,8 @@ def test_vector_bad_kick_in_one_sub_env_is_refused_before_any_reset():
     env.step(np.zeros((3, 8), np.float32))
 
 
-def test_vector_first_reset_with_mask_is_refused_then_works():
-    env = AzimutVectorEnv(num_envs=3)
+def test_vector_first_reset_with_mask_is_refused_then_works(make_vector_env):
+    env = make_vector_env(num_envs=3)
     with pytest.raises(ValueError, match="not been reset"):
         env.reset(seed=0, options={"reset_mask": np.array([True, False, True])})
     with pytest.raises(ResetNeeded):
@@ -189,9 +188,9 @@ def test_vector_first_reset_with_mask_is_refused_then_works():
     env.step(np.zeros((3, 8), np.float32))
 
 
-def test_vector_failed_reset_refuses_step():
+def test_vector_failed_reset_refuses_step(make_vector_env):
     start = make_track("paper").sample(0.0)
-    env = AzimutVectorEnv(num_envs=2, obstacles=[(float(start[0]), float(start[1]), 0.3)])
+    env = make_vector_env(num_envs=2, obstacles=[(float(start[0]), float(start[1]), 0.3)])
     with pytest.raises(ValueError, match="overlap"):
         env.reset(seed=0)
     with pytest.raises(ResetNeeded):
@@ -201,14 +200,14 @@ def test_vector_failed_reset_refuses_step():
 
 
 @pytest.mark.parametrize("seed", [-1, [0, "a"], [0], "7", 2.0])
-def test_vector_bad_seed_refused(seed):
+def test_vector_bad_seed_refused(seed, make_vector_env):
     with pytest.raises((ValueError, TypeError)):
-        AzimutVectorEnv(num_envs=2).reset(seed=seed)
+        make_vector_env(num_envs=2).reset(seed=seed)
 
 
-def test_vector_sub_env_matches_single_after_refused_resets():
-    single = rollout(AzimutEnv(), seed=7)
-    env = AzimutVectorEnv(num_envs=2)
+def test_vector_sub_env_matches_single_after_refused_resets(make_env, make_vector_env):
+    single = rollout(make_env(), seed=7)
+    env = make_vector_env(num_envs=2)
     for bad in ({"kick": {"wheels": [9]}}, [None, {"start_progress": math.inf}], {"track": object()}):
         with pytest.raises((ValueError, TypeError)):
             env.reset(seed=0, options=bad)
@@ -222,8 +221,7 @@ def test_vector_sub_env_matches_single_after_refused_resets():
     assert np.array_equal(np.array(rows), single)
 
 
-def test_step_refuses_complex_and_object_actions():
-    env = AzimutEnv()
+def test_step_refuses_complex_and_object_actions(env):
     env.reset(seed=0)
     with pytest.raises(TypeError):
         env.step(np.zeros(8, complex))

@@ -165,8 +165,8 @@ def test_reset_mask_and_per_sub_env_options():
         venv.reset(options={"obstacles": [(5.0, 5.0, 0.2)]})
 
 
-def test_nan_action_raises_without_changing_state():
-    venv = AzimutVectorEnv(num_envs=3)
+def test_nan_action_raises_without_changing_state(make_vector_env):
+    venv = make_vector_env(num_envs=3)
     venv.reset(seed=0)
     pose = venv.true_pose
     act = np.zeros((3, 8), dtype=np.float32)
@@ -178,9 +178,9 @@ def test_nan_action_raises_without_changing_state():
         venv.step(np.zeros((2, 8), dtype=np.float32))
 
 
-def test_one_blow_up_ends_only_its_own_episode():
-    ref = AzimutVectorEnv(num_envs=3)
-    venv = AzimutVectorEnv(num_envs=3)
+def test_one_blow_up_ends_only_its_own_episode(make_vector_env):
+    ref = make_vector_env(num_envs=3)
+    venv = make_vector_env(num_envs=3)
     ref.reset(seed=4)
     venv.reset(seed=4)
     act = np.full((3, 8), 0.2, dtype=np.float32)
