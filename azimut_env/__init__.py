@@ -20,8 +20,8 @@ __all__ = ["ENV_ID"]
 ENV_ID = "Azimut-v1"
 
 if ENV_ID not in registry:
-    # no registry-wide step limit: the env truncates each episode at time_limit_factor (3) × the
-    # nominal lap time of its track (gymnasium.make(..., max_episode_steps=K) adds a TimeLimit)
+    # no registry-wide step limit: the env truncates each episode at time_limit_factor (1.5) × the
+    # reference controller's nominal lap on its track (gymnasium.make(..., max_episode_steps=K) adds a TimeLimit)
     # disable_env_checker: Gymnasium's PassiveEnvChecker marks its one-time reset check as done
     # *before* the reset runs, so a reset that this env refuses (bad seed or option, validated
     # before any state changes) left the checker without data and the next good step raised a

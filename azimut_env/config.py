@@ -43,9 +43,10 @@ class TaskConfig:
         antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
         stall_time: end the episode (terminated, with the off-track penalty) after this long [s]
             without ``stall_distance`` [m] of new progress; 0: never.
-        time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the time to drive the
-            track's reference speed profile exactly (:func:`nominal_duration`; 3 by default); 0: no
-            limit of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
+        time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the nominal lap of the
+            reference controller on the episode's track (:func:`~azimut_env.lap_time.reference_lap_time`:
+            the speed profile plus its stops to turn wheels in place; 1.5 by default); 0: no limit
+            of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
         max_lateral_error: lateral error that ends the episode [m].
         lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
             [m of progress]. start_noise: uniform start pose noise [m, rad].
@@ -79,7 +80,7 @@ class TaskConfig:
     antagonism_cap: float = 2.0
     stall_time: float = 0.0
     stall_distance: float = 0.05
-    time_limit_factor: float = 3.0
+    time_limit_factor: float = 1.5
     max_lateral_error: float = 0.5
     lookahead_count: int = 5
     lookahead_spacing: float = 0.3

@@ -159,13 +159,15 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     the track is finished (``info["finished"]``; one lap of a closed track), when the robot stalls
     (``stall_time`` > 0 s without ``stall_distance`` of new progress, ``info["stalled"]``; off by
     default), or when the physics blows up (non-finite or absurd state, ``info["error"]``; the last
-    finite observation is returned). Truncated at ``time_limit_factor`` (default 3) × T, T the time
-    to drive the track's reference speed profile exactly (``task.nominal_duration``; ``0`` turns
-    the limit off); the registration adds no other limit (``gymnasium.make(...,
-    max_episode_steps=K)`` does). The reference controller needs 1.0 T (circle), 1.3 T (crab,
-    square), 1.9 T (paper) and 2.2 T (figure8), as it stops to turn its wheels in place, so the
-    default is 1.4–1.6× its lap on paper and figure8 (1 500–4 800 steps over the built-in
-    tracks instead of 6 000 for all).
+    finite observation is returned). Truncated at ``time_limit_factor`` (default 1.5) × T, T the
+    nominal lap of the ICR reference controller on the episode's track
+    (``lap_time.reference_lap_time``: the time of the track's speed profile plus, for each wheel that
+    must stop and turn in place across its steering stops along the reference ICR path, the
+    time to turn it, up to 1.79 s; ``0`` turns the limit off); the registration adds no other
+    limit (``gymnasium.make(..., max_episode_steps=K)`` does). The limit is 1.38–1.69× the
+    reference controller's measured lap on every built-in track (steps: circle 1 442, crab
+    1 440, square 3 084, figure8 4 057, paper 4 513; was 3 × the speed profile's time, up to
+    3× the lap on circle); ``random`` tracks get theirs from the same formula at each reset.
 
     ## Arguments
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
@@ -209,8 +211,8 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       quadratic: 1 cm cost 0.0005 per step, and a lost heading up to 4.9), overspeed penalised,
       slip power and internal force priced (a raw-action agent fighting its wheels with 150× the
       reference controller's internal force lost only 2% of its return), backward projection
-      jumps clipped, optional stall termination, a per-track time limit (3 × the time of the speed
-      profile, 1.4–1.6× the reference controller's lap on paper and figure8) instead of 6000 steps; ``info["stalled"]``. The same release changes the
+      jumps clipped, optional stall termination, a per-track time limit (1.5 × the reference
+      controller's nominal lap, ``time_limit_factor``) instead of 6000 steps; ``info["stalled"]``. The same release changes the
       simulated vehicle dynamics (see the README). ``gymnasium.make("Azimut-v0")`` raises
       ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
     * v0: initial version.

@@ -36,11 +36,12 @@ from .params import RobotParams, _setpoints_row, action_from_setpoints
 from .physics import AzimutPhysics, BlowUpLimits, Obstacle
 from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
 from .sensors import _measure_kernel
+from .lap_time import nominal_duration, reference_lap_time  # noqa: F401 (nominal_duration: re-exported)
 from .tracks import TRACK_NAMES, Track, make_track, query_tracks
 from .validation import check_finite, check_index_list, check_int
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
-           "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles"]
+           "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles", "nominal_duration", "reference_lap_time"]
 
 #: the reward terms, in the order of the columns of ``AzimutTask.reward_terms``
 REWARD_TERMS = ("progress", "lateral", "heading", "overspeed", "slip", "internal_force", "action_rate", "off_track")
@@ -91,12 +92,6 @@ def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle,
         return tuple(Obstacle.coerce(o) for o in obstacles)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{what}: {exc}") from None
-
-
-def nominal_duration(track: Track, speed_scale: float = 1.0) -> float:
-    """The time [s] to drive ``track`` at its reference speed profile (speeds below 5 cm/s count as
-    5 cm/s, so a profile that starts or ends at rest has a finite duration)."""
-    return float(np.sum(np.diff(track.s) / np.maximum(track.speed[:-1] * speed_scale, 0.05)))
 
 
 # ---------------------------------------------------------------------- compiled stages
@@ -495,7 +490,10 @@ class AzimutTask:
         self.stalled[i] = False
         self.best_step[i] = 0
         factor = self.config.time_limit_factor
-        steps = factor * nominal_duration(track) / self.config.control_period
+        if factor > 0:
+            steps = factor * reference_lap_time(track, self.params.geometry, self.params.limits) / self.config.control_period
+        else:
+            steps = 0.0
         big = np.iinfo(np.int64).max  # no limit (factor 0), or one beyond any run (a huge factor)
         self.step_limit[i] = int(math.ceil(steps)) if 0 < steps < 9e18 else big
         sl = slice(i, i + 1)

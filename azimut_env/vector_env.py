@@ -61,8 +61,8 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     As the single env, per sub-env: off the track or finished (terminated), a physics blow-up of
     that robot (terminated, reward ``−off_track_penalty``, the last finite observation, and
     ``info["error"][i]``; the other robots go on), a stall (``stall_time``, terminated), and the
-    step limits (truncated): the per-track limit of ``time_limit_factor`` (3 × the time of the track's
-    speed profile by default, see the single env) and ``max_episode_steps`` if given (default ``None``).
+    step limits (truncated): the per-track limit of ``time_limit_factor`` (1.5 × the reference
+    controller's nominal lap on the track by default, see the single env) and ``max_episode_steps`` if given (default ``None``).
 
     ## Info
     ``step`` and ``reset`` return a dict of arrays with a leading ``num_envs`` axis and, per key,

@@ -1,0 +1,62 @@
+"""The env's per-track time limit: 1.5 × the ICR reference controller's nominal lap
+(``task.reference_lap_time``), which the reference controller meets on every built-in track.
+
+``paper`` and ``figure8`` take about 15 s each and are in the slow run; ``circle``, ``crab`` and
+``square`` (the three others, one with no stops, two with stops to turn wheels in place) in the
+default run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from azimut_env.env import AzimutEnv
+from azimut_env.params import RobotParams
+from azimut_env.config import TaskConfig
+from azimut_env.lap_time import REFERENCE_TURN_FRACTIONS, nominal_duration, reference_lap_time, steering_wraps
+from azimut_env.tracks import make_track
+from control.episode import episode_metrics, run_episode
+from control.icr_controller import ICRControllerConfig
+
+slow = pytest.mark.slow
+
+
+@pytest.mark.parametrize("track", ["circle", "crab", "square", pytest.param("paper", marks=slow),
+                                   pytest.param("figure8", marks=slow)])
+def test_reference_controller_finishes_within_the_limit(track):
+    env = AzimutEnv(track=track)
+    env.reset(seed=0)
+    limit = float(env.task.step_limit[0]) * env.control_period
+    env.close()
+    m = episode_metrics(run_episode("icr", track, seed=0))
+    assert m["completed"]
+    ratio = limit / m["completion_time_s"]
+    assert 1.3 <= ratio <= 1.8, (track, limit, m["completion_time_s"])
+
+
+def test_reference_lap_counts_the_stops_to_turn_wheels():
+    params = RobotParams()
+    geom, lim = params.geometry, params.limits
+    circle = make_track("circle")
+    assert steering_wraps(circle, geom).size == 0  # no stop: the lap is the speed profile's time
+    assert reference_lap_time(circle, geom, lim) == pytest.approx(nominal_duration(circle))
+    square = make_track("square")
+    swings = steering_wraps(square, geom)
+    assert swings.size >= 4 and np.all((swings > np.pi / 2) & (swings <= np.pi))  # each corner
+    # each swing at most π on a trapezoid at half the rate and 0.3 of the accel limit: ≤ 1.79 s
+    v, a = REFERENCE_TURN_FRACTIONS[0] * lim.steer_rate_max, REFERENCE_TURN_FRACTIONS[1] * lim.steer_accel_max
+    extra = reference_lap_time(square, geom, lim) - nominal_duration(square)
+    assert 0 < extra <= swings.size * (np.pi / v + v / a) + 1e-9
+    # random tracks get theirs at each reset; the env's limit is factor × the lap
+    track = make_track("random", rng=np.random.default_rng(4))
+    env = AzimutEnv(track=track)
+    env.reset(seed=0)
+    expect = TaskConfig().time_limit_factor * reference_lap_time(track, geom, lim) / env.control_period
+    assert env.task.step_limit[0] == int(np.ceil(expect))
+    env.close()
+
+
+def test_turn_fractions_are_the_reference_controllers():
+    cfg = ICRControllerConfig()
+    assert REFERENCE_TURN_FRACTIONS == (cfg.reconfig_rate_fraction, cfg.reconfig_accel_fraction)
