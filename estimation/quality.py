@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -19,10 +20,18 @@ def _quality_from_d2(d2: float, n: int, f: float) -> float:
     return 1.0 - math.log1p(f * d2 / (n * math.pi * math.pi)) / math.log1p(f)
 
 
+class _MetricCheck(IntEnum):
+    """What :func:`_metric_kernel` found in its input."""
+
+    OK = 0
+    NON_FINITE = 1  #: a value is NaN or infinite
+    OUT_OF_RANGE = 2  #: some |q_k − β_k| > π: the angles are not in one steering range of width π
+
+
 @njit(cache=True)
-def _metric_kernel(beta, q, out) -> int:
-    """m of eq. (28) per row into ``out``; returns 1 if any value is not finite, 2 if some
-    |q_k − β_k| > π (angles not in one steering range of width π), else 0."""
+def _metric_kernel(beta, q, out):
+    """m of eq. (28) per row into ``out``; returns the :class:`_MetricCheck` value of the first problem
+    met (``OK``: none)."""
     n = q.shape[1]
     scale = 1.0 / (n * math.pi * math.pi)
     for i in range(q.shape[0]):
@@ -31,13 +40,13 @@ def _metric_kernel(beta, q, out) -> int:
             a = beta[i, k]
             b = q[i, k]
             if not (math.isfinite(a) and math.isfinite(b)):
-                return 1
+                return _MetricCheck.NON_FINITE.value
             diff = b - a
             if abs(diff) > math.pi:
-                return 2
+                return _MetricCheck.OUT_OF_RANGE.value
             d += diff * diff
         out[i] = d * scale
-    return 0
+    return _MetricCheck.OK.value
 
 
 def _real(x, name: str) -> np.ndarray:
@@ -56,9 +65,9 @@ def _metric(beta_est, q) -> tuple[np.ndarray, tuple[int, ...]]:
     n = q.shape[-1]
     out = np.empty(int(np.prod(batch, dtype=np.int64)))
     code = _metric_kernel(np.ascontiguousarray(beta_est.reshape(-1, n)), np.ascontiguousarray(q.reshape(-1, n)), out)
-    if code == 1:
+    if code == _MetricCheck.NON_FINITE:
         raise ValueError("beta_est and q must be finite")
-    if code == 2:
+    if code == _MetricCheck.OUT_OF_RANGE:
         raise ValueError("beta_est and q must lie in one steering range of width π (|q_k − β_k| <= π): "
                          "wrap them first (RobotGeometry.wrap_steering)")
     return out, batch
