@@ -8,7 +8,7 @@ default run leaves them out, see ``pyproject.toml``).
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -31,24 +31,23 @@ def limits() -> ActuatorLimits:
     return ActuatorLimits()
 
 
-def _closing_factory(cls) -> Callable:
+def _closing_factory(cls) -> Iterator[Callable]:
+    """Yield ``make(**kwargs)`` → a new ``cls(**kwargs)``; close every one made afterwards."""
     made = []
 
     def make(**kwargs):
-        env = cls(**kwargs)
-        made.append(env)
-        return env
+        made.append(cls(**kwargs))
+        return made[-1]
 
-    return make, made
-
-
-@pytest.fixture
-def make_env():
-    """``make_env(**kwargs)`` → a fresh :class:`AzimutEnv`; every env made is closed after the test."""
-    make, made = _closing_factory(AzimutEnv)
     yield make
     for env in made:
         env.close()
+
+
+@pytest.fixture
+def make_env() -> Iterator[Callable[..., AzimutEnv]]:
+    """``make_env(**kwargs)`` → a fresh :class:`AzimutEnv`; every env made is closed after the test."""
+    yield from _closing_factory(AzimutEnv)
 
 
 @pytest.fixture
@@ -58,12 +57,9 @@ def env(make_env) -> AzimutEnv:
 
 
 @pytest.fixture
-def make_vector_env():
+def make_vector_env() -> Iterator[Callable[..., AzimutVectorEnv]]:
     """``make_vector_env(**kwargs)`` → a fresh :class:`AzimutVectorEnv`, closed after the test."""
-    make, made = _closing_factory(AzimutVectorEnv)
-    yield make
-    for venv in made:
-        venv.close()
+    yield from _closing_factory(AzimutVectorEnv)
 
 
 @pytest.fixture
