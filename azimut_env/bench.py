@@ -10,7 +10,7 @@
   spring, tires, module and chassis integration), write back to pymunk, ``space.step`` (only
   with obstacles), the summary, sensors (noise draws and encoder models), estimation (the
   batched IT), track queries, reward + observation, and the rest (Python glue, info arrays). The
-  physics stages come from ``AzimutPhysics.step``'s own timing hook (``step(times)``), so the
+  physics stages come from ``AzimutPhysics.step``'s own timing hook (``stage_times``), so the
   split times the code that runs. Memory: resident-set growth of a 512-robot vector env per
   robot, measured in a fresh process.
 
@@ -234,21 +234,18 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
     from . import task as task_module
-    from .physics import AzimutPhysics
 
     acc = {k: 0.0 for k in VECTOR_STAGES}
     clock = time.perf_counter
     task, phys = venv.task, venv.physics
-    original = (task.apply_actions, phys.step, task._measure, task._estimate, task._query_tracks,
-                task_module._reward_obs_kernel, task_module._draw_normals_kernel)
-
-    task.apply_actions = _timed(acc, original[0], "actions")
-    phys.step = lambda: AzimutPhysics.step(phys, acc)
-    task._measure = _timed(acc, original[2], "sensors")
-    task._estimate = _timed(acc, original[3], "estimation")
-    task._query_tracks = _timed(acc, original[4], "track")
-    task_module._reward_obs_kernel = _timed(acc, original[5], "reward_obs")
-    task_module._draw_normals_kernel = _timed(acc, original[6], "sensors")
+    kernels = (task_module._reward_obs_kernel, task_module._draw_normals_kernel)
+    task.apply_actions = _timed(acc, task.apply_actions, "actions")
+    phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
+    task._measure = _timed(acc, task._measure, "sensors")
+    task._estimate = _timed(acc, task._estimate, "estimation")
+    task._query_tracks = _timed(acc, task._query_tracks, "track")
+    task_module._reward_obs_kernel = _timed(acc, kernels[0], "reward_obs")
+    task_module._draw_normals_kernel = _timed(acc, kernels[1], "sensors")
     N = venv.num_envs
     try:
         t0 = clock()
@@ -258,9 +255,8 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     finally:
         for name in ("apply_actions", "_measure", "_estimate", "_query_tracks"):
             task.__dict__.pop(name, None)
-        phys.__dict__.pop("step", None)
-        task_module._reward_obs_kernel = original[5]
-        task_module._draw_normals_kernel = original[6]
+        phys.stage_times = None
+        task_module._reward_obs_kernel, task_module._draw_normals_kernel = kernels
     acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
     scale = 1e6 / (calls * N)
     out = {f"{k}_us": v * scale for k, v in acc.items()}

@@ -37,16 +37,15 @@ class BlowUpLimits:
 
     Attributes:
         speed: chassis speed [m/s]. spin: |φ̇| [rad/s]. yaw_rate: chassis or module angular speed
-        [rad/s]. position: |x|, |y| [m]. joint_gap: accepted and unused: the steering pivots are
-        exact since physics v2 (joint coordinates), so no pivot can tear.
+        [rad/s]. position: |x|, |y| [m]. (The steering pivots are joint coordinates since physics
+        v2: they cannot tear, so there is no pivot-gap limit.)
     """
 
     speed: float = 20.0
     spin: float = 500.0
     yaw_rate: float = 200.0
     position: float = 1e4
-    joint_gap: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("speed", "spin", "yaw_rate", "position", "joint_gap"):  # NaN would disarm the check
+        for name in ("speed", "spin", "yaw_rate", "position"):  # NaN would disarm the check
             object.__setattr__(self, name, check_positive(f"BlowUpLimits.{name}", getattr(self, name)))

@@ -25,6 +25,8 @@ from numba import njit
 
 from estimation.geometry import RobotGeometry
 
+from .physics_layout import CMD
+
 __all__ = [
     "ActuatorLimits",
     "SteeringParams",
@@ -87,8 +89,8 @@ def _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd):
     below β_min) [rad], φ̇_cmd = a·φ̇_max [rad/s]. The one implementation of the action map; the
     task's compiled step calls it too."""
     for k in range(n):
-        cmd[i, k, 0] = max(a[i, k] * steer_max, steer_min)
-        cmd[i, k, 1] = a[i, n + k] * wheel_speed_max
+        cmd[i, k, CMD.BETA] = max(a[i, k] * steer_max, steer_min)
+        cmd[i, k, CMD.PHIDOT] = a[i, n + k] * wheel_speed_max
 
 
 @njit(cache=True)
@@ -388,6 +390,15 @@ class RobotParams:
     def max_surface_speed(self) -> float:
         """Largest wheel surface speed r φ̇_max [m/s] (smallest wheel)."""
         return float(np.min(self.geometry.r) * self.limits.wheel_speed_max)
+
+    def body_inertia(self, chassis_mass: float | None = None) -> np.ndarray:
+        """(M, I): the robot body's mass [kg] and moment about the centre [kg·m²] with a chassis of
+        mass ``chassis_mass`` (default ``chassis.mass``; the plate's inertia scales with it) and
+        the modules' masses at their steering axes (parallel axis: m_m Σ_k l_k²)."""
+        ch = self.chassis
+        m = ch.mass if chassis_mass is None else float(chassis_mass)
+        return np.array([m + self.n * self.steering.module_mass,
+                         ch.inertia * m / ch.mass + self.steering.module_mass * float(np.sum(self.geometry.l ** 2))])
 
     def load_map(self) -> np.ndarray:
         """(n, 3) matrix L with N = L (W, M_x, M_y): the least-norm normal loads N_k on the steering

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-__all__ = ["CS", "BODY", "CMD", "WP", "JS", "MS", "ACC", "RS", "WS", "RS_POSE", "RS_VEL_WORLD", "RS_TWIST_BODY", "WS_FORCE",
+__all__ = ["CS", "FT", "BODY", "CMD", "WP", "JS", "MS", "ACC", "RS", "WS", "RS_POSE", "RS_VEL_WORLD", "RS_TWIST_BODY", "WS_FORCE",
            "WS_CONTACT"]
 
 
@@ -25,6 +25,13 @@ class CS(IntEnum):
     ``pymunk.batch``'s position, angle, velocity and angular velocity fields."""
 
     X, Y, TH, VX, VY, W = range(6)
+
+
+class FT(IntEnum):
+    """Columns of the force rows written to pymunk (rows, len(FT)): the force (FX, FY) [N] and the
+    torque TAU [N·m] on a body, in the world."""
+
+    FX, FY, TAU = range(3)
 
 
 class BODY(IntEnum):
@@ -90,7 +97,8 @@ class ACC(IntEnum):
 
 class RS(IntEnum):
     """Columns of the robot summary ``summary`` (N, len(RS)), computed after each step: the pose
-    (X, Y [m], TH [rad]) and velocity (VX, VY [m/s], W [rad/s]) in the world, the velocity in the
+    (X, Y [m], TH [rad]) and velocity (VX, VY [m/s], W [rad/s]) in the world (the columns of
+    :class:`CS`, in the same order), the velocity in the
     chassis frame (BX, BY [m/s]), the step-mean slip power SLIP [W] and internal force INTERNAL [N],
     and the blow-up code CODE (a :class:`azimut_env.blowup.BlowUp`, 0 when fine)."""
 
@@ -104,6 +112,8 @@ class WS(IntEnum):
 
     BETA, BETA_DOT, FX, FY, PX, PY = range(6)
 
+
+assert [m.name for m in RS][: len(CS)] == [m.name for m in CS], "the summary starts with the chassis state"
 
 #: the pose (x, y, θ) in a robot summary row
 RS_POSE = slice(RS.X, RS.TH + 1)

@@ -33,8 +33,8 @@ from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_tw
 from .blowup import BlowUp
 from .config import TaskConfig, resolve_params
 from .params import RobotParams, _setpoints_row, action_from_setpoints
-from .physics import AzimutPhysics, BlowUpLimits, Obstacle
-from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
+from .physics import AzimutPhysics, BlowUpLimits, Obstacle, default_wheel_params
+from .physics_layout import CMD, MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
 from .sensors import _measure_kernel
 from .lap_time import nominal_duration, reference_lap_time  # noqa: F401 (nominal_duration: re-exported)
 from .tracks import TRACK_NAMES, Track, make_track, query_tracks
@@ -283,7 +283,7 @@ class AzimutTask:
         self.track_spec = track
         default = track if isinstance(track, Track) else self.builtin_track(track, np.random.default_rng(0))
         self.tracks: list[Track] = [default] * N
-        self._default_wp = self.physics._default_wheel_params()
+        self._default_wp = default_wheel_params(params, N)
         K = config.lookahead_count
         self.layout = observation_layout(n, K)
         self.obs_low, self.obs_high = observation_bounds(n, K, params.limits.wheel_speed_max)
@@ -333,8 +333,9 @@ class AzimutTask:
         self._all = np.ones(N, dtype=np.bool_)
         self._normals = np.zeros((N, 3, n))
         # command latency: set-points waiting to be applied, oldest first (N, k, n, 2)
-        self._cmd_fifo = np.zeros((N, config.action_latency, n, 2))
-        self._cmd_new = np.zeros((N, n, 2))
+        self._cmd_fifo = np.zeros((N, config.action_latency, n, len(CMD)))
+        self._cmd_new = np.zeros((N, n, len(CMD)))
+        self._cmd_out = np.zeros((N, n, len(CMD)))  # the set-points leaving the FIFOs
         self._meas = np.empty((N, 3, n))
         # the pose source (azimut_env.localisation): with "odometry", the pose estimate and the
         # track state seen from it; with "true" these stay unused and the observation reads the truth
@@ -453,12 +454,8 @@ class AzimutTask:
         self.track_max_speed[i] = track.max_speed
         self.track_closed[i] = track.closed
         self.track_rho[i] = track.progress_radius
-        if "obstacles" in options:
-            phys.obstacles = options["obstacles"]
-        elif fresh_space:
-            phys.obstacles = self.default_obstacles
-        if fresh_space:
-            phys.rebuild()
+        if fresh_space:  # per-episode obstacles come with a Space of their own (check_reset_options)
+            phys.rebuild(options.get("obstacles", self.default_obstacles))
         self.kicks[i] = None
         self._kick_step[i] = -1
         if "kick" in options:
@@ -555,7 +552,7 @@ class AzimutTask:
             for col in (WP.C_KAPPA, WP.C_ALPHA, WP.SIGMA_LONG, WP.SIGMA_LAT):
                 wp[..., col] *= f[4]
             wp[..., WP.HALF_LEN] *= f[5]
-        phys.wheel_params[i] = wp
+        phys.set_wheel_params(wp, robot=i)
         phys.set_chassis_mass(i, mass)
 
     def park(self, i: int) -> None:
@@ -612,11 +609,14 @@ class AzimutTask:
         rows = self._all if rows is None else rows
         fifo = self._cmd_fifo
         delayed = fifo.shape[1] > 0
-        bad = _apply_actions_kernel(a, self._cmd_new if delayed else self.physics.commands, rows, *self._lim)
+        bad = _apply_actions_kernel(a, self._cmd_new, rows, *self._lim)
         if bad >= 0:
             raise ValueError(f"action contains NaN or inf (robot {bad}): {np.asarray(actions)[bad]}")
+        cmd = self._cmd_new
         if delayed:
-            _shift_fifo_kernel(fifo, self._cmd_new, self.physics.commands, rows)
+            cmd = self._cmd_out
+            _shift_fifo_kernel(fifo, self._cmd_new, cmd, rows)
+        self.physics.set_setpoints(cmd, None if rows is self._all else rows)
         return a
 
     def step_physics(self) -> np.ndarray:
