@@ -47,7 +47,7 @@ from azimut_env.env import AzimutEnv
 from azimut_env.params import RobotParams
 from azimut_env.task import nominal_duration
 from azimut_env.tracks import TRACK_NAMES, make_track
-from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path
+from azimut_env.validation import arg_float, arg_int, arg_output_path
 from estimation import estimate_icr, eta_from_twist, quality, steering_from_lambda, wheel_speeds
 
 from .episode import MOVING_MU, EpisodeLog, moving_mask, record_step, run_episode

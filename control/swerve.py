@@ -41,7 +41,7 @@ from azimut_env.validation import check_bool
 
 from estimation.geometry import RobotGeometry
 
-from .icr_controller import WheelCommand
+from .commands import WheelCommand
 from .limits import ActuatorLimits
 
 __all__ = ["SwerveConfig", "SwerveController", "discretize_twist", "module_states", "optimize_module",

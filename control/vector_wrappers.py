@@ -140,7 +140,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         # residual only: the path followers of all sub-envs, one compiled call per step
         self._follower = BatchFollower(N, self._follower_config, self._stop_mask, base.control_period) \
             if action == "residual" else None
-        self.last_command = None  #: the last BatchWheelCommand of the ICR controllers (diagnostics)
+        self.last_command = None  #: the last WheelCommand ((N, n) arrays) of the ICR controllers (diagnostics)
 
     @property
     def follower(self) -> BatchFollower | None:

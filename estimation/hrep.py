@@ -30,6 +30,10 @@ __all__ = [
     "eta_from_twist",
     "twist_from_eta",
     "point_velocity",
+    "sphere_angle",
+    "slerp",
+    "exp_map",
+    "nearer_representative",
 ]
 
 #: The charts of the atlas (§2.1, eq. (2)–(4) and circular permutations): chart c is the pair of
@@ -225,3 +229,65 @@ def point_velocity(lam: np.ndarray, mu: np.ndarray, p: np.ndarray) -> np.ndarray
     p = np.asarray(p, dtype=np.float64)
     ph = np.concatenate([p, np.ones(p.shape[:-1] + (1,))], axis=-1)
     return (np.asarray(mu, dtype=np.float64)[..., None] * np.cross(lam, ph))[..., :2]
+
+
+# ---------------------------------------------------------------- motion of λ on the sphere
+#
+# A path of motions λ(t) is a path on the unit sphere S² (the double cover of Λ). The ICR controller
+# drives its reference λ along great circles; these are the few operations it needs. They act on
+# unit vectors of S², not on points of Λ: antipodes are two points here, so that a path is continuous.
+
+
+def sphere_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle [rad] between unit vectors of S², in [0, π] (antipodes are π apart, unlike
+    :func:`lambda_distance`): ``atan2(‖a × b‖, a·b)``, accurate at 0 and π. (..., 3) -> (...)."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+def _extra_axes(lam: np.ndarray, other: np.ndarray, trailing: int) -> tuple:
+    """Index that inserts into ``lam`` (B..., 3) the axes that ``other`` (B..., K..., [3]) has
+    beyond the batch axes B... (``trailing`` = 1 if ``other`` ends with a vector axis, else 0)."""
+    return (Ellipsis,) + (None,) * (other.ndim - trailing - (lam.ndim - 1)) + (slice(None),)
+
+
+def slerp(lam, lam_d, angle) -> np.ndarray:
+    """The point ``angle`` [rad] from unit λ along the great circle toward unit λ_d.
+
+    λ, λ_d (B..., 3); ``angle`` (B..., K...) -> (B..., K..., 3): e.g. one pair (3,) and K angles,
+    or N pairs (N, 3) and angles (N,) or (N, M). Where λ_d = ±λ (no great circle through both),
+    returns λ. The point is cos(angle) λ + sin(angle) e, e the unit tangent at λ toward λ_d."""
+    lam = np.asarray(lam, dtype=np.float64)
+    lam_d = np.asarray(lam_d, dtype=np.float64)
+    angle = np.asarray(angle, dtype=np.float64)
+    tang = lam_d - np.sum(lam * lam_d, axis=-1)[..., None] * lam
+    tn = np.linalg.norm(tang, axis=-1)
+    degenerate = tn < 1e-15
+    e = tang / np.where(degenerate, 1.0, tn)[..., None]
+    idx = _extra_axes(lam, angle, 0)
+    lam_b, e_b = lam[idx], e[idx]
+    out = np.cos(angle)[..., None] * lam_b + np.sin(angle)[..., None] * e_b
+    if np.any(degenerate):
+        out = np.where(degenerate[idx[:-1] + (None,)], lam_b, out)
+    return out
+
+
+def exp_map(lam, v) -> np.ndarray:
+    """exp_λ(v) on the unit sphere: the point reached from unit λ (B..., 3) along the great circle
+    of the tangent vector v (B..., K..., 3) after the arc ‖v‖, cos‖v‖ λ + sin‖v‖ v/‖v‖,
+    renormalised. Returns (B..., K..., 3)."""
+    lam = np.asarray(lam, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    nv = np.linalg.norm(v, axis=-1, keepdims=True)
+    safe = np.where(nv > 0, nv, 1.0)
+    out = np.cos(nv) * lam[_extra_axes(lam, v, 1)] + np.sin(nv) * v / safe
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def nearer_representative(lam, lam_d, mu_d) -> tuple[np.ndarray, np.ndarray]:
+    """Of the two representatives (λ_d, μ_d) and (−λ_d, −μ_d) of one motion, the one whose λ is
+    nearer to λ on S² (λ·λ_d ≥ 0): the motion the reference λ can reach without crossing half the
+    sphere. λ, λ_d (..., 3), μ_d (...)."""
+    lam = np.asarray(lam, dtype=np.float64)
+    lam_d = np.asarray(lam_d, dtype=np.float64)
+    sign = np.where(np.sum(lam * lam_d, axis=-1) < 0, -1.0, 1.0)
+    return lam_d * sign[..., None], np.asarray(mu_d, dtype=np.float64) * sign

@@ -477,8 +477,8 @@ def wheel_speed_path_derivative(lam, dlam, mu, dmu, ddbeta, geom: RobotGeometry)
     """φ̇′_k = ((s⊥2,k − b_k ẑ)·(μ λ′ + μ′ λ) + (s⊥2,k)′·μλ − b_k β″_k) / r_k along a path.
 
     With (s⊥2,k)′ = −β′_k s⊥1,k and s⊥1,k·λ = 0 on the surface, the middle term vanishes, giving
-    the note's φ̇′_k = ((s⊥2,k − b_k ẑ)·(μ λ′ + μ′ λ) − b_k β″_k)/r_k. Here φ̇ is the path form
-    r φ̇ = μ c − b β′ (rates per unit of s).
+    φ̇′_k = ((s⊥2,k − b_k ẑ)·(μ λ′ + μ′ λ) − b_k β″_k)/r_k (derived in docs/icr-controller.md, §2). Here
+    φ̇ is the path form r φ̇ = μ c − b β′ (rates per unit of s).
     """
     lam = np.asarray(lam, dtype=np.float64)
     beta = steering_from_lambda(lam, geom)

@@ -1,4 +1,4 @@
-"""ICR controller: the note's algebra against finite differences, limits, singular targets and the
+"""ICR controller: the algebra of docs/icr-controller.md against finite differences, limits, singular targets and the
 RUNNING -> STOPPING -> RECONFIGURING state machine (on the kinematic test bench)."""
 
 from __future__ import annotations
@@ -298,9 +298,9 @@ def test_limits_never_exceeded_on_random_target_sequences(seq):
     _run([(np.array(lam), mu, n) for lam, mu, n in seq])
 
 
-def test_great_circle_second_derivative_corrects_the_note():
+def test_great_circle_second_derivative_by_finite_differences():
     """λ′ = k(λ_d − (λ·λ_d)λ) gives λ″ = k²((2c² − 1)λ − c λ_d), c = λ·λ_d, by finite differences
-    of the integrated flow; the note's k²(c λ_d − λ) is not it."""
+    of the integrated flow; the form k²(c λ_d − λ) once circulated for it is wrong."""
     rng = np.random.default_rng(0)
     lam, lam_d, k = _unit(rng.normal(size=3)), _unit(rng.normal(size=3)), 0.7
 
@@ -321,7 +321,7 @@ def test_great_circle_second_derivative_corrects_the_note():
 
 def test_time_scaled_wheel_acceleration_includes_the_coupling_terms():
     """With s(t), r φ̇ = μ(s) c(λ(s)) − b β′ ṡ, so r φ̈ = (s⊥2 − b ẑ)·(μλ′ + μ′λ) ṡ − b(β″ṡ² + β′s̈):
-    the note's φ̈ = φ̇′ ṡ holds only for ṡ = 1, s̈ = 0 (checked by finite differences)."""
+    φ̈ = φ̇′ ṡ holds only for ṡ = 1, s̈ = 0 (checked by finite differences)."""
     rng = np.random.default_rng(1)
     lam0, axis = _unit(rng.normal(size=3)), rng.normal(size=3)
     mu0, dmu = 0.4, -0.3
@@ -347,5 +347,5 @@ def test_time_scaled_wheel_acceleration_includes_the_coupling_terms():
     mu = mu0 + dmu * s
     analytic = (s2b @ (mu * dlam + dmu * lam)) * sdot - GEOM.b * (bpp * sdot**2 + bp * sddot)
     np.testing.assert_allclose(analytic, fd, rtol=2e-3, atol=2e-3)
-    note = ((s2b @ (mu * dlam + dmu * lam)) - GEOM.b * bpp) * sdot
-    assert np.max(np.abs(note - fd)) > 1e-2
+    path_form = ((s2b @ (mu * dlam + dmu * lam)) - GEOM.b * bpp) * sdot
+    assert np.max(np.abs(path_form - fd)) > 1e-2
