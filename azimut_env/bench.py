@@ -233,19 +233,17 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
 
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
-    from . import task as task_module
-
     acc = {k: 0.0 for k in VECTOR_STAGES}
     clock = time.perf_counter
     task, phys = venv.task, venv.physics
-    kernels = (task_module._reward_obs_kernel, task_module._draw_normals_kernel)
+    original = (task._outputs, task.sensors.draw_noise)
     task.apply_actions = _timed(acc, task.apply_actions, "actions")
     phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
     task._measure = _timed(acc, task._measure, "sensors")
     task._estimate = _timed(acc, task._estimate, "estimation")
     task._query_tracks = _timed(acc, task._query_tracks, "track")
-    task_module._reward_obs_kernel = _timed(acc, kernels[0], "reward_obs")
-    task_module._draw_normals_kernel = _timed(acc, kernels[1], "sensors")
+    task._outputs = _timed(acc, original[0], "reward_obs")  # termination, reward, observation
+    task.sensors.draw_noise = _timed(acc, original[1], "sensors")
     N = venv.num_envs
     try:
         t0 = clock()
@@ -253,10 +251,10 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
             venv.step(actions[i % 64])
         total = clock() - t0
     finally:
-        for name in ("apply_actions", "_measure", "_estimate", "_query_tracks"):
+        for name in ("apply_actions", "_measure", "_estimate", "_query_tracks", "_outputs"):
             task.__dict__.pop(name, None)
         phys.stage_times = None
-        task_module._reward_obs_kernel, task_module._draw_normals_kernel = kernels
+        task.sensors.__dict__.pop("draw_noise", None)
     acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
     scale = 1e6 / (calls * N)
     out = {f"{k}_us": v * scale for k, v in acc.items()}

@@ -1,18 +1,33 @@
-"""The task of ``Azimut-v1`` over N robots at once: observation, reward, termination, resets.
+"""The task of ``Azimut-v1`` over N robots at once: the stages of a step, and resets.
 
 :class:`AzimutTask` holds N robots in one :class:`~azimut_env.physics.AzimutPhysics` (one pymunk
 Space) and every per-robot task quantity as an array with a leading robot axis. Both envs are thin
-front ends over it, so there is one copy of the task and of the physics:
+front ends over it (:mod:`azimut_env.frontend`), so there is one copy of the task and of the
+physics: :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) is the N = 1 case,
+:class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
 
-* :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) is the N = 1 case;
-* :class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
+Data flow of one control step (each stage batched over the robots, compiled where it pays):
 
-One control step is :meth:`AzimutTask.apply_actions` (a compiled check/clip/write of all
-actions), :meth:`AzimutTask.step_physics` (per substep one batched read, the compiled force model
-over all wheels, one batched write, one ``space.step``) and :meth:`AzimutTask.observe` (a compiled
-sensor model over all wheels, one batched IT estimate with ``estimation.estimate_eta``, one
-compiled track query for all robots, each on its own track, and one compiled reward and
-observation fill for all robots).
+1. :meth:`AzimutTask.apply_actions`: action → set-points (check, clip, ``params`` map; with
+   ``action_latency`` through a per-robot FIFO) written to the physics' commands.
+2. :meth:`AzimutTask.step_physics`: kicks due now, then ``substeps`` physics substeps (motors,
+   series-elastic steering, tires, ``space.step``), which end with the robot and wheel summaries
+   (:mod:`azimut_env.physics_layout`: ``RS``, ``WS``) and the blow-up codes; the front end ends
+   blown-up robots' episodes (:meth:`AzimutTask.end_blown_up`).
+3. :meth:`AzimutTask.observe`:
+   sensors (:class:`~azimut_env.sensors.SensorState`: noise draws, encoders) →
+   estimation (one batched IT estimate ``estimation.estimate_eta``: λ̂, μ̂) →
+   track state (one compiled query, each robot on its own track: s, errors, v_ref, look-ahead;
+   columns :class:`~azimut_env.tracks.TQ`) →
+   termination (:mod:`azimut_env.termination`: off track, finished) →
+   reward (:mod:`azimut_env.reward`: the terms from the true state) →
+   pose source (the truth, or odometry + localisation fixes, :mod:`azimut_env.localisation`) →
+   observation (:mod:`azimut_env.observation`: the layout table's fields, clipped) →
+   stall check (termination, with its penalty).
+
+Where to add things: a sensor in :mod:`azimut_env.sensors` (its state in ``SensorState``), a
+reward term in :mod:`azimut_env.reward`, an observation field in :mod:`azimut_env.observation`,
+an end condition in :mod:`azimut_env.termination`, a setting in :class:`~azimut_env.config.TaskConfig`.
 
 Randomness comes from one ``numpy.random.Generator`` per robot, passed in by the caller (the single
 env's ``np_random``, or the vector env's sub-env generators). Each robot consumes its generator in
@@ -32,53 +47,23 @@ from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_tw
 
 from .blowup import BlowUp
 from .config import TaskConfig, resolve_params
+from .lap_time import nominal_duration, reference_lap_time  # noqa: F401 (re-exported)
+from .observation import (field_offsets, fill_observation, fill_row, observation_bounds, observation_layout,
+                          speed_along)
 from .params import RobotParams, _setpoints_row, action_from_setpoints
 from .physics import AzimutPhysics, BlowUpLimits, Obstacle, default_wheel_params
 from .physics_layout import CMD, MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
-from .sensors import _measure_kernel
-from .lap_time import nominal_duration, reference_lap_time  # noqa: F401 (nominal_duration: re-exported)
-from .tracks import TRACK_NAMES, Track, make_track, query_tracks
+from .reward import REWARD_TERMS, RewardTerm, charge_penalty, compute_rewards, reward_scales, reward_weights
+from .sensors import SensorState
+from .termination import check_stalls, check_track_limits, episode_step_limit
+from .tracks import TQ, TRACK_NAMES, Track, make_track, query_tracks
 from .validation import check_finite, check_index_list, check_int
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
            "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles", "nominal_duration", "reference_lap_time"]
 
-#: the reward terms, in the order of the columns of ``AzimutTask.reward_terms``
-REWARD_TERMS = ("progress", "lateral", "heading", "overspeed", "slip", "internal_force", "action_rate", "off_track")
 #: the keys ``reset(options=...)`` accepts
 RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
-
-
-def observation_layout(n: int, lookahead_count: int) -> dict[str, slice]:
-    """Names and slices of the observation vector for n wheels and K look-ahead points (see
-    :class:`~azimut_env.env.AzimutEnv`, "Observation Space")."""
-    sizes = [("lambda_hat", 3), ("mu_hat", 1), ("beta", n), ("phidot", n), ("motor_angle", n),
-             ("lateral_error", 1), ("heading_error", 1), ("speed_along", 1), ("speed_ref", 1),
-             ("lookahead", 3 * lookahead_count), ("prev_action", 2 * n)]
-    out, i = {}, 0
-    for name, size in sizes:
-        out[name] = slice(i, i + size)
-        i += size
-    return out
-
-
-def observation_bounds(n: int, lookahead_count: int, wheel_speed_max: float) -> tuple[np.ndarray, np.ndarray]:
-    """Finite (low, high) float32 bounds of the observation vector (the Box limits)."""
-    layout = observation_layout(n, lookahead_count)
-    size = max(s.stop for s in layout.values())
-    lo, hi = np.zeros(size), np.zeros(size)
-    bounds = dict(lambda_hat=1.0, mu_hat=10.0, beta=math.pi, phidot=3 * wheel_speed_max, motor_angle=math.pi,
-                  lateral_error=10.0, heading_error=math.pi, speed_along=10.0, speed_ref=10.0,
-                  lookahead=20.0, prev_action=1.0)
-    for name, sl in layout.items():
-        lo[sl], hi[sl] = -bounds[name], bounds[name]
-    la = layout["lookahead"]
-    hi_la = hi[la].reshape(-1, 3)
-    hi_la[:, 2] = math.pi
-    hi[la] = hi_la.ravel()
-    lo[la] = -hi[la]
-    lo[layout["speed_ref"]] = 0.0
-    return lo.astype(np.float32), hi.astype(np.float32)
 
 
 def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
@@ -127,115 +112,6 @@ def _shift_fifo_kernel(fifo, new, cmd, rows):
             for j in range(k - 1):
                 fifo[i, j] = fifo[i, j + 1]
             fifo[i, k - 1] = new[i]
-
-
-@njit(cache=True)
-def _draw_normals_kernel(rngs, rows, out):
-    """out[i] (3, n) = rngs[i].standard_normal((3, n)) for the rows where ``rows`` is True: the
-    same numbers, in the same order, as NumPy's (numba's Generator runs NumPy's algorithms on the
-    same bit generator state)."""
-    for i in range(len(rngs)):
-        if rows[i]:
-            rng = rngs[i]
-            for j in range(out.shape[1]):
-                for k in range(out.shape[2]):
-                    out[i, j, k] = rng.standard_normal()
-
-
-@njit(cache=True)
-def _reward_obs_kernel(rows, summ, track_out, look, obs_track, obs_look, obs_vel, s_prev, lengths, max_speeds, lam,
-                       mu, beta, phidot, motor, action, prev_action, weights, scales, dt, max_lat, lo, hi, v_along,
-                       reward, terms, off_track, finished, obs):
-    """For the robots where ``rows`` is True: speed along the path, reward terms and reward,
-    off-track and finished flags, and the observation (layout of :func:`observation_layout`;
-    non-finite values become 0, all clipped to [lo, hi]); prev_action takes the action.
-
-    The terms (columns of ``terms``, :data:`REWARD_TERMS`; the env docstring has their
-    magnitudes): progress w·clip(Δs, −v_max dt, v_ref dt)/(v_max dt) (backward jumps of the
-    projection clipped to one step at full speed); lateral and heading −w·(1 − exp(−|e|/scale));
-    overspeed −w·max(0, v_along − v_ref)/v_max; slip −min(w·P_slip, cap); internal force
-    −min(w·F_int, cap); action rate −w‖a − a_prev‖²; off-track −penalty.
-
-    The reward and flags use the true track state (``track_out``, ``summ``); the observation's
-    tracking errors, speeds and look-ahead use ``obs_track`` (N, 5), ``obs_look`` (N, K, 3) and the
-    world velocity ``obs_vel`` (N, 2) of the pose source (the same arrays when it is the truth)."""
-    n = beta.shape[1]
-    for i in range(rows.shape[0]):
-        if not rows[i]:
-            continue
-        s = track_out[i, 0]
-        lat = track_out[i, 1]
-        head = track_out[i, 2]
-        v_ref = track_out[i, 3]
-        psi = track_out[i, 4]
-        va = summ[i, RS.VX] * math.cos(psi) + summ[i, RS.VY] * math.sin(psi)
-        v_along[i] = va
-        off = abs(lat) > max_lat
-        off_track[i] = off
-        finished[i] = s >= lengths[i] - 1e-6
-        v_max = max(max_speeds[i], 1e-3)
-        da2 = 0.0
-        for j in range(action.shape[1]):
-            d = action[i, j] - prev_action[i, j]  # float32, as the actions
-            da2 += d * d
-        ds = min(max(s - s_prev[i], -v_max * dt), v_ref * dt + 1e-3 * dt)
-        t0 = weights[0] * ds / (v_max * dt)
-        t1 = -weights[1] * (1.0 - math.exp(-abs(lat) / scales[0]))
-        t2 = -weights[2] * (1.0 - math.exp(-abs(head) / scales[1]))
-        t3 = -weights[3] * max(0.0, va - v_ref) / v_max
-        t4 = -min(weights[4] * summ[i, RS.SLIP], scales[2])
-        t5 = -min(weights[5] * summ[i, RS.INTERNAL], scales[2])
-        t6 = -weights[6] * da2
-        t7 = -weights[7] if off else 0.0
-        terms[i, 0] = t0
-        terms[i, 1] = t1
-        terms[i, 2] = t2
-        terms[i, 3] = t3
-        terms[i, 4] = t4
-        terms[i, 5] = t5
-        terms[i, 6] = t6
-        terms[i, 7] = t7
-        reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7
-        for j in range(action.shape[1]):
-            prev_action[i, j] = action[i, j]
-        psi_o = obs_track[i, 4]
-        va_o = obs_vel[i, 0] * math.cos(psi_o) + obs_vel[i, 1] * math.sin(psi_o)
-        _fill_obs_row(obs[i], lam[i], mu[i], beta[i], phidot[i], motor[i], obs_track[i, 1], obs_track[i, 2], va_o,
-                      obs_track[i, 3], obs_look[i], prev_action[i], lo, hi, n)
-
-
-@njit(cache=True)
-def _fill_obs_row(obs, lam, mu, beta, phidot, motor, lat, head, v_along, v_ref, look, prev_action, lo, hi, n):
-    """One observation row in the layout of :func:`observation_layout`."""
-    i = 0
-    for j in range(3):
-        obs[i] = lam[j]
-        i += 1
-    obs[i] = mu
-    i += 1
-    for j in range(n):
-        obs[i] = beta[j]
-        obs[i + n] = phidot[j]
-        obs[i + 2 * n] = motor[j]
-        i += 1
-    i += 2 * n
-    obs[i] = lat
-    obs[i + 1] = head
-    obs[i + 2] = v_along
-    obs[i + 3] = v_ref
-    i += 4
-    for k in range(look.shape[0]):
-        for j in range(3):
-            obs[i] = look[k, j]
-            i += 1
-    for j in range(prev_action.shape[0]):
-        obs[i] = prev_action[j]
-        i += 1
-    for j in range(obs.shape[0]):
-        x = obs[j]
-        if not math.isfinite(x):
-            x = 0.0
-        obs[j] = min(max(x, lo[j]), hi[j])
 
 
 # ---------------------------------------------------------------------- the task over N robots
@@ -287,16 +163,14 @@ class AzimutTask:
         K = config.lookahead_count
         self.layout = observation_layout(n, K)
         self.obs_low, self.obs_high = observation_bounds(n, K, params.limits.wheel_speed_max)
-        self._weights = np.array([config.weights[k] for k in REWARD_TERMS])
-        self._scales = config.reward_scales
+        self._obs_offsets = field_offsets(n, K)
+        self._weights = reward_weights(config)
+        self._scales = reward_scales(config)
         lim = params.limits
         self._lim = (float(lim.steer_min), float(lim.steer_max), float(lim.wheel_speed_max))
-        sp = params.sensors
-        self._sensor_args = (float(config.control_period), sp.steer_noise, sp.motor_noise, sp.steer_resolution,
-                             int(sp.wheel_cpr), sp.wheel_speed_noise)
-        self.beta_m = np.zeros((N, n))
-        self.phidot_m = np.zeros((N, n))
-        self.motor_m = np.zeros((N, n))
+        self.sensors = SensorState(params.sensors, config.control_period, N, n)
+        # the last readings, by the names the task uses (the sensors' arrays, written in place)
+        self.beta_m, self.phidot_m, self.motor_m = self.sensors.beta, self.sensors.phidot, self.sensors.motor
         self.lam_hat = np.tile(np.array([0.0, 0.0, 1.0]), (N, 1))
         self.mu_hat = np.zeros(N)
         self.qua = np.ones(N)
@@ -307,11 +181,11 @@ class AzimutTask:
         self.v_ref = np.zeros(N)
         self.v_along = np.zeros(N)
         self.look = np.zeros((N, K, 3))
-        self.track_out = np.zeros((N, 5))
+        self.track_out = np.zeros((N, len(TQ)))
         self.prev_action = np.zeros((N, 2 * n), dtype=np.float32)
         self.obs = np.zeros((N, self.obs_low.shape[0]), dtype=np.float32)
         self.reward = np.zeros(N)
-        self.reward_terms = np.zeros((N, len(REWARD_TERMS)))
+        self.reward_terms = np.zeros((N, len(RewardTerm)))
         self.off_track = np.zeros(N, dtype=np.bool_)
         self.finished = np.zeros(N, dtype=np.bool_)
         self.stalled = np.zeros(N, dtype=np.bool_)
@@ -321,8 +195,6 @@ class AzimutTask:
         self.step_limit = np.full(N, np.iinfo(np.int64).max, dtype=np.int64)
         self.steps = np.zeros(N, dtype=np.int64)
         self.ready = np.zeros(N, dtype=np.bool_)  # robot i's last reset succeeded (step needs it)
-        self.steer_bias = np.zeros((N, n))
-        self.phi_prev = np.zeros((N, n))
         self.track_length = np.array([t.length for t in self.tracks])
         self.track_max_speed = np.array([t.max_speed for t in self.tracks])
         self.track_closed = np.array([t.closed for t in self.tracks], dtype=np.bool_)
@@ -331,12 +203,10 @@ class AzimutTask:
         self.kicks: list[dict | None] = [None] * N
         self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
-        self._normals = np.zeros((N, 3, n))
         # command latency: set-points waiting to be applied, oldest first (N, k, n, 2)
         self._cmd_fifo = np.zeros((N, config.action_latency, n, len(CMD)))
         self._cmd_new = np.zeros((N, n, len(CMD)))
         self._cmd_out = np.zeros((N, n, len(CMD)))  # the set-points leaving the FIFOs
-        self._meas = np.empty((N, 3, n))
         # the pose source (azimut_env.localisation): with "odometry", the pose estimate and the
         # track state seen from it; with "true" these stay unused and the observation reads the truth
         self.pose_source = config.pose_source
@@ -346,7 +216,7 @@ class AzimutTask:
         self._fix_sigma = np.array([loc.fix_noise_xy_m, loc.fix_noise_xy_m, loc.fix_noise_theta_rad])
         self.pose_est = np.zeros((N, 3))
         self.beta_m_prev = np.zeros((N, n))
-        self.track_out_est = np.zeros((N, 5))
+        self.track_out_est = np.zeros((N, len(TQ)))
         self.look_est = np.zeros((N, K, 3))
         self.vel_est = np.zeros((N, 2))
         self._loc_rngs: list[np.random.Generator | None] = [None] * N
@@ -462,8 +332,7 @@ class AzimutTask:
             self.kicks[i] = dict(options["kick"])
             self._kick_step[i] = self.kicks[i]["step"]
         self._randomize(i, rng)
-        sb = self.params.sensors.steer_bias
-        self.steer_bias[i] = rng.normal(0.0, sb, size=n) if sb > 0 else 0.0
+        self.sensors.draw_bias(i, rng)
         s0 = float(options.get("start_progress", 0.0))
         ref = track.sample(s0)
         noise = cfg.start_noise
@@ -477,7 +346,7 @@ class AzimutTask:
         if clash:
             raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
                              "move them off the start of the track")
-        self.phi_prev[i] = phys.motor_state[i, :, MS.PHI]
+        self.sensors.start(i, phys.motor_state[i, :, MS.PHI])
         self.prev_action[i] = action_from_setpoints(beta, np.zeros(n), self.params.limits)
         self.steps[i] = 0
         self.reward[i] = 0.0
@@ -486,15 +355,10 @@ class AzimutTask:
         self.finished[i] = False
         self.stalled[i] = False
         self.best_step[i] = 0
-        factor = self.config.time_limit_factor
-        if factor > 0:
-            steps = factor * reference_lap_time(track, self.params.geometry, self.params.limits) / self.config.control_period
-        else:
-            steps = 0.0
-        big = np.iinfo(np.int64).max  # no limit (factor 0), or one beyond any run (a huge factor)
-        self.step_limit[i] = int(math.ceil(steps)) if 0 < steps < 9e18 else big
+        self.step_limit[i] = episode_step_limit(track, cfg.time_limit_factor, cfg.control_period,
+                                                self.params.geometry, self.params.limits)
         sl = slice(i, i + 1)
-        rng.standard_normal(out=self._normals[i])
+        self.sensors.draw_noise_robot(i, rng)
         self._measure(sl)
         self._estimate(sl)
         s_, look = track.query_batch(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
@@ -502,9 +366,7 @@ class AzimutTask:
         self.look[i] = look[0]
         self._unpack_track(sl)
         self.s_best[i] = self.s[i]
-        psi = self.track_out[i, 4]
-        summ = phys.summary[i]
-        self.v_along[i] = summ[RS.VX] * math.cos(psi) + summ[RS.VY] * math.sin(psi)
+        self.v_along[i] = speed_along(phys.summary[i, RS_VEL_WORLD], self.track_out[i, TQ.PSI])
         obs_track, obs_look, va = self.track_out[i], self.look[i], self.v_along[i]
         if self._odometry:
             # the localisation system's generator, spawned from the robot's; the first fix now
@@ -516,9 +378,9 @@ class AzimutTask:
             self.track_out_est[i] = s_[0]
             self.look_est[i] = look[0]
             obs_track, obs_look, va = self.track_out_est[i], self.look_est[i], 0.0
-        _fill_obs_row(self.obs[i], self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
-                      self.motor_m[i], obs_track[1], obs_track[2], va, obs_track[3], obs_look,
-                      self.prev_action[i], self.obs_low, self.obs_high, n)
+        fill_row(self.obs[i], self._obs_offsets, self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
+                 self.motor_m[i], obs_track[TQ.LATERAL], obs_track[TQ.HEADING], va, obs_track[TQ.V_REF], obs_look,
+                 self.prev_action[i], self.obs_low, self.obs_high)
 
     def reference_beta(self, track: Track, s: float, theta: float) -> np.ndarray:
         """Steering angles of the reference motion at progress s (direction only)."""
@@ -560,7 +422,7 @@ class AzimutTask:
         its reset), so that no NaN stays in the Space or in its joint, motor and tire states."""
         self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
         self._cmd_fifo[i] = self.physics.commands[i]
-        self.phi_prev[i] = 0.0
+        self.sensors.start(i, 0.0)
 
     def end_blown_up(self, codes: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
         """End the episodes of the robots (among ``rows``, default all) whose physics blew up in the
@@ -632,72 +494,58 @@ class AzimutTask:
         return phys.summary[:, RS.CODE]
 
     def observe(self, action: np.ndarray, rngs: Sequence[np.random.Generator], rows: np.ndarray | None = None) -> None:
-        """After :meth:`step_physics`: measurements, IT estimate, track state, reward and
-        observation for ``rows`` (default all), each robot drawing its sensor noise from its
+        """After :meth:`step_physics`, for ``rows`` (default all): sensors, IT estimate, track state,
+        termination, reward and observation, each robot drawing its sensor noise from its
         generator (``rngs``: a sequence of N generators, or a ``numba.typed.List`` of them, which
         draws for all robots in one compiled call with the same streams). Rows left out keep
-        their previous values except the raw measurements."""
-        rows = self._all if rows is None else rows
-        normals = self._normals
-        if isinstance(rngs, NumbaList):
-            _draw_normals_kernel(rngs, rows, normals)
-        elif rows is self._all:
-            for i, rng in enumerate(rngs):
-                rng.standard_normal(out=normals[i])
-        else:
-            for i in np.flatnonzero(rows):
-                rngs[i].standard_normal(out=normals[i])
+        their previous values except the raw measurements; ``action`` (N, 2n) is what
+        :meth:`apply_actions` returned."""
+        all_rows = rows is None
+        rows = self._all if all_rows else rows
+        self.sensors.draw_noise(rngs, rows, all_rows)
         s_prev = self.s.copy()
-        keep = None if rows is self._all or rows.all() else ~rows
+        keep = None if all_rows or rows is self._all or rows.all() else ~rows
         if keep is not None:
             saved = [a[keep].copy() for a in (self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat,
                                              self.head, self.v_ref, self.track_out, self.look)]
-        all_rows = slice(None)
-        self._measure(all_rows)
-        self._estimate(all_rows)
+        everyone = slice(None)
+        self._measure(everyone)
+        self._estimate(everyone)
         self._query_tracks(s_prev)
         if keep is not None:
             for a, v in zip((self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat, self.head,
                              self.v_ref, self.track_out, self.look), saved):
                 a[keep] = v
-        obs_track, obs_look, obs_vel = self._pose_source_state(rows)
-        _reward_obs_kernel(rows, self.physics.summary, self.track_out, self.look, obs_track, obs_look, obs_vel, s_prev,
-                           self.track_length, self.track_max_speed, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
-                           action, self.prev_action, self._weights, self._scales, self.config.control_period,
-                           self.config.max_lateral_error, self.obs_low, self.obs_high, self.v_along, self.reward,
-                           self.reward_terms, self.off_track, self.finished, self.obs)
-        self._check_stall(rows)
+        self._outputs(rows, action, s_prev)
 
-    def _check_stall(self, rows: np.ndarray) -> None:
-        """Stall termination (``stall_time`` > 0): a robot without ``stall_distance`` of new progress
-        for ``stall_time`` is flagged ``stalled`` and pays the off-track penalty (once)."""
-        cfg = self.config
-        better = rows & (self.s > self.s_best + cfg.stall_distance)
-        self.s_best[better] = self.s[better]
-        self.best_step[better] = self.steps[better]
-        if cfg.stall_time <= 0:
-            return
-        stalled = rows & ~self.off_track & ((self.steps - self.best_step) * cfg.control_period >= cfg.stall_time)
-        self.stalled[:] = stalled
-        if stalled.any():
-            col = REWARD_TERMS.index("off_track")
-            self.reward[stalled] += -cfg.off_track_penalty - self.reward_terms[stalled, col]
-            self.reward_terms[stalled, col] = -cfg.off_track_penalty
+    def _outputs(self, rows: np.ndarray, action: np.ndarray, s_prev: np.ndarray) -> None:
+        """Termination, reward and observation of ``rows`` (the stages of :mod:`.termination`,
+        :mod:`.reward` and :mod:`.observation`); ``prev_action`` takes the action."""
+        cfg, summary = self.config, self.physics.summary
+        check_track_limits(rows, self.track_out, self.track_length, cfg.max_lateral_error, self.off_track,
+                           self.finished)
+        compute_rewards(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
+                        summary[:, RS.SLIP], summary[:, RS.INTERNAL], action, self.prev_action, self.off_track,
+                        self._weights, self._scales, cfg.control_period, self.v_along, self.reward_terms, self.reward)
+        self.prev_action[rows] = action[rows]
+        obs_track, obs_look, obs_vel = self._pose_source_state(rows)
+        fill_observation(rows, self._obs_offsets, self.lam_hat, self.mu_hat, self.beta_m, self.phidot_m, self.motor_m,
+                         obs_track, obs_look, obs_vel, self.prev_action, self.obs_low, self.obs_high, self.obs)
+        stalled = check_stalls(rows, self.s, self.s_best, self.best_step, self.steps, self.off_track, cfg.stall_time,
+                               cfg.stall_distance, cfg.control_period)
+        if stalled is not None:
+            self.stalled[:] = stalled
+            if stalled.any():
+                charge_penalty(stalled, cfg.off_track_penalty, self.reward, self.reward_terms)
 
     # ------------------------------------------------------------------ stages
 
     def _measure(self, rows: slice) -> None:
-        """Sensors (``sensors`` models, compiled) on views of the physics arrays for ``rows``."""
+        """The sensors (:class:`~azimut_env.sensors.SensorState`) on the physics' true states of ``rows``."""
         phys = self.physics
         ms = phys.motor_state
-        beta_true = phys.wheel_summary[rows, :, WS.BETA] + self.steer_bias[rows]
-        out = self._meas[rows]
-        _measure_kernel(beta_true, ms[rows, :, MS.THETA], ms[rows, :, MS.PHI], self.phi_prev[rows], ms[rows, :, MS.PHIDOT],
-                        *self._sensor_args, self._normals[rows], out)
-        self.phi_prev[rows] = ms[rows, :, MS.PHI]
-        self.beta_m[rows] = out[:, 0]
-        self.motor_m[rows] = out[:, 1]
-        self.phidot_m[rows] = out[:, 2]
+        self.sensors.measure(rows, phys.wheel_summary[rows, :, WS.BETA], ms[rows, :, MS.THETA], ms[rows, :, MS.PHI],
+                             ms[rows, :, MS.PHIDOT])
 
     def _estimate(self, rows: slice) -> None:
         """The IT-estimated H state of ``rows``: one batched ``estimation.estimate_eta`` call."""
@@ -743,7 +591,7 @@ class AzimutTask:
             for i in idx[self.steps[idx] % self._fix_every == 0]:
                 self.pose_est[i] = self._fix(int(i))
         out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho, self.pose_est,
-                                 self.track_out_est[:, 0].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
+                                 self.track_out_est[:, TQ.S].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
         self.track_out_est[idx] = out[idx]
         self.look_est[idx] = look[idx]
         return self.track_out_est, self.look_est, self.vel_est
@@ -759,10 +607,10 @@ class AzimutTask:
 
     def _unpack_track(self, rows: slice) -> None:
         out = self.track_out[rows]
-        self.s[rows] = out[:, 0]
-        self.lat[rows] = out[:, 1]
-        self.head[rows] = out[:, 2]
-        self.v_ref[rows] = out[:, 3]
+        self.s[rows] = out[:, TQ.S]
+        self.lat[rows] = out[:, TQ.LATERAL]
+        self.head[rows] = out[:, TQ.HEADING]
+        self.v_ref[rows] = out[:, TQ.V_REF]
 
     # ------------------------------------------------------------------ pickling
 

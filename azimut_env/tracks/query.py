@@ -11,11 +11,22 @@ reads packed tracks (``control.follower_batch``).
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
 
-__all__ = ["wrap_angle", "wrap_pi", "interp1", "project_window_kernel", "query_batch_kernel", "query_tracks"]
+__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "project_window_kernel", "query_batch_kernel", "query_tracks"]
+
+
+class TQ(IntEnum):
+    """Columns of a robot's track state, the ``out`` rows of the queries (N, 5)."""
+
+    S = 0  #: progress s along the track [m] (unwrapped over laps)
+    LATERAL = 1  #: lateral error, positive to the left of the path direction [m]
+    HEADING = 2  #: heading error θ − θ_ref, wrapped [rad]
+    V_REF = 3  #: reference progress speed at s [m/s]
+    PSI = 4  #: path direction ψ at s [rad]
 
 
 def wrap_angle(a):
@@ -111,11 +122,11 @@ def _query_one(p, closed, length, rho, px, py, pth, s_hint, back, ahead, spacing
     yr = interp1(S, p[2], sw)
     thr = interp1(S, p[3], sw)
     psi = interp1(S, p[5], sw)
-    out[0] = s
-    out[1] = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
-    out[2] = wrap_pi(pth - thr)
-    out[3] = interp1(S, p[4], sw)
-    out[4] = psi
+    out[TQ.S] = s
+    out[TQ.LATERAL] = -(px - xr) * math.sin(psi) + (py - yr) * math.cos(psi)
+    out[TQ.HEADING] = wrap_pi(pth - thr)
+    out[TQ.V_REF] = interp1(S, p[4], sw)
+    out[TQ.PSI] = psi
     c, sn = math.cos(pth), math.sin(pth)
     for k in range(look.shape[0]):
         sk = s + spacing * (k + 1)
@@ -160,7 +171,7 @@ def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: in
     n = poses.shape[0]
     if hints.shape[0] != n or len(packs) != n or closed.shape[0] != n or length.shape[0] != n or rho.shape[0] != n:
         raise ValueError("query_tracks needs one track, flag, length, radius and s_hint per pose")
-    out = np.empty((n, 5))
+    out = np.empty((n, len(TQ)))
     look = np.empty((n, int(lookahead_count), 3))
     query_batch_kernel(packs, np.arange(n), closed, length, rho, poses, hints, back, ahead, spacing, out, look)
     return out, look
