@@ -31,6 +31,7 @@ from azimut_env.tracks import make_track
 
 from .campaign import (CampaignInterrupted, Task, TaskStore, add_executor_arguments, arg_seeds, check_executor_args,
                        resolve_executor, run_tasks, summarize)
+from .plots import comparison_plots, write_plots
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",
            "comparison_plots"]
@@ -188,50 +189,6 @@ def _save_trace(path: Path, log) -> None:
                         internal_force=log.internal_force, lateral=log.lateral, track_xy=log.track.xy)
 
 
-def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]:
-    """Overlay the controllers on one track: trajectories; slip power and internal force over
-    time. ``traces``: controller -> npz (t, pose, slip_power, internal_force, track_xy).
-    Returns the file names (relative to ``out``)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    files = []
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
-    first = next(iter(traces.values()))
-    ax.plot(first["track_xy"][:, 0], first["track_xy"][:, 1], "k--", lw=1, label="track")
-    for i, (controller, tr) in enumerate(traces.items()):
-        if tr["pose"].size:
-            ax.plot(tr["pose"][:, 0], tr["pose"][:, 1], color=f"C{i}", lw=1.2, label=controller)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"trajectories on {track}")
-    files.append(f"compare_{track}_trajectory.png")
-    fig.savefig(out / files[-1], dpi=100, bbox_inches="tight")
-    plt.close(fig)
-
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
-    for i, (controller, tr) in enumerate(traces.items()):
-        axes[0].plot(tr["t"], tr["slip_power"], color=f"C{i}", lw=0.7, label=controller)
-        axes[1].plot(tr["t"], tr["internal_force"], color=f"C{i}", lw=0.7, label=controller)
-    axes[0].set_ylabel("slip power Σ|F·v_slip| [W]")
-    axes[1].set_ylabel("internal force [N]")
-    axes[1].set_xlabel("t [s]")
-    axes[0].legend(fontsize=8, loc="upper right")
-    axes[0].set_title(f"slip and internal force over time on {track}")
-    fig.tight_layout()
-    files.append(f"compare_{track}_slip_force.png")
-    fig.savefig(out / files[-1], dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return files
-
-
-# ----------------------------------------------------------------------------------- report
-
-
 def _cell(stats: dict, fmt: str, scale: float) -> str:
     if not stats or stats.get("n", 0) == 0 or not math.isfinite(stats["mean"]):
         return "-"
@@ -343,7 +300,6 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
 
-    from .evaluate import write_plots
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

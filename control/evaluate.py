@@ -25,22 +25,19 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 import time
 import zipfile
 from pathlib import Path
-
-import numpy as np
 
 from azimut_env.tracks import TRACK_NAMES
 from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
 
 # the episode runner lives in control.episode; its names stay importable from here
 from .episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
-from .icr_controller import Mode
+from .plots import write_plots  # re-exported
 
-__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_report",
+__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots", "write_report",
            "add_arguments", "run"]
 
 #: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
@@ -102,101 +99,6 @@ def metrics_markdown(rows: list[dict]) -> str:
             cells.append(col[2].format(v) if v is not None else "-")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def _surface_samples(geom, n: int = 4000, seed: int = 0) -> np.ndarray:
-    from estimation.kinematics import steering_from_lambda
-
-    lam = np.random.default_rng(seed).normal(size=(n, 3))
-    return steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), geom)
-
-
-def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
-    """The five PNG plots of one run; returns their file names."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # ppo:PATH -> a file name
-    files = []
-    # 1. trajectory over the track (Fig. 9)
-    fig, ax = plt.subplots(figsize=(6, 6))
-    ax.plot(log.track.xy[:, 0], log.track.xy[:, 1], "k--", lw=1, label="track")
-    if log.pose.size:
-        ax.plot(log.pose[:, 0], log.pose[:, 1], "C0", lw=1.2, label=f"{log.controller}")
-        ev = np.flatnonzero(np.diff(log.mode) != 0) + 1 if log.mode.size else []
-        ev = [i for i in ev if log.mode[i] == int(Mode.RECONFIGURING)]
-        if len(ev):
-            ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"trajectory: {stem}")
-    files.append(f"{stem}_trajectory.png")
-    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # 2. pairwise β projections against the constraining surface (Fig. 10)
-    surf = _surface_samples(geom)
-    pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
-    fig, axes = plt.subplots(2, 3, figsize=(11, 7))
-    for ax, (i, j) in zip(axes.ravel(), pairs):
-        ax.plot(np.degrees(surf[:, i]), np.degrees(surf[:, j]), ".", color="0.75", ms=1, label="surface S(λ)")
-        if log.beta_meas.size:
-            ax.plot(np.degrees(log.beta_meas[:, i]), np.degrees(log.beta_meas[:, j]), ".", ms=1.5, color="C3",
-                    label="measured β")
-        ax.set_xlabel(f"β{i + 1} [deg]")
-        ax.set_ylabel(f"β{j + 1} [deg]")
-    axes[0, 0].legend(fontsize=7, markerscale=5)
-    fig.suptitle(f"measured steering vs constraining surface: {stem}")
-    fig.tight_layout()
-    files.append(f"{stem}_beta_pairs.png")
-    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # 3. qua over time (Fig. 11)
-    fig, ax = plt.subplots(figsize=(8, 3))
-    ax.plot(log.t, log.qua, lw=0.8)
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("qua")
-    ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
-    ax.set_title(f"quality of the measured steering configuration: {stem}")
-    files.append(f"{stem}_qua.png")
-    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
-    fig, ax = plt.subplots(figsize=(5, 5))
-    th = np.linspace(0, 2 * np.pi, 200)
-    ax.plot(np.cos(th), np.sin(th), "k", lw=0.8)
-    ax.plot(*geom.s_unit[:, :2].T, "k^", label="steering axes ŝ_k")
-    if log.lam_hat.size:
-        lam = log.lam_hat * np.where(log.lam_hat[:, 2:3] < 0, -1.0, 1.0)
-        ax.scatter(lam[:, 0], lam[:, 1], c=log.t, s=2, cmap="viridis", label="λ̂ (colour: time)")
-    ax.set_aspect("equal")
-    ax.set_xlabel("u")
-    ax.set_ylabel("v")
-    ax.legend(fontsize=7, loc="lower left")
-    ax.set_title(f"ICR on the sphere (w ≥ 0): {stem}")
-    files.append(f"{stem}_icr_sphere.png")
-    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    # 5. wheel commands against their limits
-    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "β̇_c [rad/s]"),
-                                (axes[1], log.phidot_cmd, limits.wheel_speed_max, "φ̇_c [rad/s]"),
-                                (axes[2], log.phiddot, limits.wheel_accel_max, "φ̈_c [rad/s²]")):
-        if data.size:
-            ax.plot(log.t, data, lw=0.6)
-        ax.axhline(lim, color="r", ls="--", lw=0.8)
-        ax.axhline(-lim, color="r", ls="--", lw=0.8)
-        ax.set_ylim(-2 * lim, 2 * lim)
-        ax.set_ylabel(name)
-    axes[-1].set_xlabel("t [s]")
-    axes[0].set_title(f"wheel commands and limits (dashed): {stem}")
-    files.append(f"{stem}_commands.png")
-    fig.savefig(out / files[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return files
 
 
 def write_report(rows: list[dict], out: Path, header: str = "") -> None:
