@@ -18,18 +18,11 @@ import numpy as np
 from numba import njit
 from numba.typed import List as NumbaList
 
-from azimut_env.tracks import Track, interp1, project_window_kernel, wrap_pi
+from azimut_env.tracks import Track, interp1, project_window_kernel, wrap_pi, wrap_progress
 
 from .path_follower import PathFollower, PathFollowerConfig
 
 __all__ = ["BatchFollower"]
-
-
-@njit(cache=True)
-def _wrap_s(s, closed, length):
-    if closed:
-        return s % length
-    return min(max(s, 0.0), length)
 
 
 @njit(cache=True)
@@ -50,7 +43,7 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
         s = project_window_kernel(S, P[1], P[2], P[3], cl, L, rho[i], px, py, pth, state[i, 0], 0.5, 1.0, True)
         state[i, 0] = s
         finished = s >= L - 1e-6
-        sw = _wrap_s(s, cl, L)
+        sw = wrap_progress(s, cl, L)
         x_r = interp1(S, P[1], sw)
         y_r = interp1(S, P[2], sw)
         th_r = interp1(S, P[3], sw)
@@ -58,11 +51,11 @@ def _follow_kernel(packs, stops, closed, length, rho, poses, rows, state, cfg, d
         s_ff = s + max(v_r * preview, preview_min)
         if not cl:
             s_ff = min(s_ff, L)
-        psi_ff = interp1(S, P[5], _wrap_s(s_ff, cl, L))
+        psi_ff = interp1(S, P[5], wrap_progress(s_ff, cl, L))
         psi_s = interp1(S, P[5], sw)
         if abs(wrap_pi(psi_ff - psi_s)) > corner_angle:
             s_ff = min(s + preview_min, L) if not cl else s + preview_min
-        sffw = _wrap_s(s_ff, cl, L)
+        sffw = wrap_progress(s_ff, cl, L)
         v_ff = interp1(S, P[4], sffw) * speed_scale
         kappa = 0.0
         stop = s_ff + 0.05

@@ -4,8 +4,8 @@
 The tracks enter as :meth:`~azimut_env.tracks.Track.packed` arrays (6, m) = rows (s, x, y, θ, v, ψ).
 One kernel, :func:`query_batch_kernel`, serves :meth:`Track.query` (one robot),
 :meth:`Track.query_batch` (N robots on one track) and :func:`query_tracks` (N robots on N tracks).
-The scalar helpers :func:`interp1` and :func:`wrap_pi` are public for other compiled code that
-reads packed tracks (``control.follower_batch``).
+The scalar helpers :func:`interp1`, :func:`wrap_pi` and :func:`wrap_progress` are public for other
+compiled code that reads packed tracks (``control.follower_batch``).
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "project_window_kernel", "query_batch_kernel", "query_tracks"]
+__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "wrap_progress", "project_window_kernel", "query_batch_kernel",
+           "query_tracks"]
 
 
 class TQ(IntEnum):
@@ -52,6 +53,15 @@ def interp1(S, col, s):
 def wrap_pi(a):
     """A scalar angle wrapped to ]−π, π] (compiled :func:`wrap_angle`)."""
     return math.pi - ((math.pi - a) % (2 * math.pi))
+
+
+@njit(cache=True)
+def wrap_progress(s, closed, length):
+    """Progress s [m] brought onto the track: modulo the length on a closed track, clipped to
+    [0, length] on an open one (compiled ``Track._wrap_s`` for a scalar)."""
+    if closed:
+        return s % length
+    return min(max(s, 0.0), length)
 
 
 @njit(cache=True)
@@ -129,8 +139,7 @@ def _query_one(p, closed, length, rho, px, py, pth, s_hint, back, ahead, spacing
     out[TQ.PSI] = psi
     c, sn = math.cos(pth), math.sin(pth)
     for k in range(look.shape[0]):
-        sk = s + spacing * (k + 1)
-        sk = sk % length if closed else min(max(sk, 0.0), length)
+        sk = wrap_progress(s + spacing * (k + 1), closed, length)
         dx = interp1(S, p[1], sk) - px
         dy = interp1(S, p[2], sk) - py
         look[k, 0] = c * dx + sn * dy
