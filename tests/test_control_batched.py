@@ -117,3 +117,28 @@ def test_batched_rejects_bad_input():
         a[k] = bad
         with pytest.raises(ValueError):
             icr_control_step_batch(state, *a, GEOM, LIM, cfg, DT)
+
+
+def test_single_robot_state_is_a_batch_of_one():
+    from control.icr_controller import ICRControllerState, Mode, icr_control_step, initial_state
+
+    beta0 = np.array([0.3, -0.2, 0.1, 1.2])
+    st = initial_state([0.0, 0.0, 1.0], beta0, np.zeros(GEOM.n), GEOM)
+    assert st.batch.num == 1
+    assert st.mode == Mode.RECONFIGURING and isinstance(st.mode, Mode)
+    assert isinstance(st.mu, float) and isinstance(st.events, int) and isinstance(st.mode_time, float)
+    np.testing.assert_array_equal(st.lam, st.batch.lam[0])
+    np.testing.assert_array_equal(st.reconfig_lam, [0.0, 0.0, 1.0])
+    cfg = ICRControllerConfig()
+    args = ([0.0, 0.0, 1.0], 0.0, beta0, np.zeros(GEOM.n), [1.0, 0.0, 0.0], 0.5)
+    one_state, one = icr_control_step(st, *args, GEOM, LIM, cfg, DT)
+    b_state, b = icr_control_step_batch(st.batch, *[np.asarray(a, dtype=float)[None] for a in args], GEOM, LIM, cfg, DT)
+    for name in ("beta", "phidot", "beta_rate", "beta_accel", "phiddot"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(b, name)[0])
+    np.testing.assert_array_equal(one_state.batch.lam, b_state.lam)
+    with pytest.raises(AttributeError):
+        st.has_beta_meas  # noqa: B018 (the flags stay inside the batch)
+    two = initial_state_batch(np.tile([0.0, 0.0, 1.0], (2, 1)), np.zeros((2, GEOM.n)), np.zeros((2, GEOM.n)), GEOM)
+    with pytest.raises(ValueError):
+        ICRControllerState(two)
+    assert two.robot(1).batch.num == 1

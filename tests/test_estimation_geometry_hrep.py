@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -172,3 +172,66 @@ def test_lambda_distance_identifies_antipodes():
 def test_hrep_bad_input(bad):
     with pytest.raises(ValueError):
         normalize(bad)
+
+
+# ---------------------------------------------------------------- motion of λ on the sphere
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-1, 1), min_size=6, max_size=6), st.floats(0.0, 3.0))
+def test_slerp_moves_along_the_great_circle_by_the_angle(xs, angle):
+    from estimation.hrep import slerp, sphere_angle
+
+    a, b = np.array(xs[:3]), np.array(xs[3:])
+    assume(np.linalg.norm(a) > 1e-2 and np.linalg.norm(b) > 1e-2)
+    a, b = normalize(a), normalize(b)
+    assume(np.linalg.norm(np.cross(a, b)) > 1e-3)
+    p = slerp(a, b, angle)
+    assert abs(np.linalg.norm(p) - 1.0) < 1e-12
+    assert abs(np.dot(p, np.cross(a, b))) < 1e-12  # on the great circle through a and b
+    assert abs(sphere_angle(a, p) - min(angle, 2 * np.pi - angle)) < 1e-9
+    theta = sphere_angle(a, b)
+    np.testing.assert_allclose(slerp(a, b, theta), b, atol=1e-12)
+
+
+def test_slerp_broadcasts_rows_and_angles_and_keeps_degenerate_pairs():
+    from estimation.hrep import slerp
+
+    rng = np.random.default_rng(3)
+    a, b = normalize(rng.normal(size=(5, 3))), normalize(rng.normal(size=(5, 3)))
+    b[2] = -a[2]  # antipodes: no unique great circle
+    ang = rng.uniform(0, 1, size=(5, 7))
+    out = slerp(a, b, ang)
+    assert out.shape == (5, 7, 3)
+    for i in range(5):
+        np.testing.assert_array_equal(out[i], slerp(a[i:i + 1], b[i:i + 1], ang[i:i + 1])[0])
+    np.testing.assert_array_equal(out[2], np.broadcast_to(a[2], (7, 3)))
+    assert slerp(a[0], b[0], ang[0]).shape == (7, 3)
+
+
+def test_exp_map_is_the_great_circle_of_its_tangent():
+    from estimation.hrep import exp_map, slerp, sphere_angle
+
+    rng = np.random.default_rng(4)
+    lam = normalize(rng.normal(size=(6, 3)))
+    t = rng.normal(size=(6, 3))
+    t -= np.sum(t * lam, axis=-1, keepdims=True) * lam  # tangent at λ
+    scale = np.array([0.0, 0.1, 0.5, 1.0])
+    v = t[:, None, :] * scale[None, :, None]
+    out = exp_map(lam, v)
+    assert out.shape == (6, 4, 3)
+    np.testing.assert_allclose(out[:, 0], lam, atol=1e-15)
+    arc = np.linalg.norm(v, axis=-1)
+    np.testing.assert_allclose(sphere_angle(lam[:, None, :], out), np.minimum(arc, 2 * np.pi - arc), atol=1e-12)
+    np.testing.assert_allclose(out[:, 2], slerp(lam, lam + t, arc[:, 2]), atol=1e-12)
+
+
+def test_nearer_representative_is_the_same_motion_within_a_quarter_turn():
+    from estimation.hrep import nearer_representative, sphere_angle, twist_from_eta
+
+    rng = np.random.default_rng(5)
+    lam, lam_d = normalize(rng.normal(size=(50, 3))), normalize(rng.normal(size=(50, 3)))
+    mu_d = rng.normal(size=50)
+    l2, m2 = nearer_representative(lam, lam_d, mu_d)
+    np.testing.assert_allclose(twist_from_eta(l2, m2), twist_from_eta(lam_d, mu_d), atol=1e-15)
+    assert np.all(sphere_angle(lam, l2) <= np.pi / 2 + 1e-12)
