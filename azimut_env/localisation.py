@@ -27,9 +27,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
+from estimation import integrate_pose, odometry_twist
+
+from .tracks import TQ
 from .validation import check_nonnegative, check_range
 
-__all__ = ["POSE_SOURCES", "LocalisationParams", "check_pose_source"]
+__all__ = ["POSE_SOURCES", "LocalisationParams", "check_pose_source", "OdometryPoses"]
 
 #: the values of the envs' ``pose_source`` argument
 POSE_SOURCES = ("true", "odometry")
@@ -72,3 +77,59 @@ class LocalisationParams:
         if self.fix_period_s == math.inf:
             return 0
         return max(1, int(round(self.fix_period_s / control_period)))
+
+
+class OdometryPoses:
+    """The pose estimates of N robots with ``pose_source="odometry"``, and the track state seen
+    from them (filled by the task's track query).
+
+    Attributes (leading axis N): ``pose`` (N, 3) the estimates (x, y, θ); ``vel`` (N, 2) the
+    world velocity of the odometry twist at mid-period; ``beta_prev`` (N, n) the measured steering
+    angles of the previous step (for β̇); ``track_state`` (N, 5) (columns
+    :class:`~azimut_env.tracks.TQ`) and ``look`` (N, K, 3): the track state and look-ahead
+    points of the estimates.
+    """
+
+    def __init__(self, params: LocalisationParams, control_period: float, geometry, n_robots: int, n: int,
+                 lookahead_count: int) -> None:
+        self.dt = float(control_period)
+        self.geometry = geometry
+        self.fix_every = params.fix_every(control_period)
+        self.fix_sigma = np.array([params.fix_noise_xy_m, params.fix_noise_xy_m, params.fix_noise_theta_rad])
+        self.pose = np.zeros((n_robots, 3))
+        self.vel = np.zeros((n_robots, 2))
+        self.beta_prev = np.zeros((n_robots, n))
+        self.track_state = np.zeros((n_robots, len(TQ)))
+        self.look = np.zeros((n_robots, lookahead_count, 3))
+        self._rngs: list[np.random.Generator | None] = [None] * n_robots
+
+    def fix(self, i: int, true_pose: np.ndarray) -> np.ndarray:
+        """A localisation fix of robot i: its true pose plus Gaussian noise (draws 3 normals)."""
+        return true_pose + self.fix_sigma * self._rngs[i].standard_normal(3)
+
+    def reset_robot(self, i: int, rng: np.random.Generator, true_pose: np.ndarray, beta_measured: np.ndarray) -> None:
+        """Robot i's new episode: its localisation generator, spawned from ``rng`` (one draw), and
+        the first fix; at rest."""
+        self._rngs[i] = np.random.default_rng(int(rng.integers(0, 2**63 - 1)))
+        self.beta_prev[i] = beta_measured
+        self.pose[i] = self.fix(i, true_pose)
+        self.vel[i] = 0.0
+
+    def advance(self, idx: np.ndarray, lam_hat: np.ndarray, phidot: np.ndarray, beta: np.ndarray,
+                steps: np.ndarray, true_poses: np.ndarray) -> None:
+        """One control period of dead reckoning for the robots ``idx`` from their IT estimate λ̂
+        (N, 3), measured φ̇ and β (N, n); then a fix where one is due (``steps`` (N,) since the
+        reset a multiple of ``fix_every``), from ``true_poses`` (N, 3)."""
+        dt = self.dt
+        beta_rate = (beta[idx] - self.beta_prev[idx]) / dt
+        twist = odometry_twist(lam_hat[idx], phidot[idx], beta[idx], beta_rate, self.geometry)
+        pose = integrate_pose(self.pose[idx], twist, dt)
+        self.beta_prev[idx] = beta[idx]
+        th = pose[:, 2] - 0.5 * twist[:, 2] * dt  # the heading at mid-period
+        c, sn = np.cos(th), np.sin(th)
+        self.vel[idx, 0] = c * twist[:, 0] - sn * twist[:, 1]
+        self.vel[idx, 1] = sn * twist[:, 0] + c * twist[:, 1]
+        self.pose[idx] = pose
+        if self.fix_every > 0:
+            for i in idx[steps[idx] % self.fix_every == 0]:
+                self.pose[i] = self.fix(int(i), true_poses[i])

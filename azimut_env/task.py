@@ -40,79 +40,29 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-from numba import njit
 from numba.typed import List as NumbaList
 
-from estimation import estimate_eta, eta_from_twist, integrate_pose, odometry_twist, steering_from_lambda
+from estimation import estimate_eta, eta_from_twist, steering_from_lambda
 
 from .blowup import BlowUp
 from .config import TaskConfig, resolve_params
+from .localisation import OdometryPoses
 from .lap_time import nominal_duration, reference_lap_time  # noqa: F401 (re-exported)
 from .observation import (field_offsets, fill_observation, fill_row, observation_bounds, observation_layout,
                           speed_along)
-from .params import RobotParams, _setpoints_row, action_from_setpoints
-from .physics import AzimutPhysics, BlowUpLimits, Obstacle, default_wheel_params
-from .physics_layout import CMD, MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
+from .actions import CommandPath
+from .params import RobotParams, action_from_setpoints
+from .physics import AzimutPhysics, BlowUpLimits, default_wheel_params
+from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
+from .reset_options import RESET_OPTIONS, check_reset_options, check_track, coerce_obstacles  # noqa: F401
 from .reward import REWARD_TERMS, RewardTerm, charge_penalty, compute_rewards, reward_scales, reward_weights
 from .sensors import SensorState
 from .termination import check_stalls, check_track_limits, episode_step_limit
-from .tracks import TQ, TRACK_NAMES, Track, make_track, query_tracks
-from .validation import check_finite, check_index_list, check_int
+from .tracks import TQ, Track, make_track, query_tracks
+from .validation import check_int
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
            "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles", "nominal_duration", "reference_lap_time"]
-
-#: the keys ``reset(options=...)`` accepts
-RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
-
-
-def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
-    """A sequence of obstacle specs (``Obstacle``, ``(x, y, radius)``, a dict of its fields or a
-    vertex list) as a tuple of :class:`~azimut_env.physics.Obstacle`; ``ValueError`` otherwise."""
-    if obstacles is None:
-        return ()
-    if isinstance(obstacles, (str, bytes, dict, Obstacle)) or not hasattr(obstacles, "__iter__"):
-        raise TypeError(f"{what} must be a sequence of obstacles, got {type(obstacles).__name__}")
-    try:
-        return tuple(Obstacle.coerce(o) for o in obstacles)
-    except (ValueError, TypeError) as exc:
-        raise ValueError(f"{what}: {exc}") from None
-
-
-# ---------------------------------------------------------------------- compiled stages
-
-
-@njit(cache=True)
-def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
-    """Actions a (N, 2n) float32 for the robots where ``rows`` is True: return the first row with
-    NaN/inf (writing nothing), else clip them to [−1, 1] in place and write the set-points of
-    ``params.setpoints_from_action`` into cmd (N, n, 2) and return −1."""
-    n = cmd.shape[1]
-    for i in range(a.shape[0]):
-        if rows[i]:
-            for j in range(a.shape[1]):
-                if not math.isfinite(a[i, j]):
-                    return i
-    for i in range(a.shape[0]):
-        if rows[i]:
-            for j in range(a.shape[1]):
-                a[i, j] = min(max(a[i, j], -1.0), 1.0)
-            _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
-    return -1
-
-
-@njit(cache=True)
-def _shift_fifo_kernel(fifo, new, cmd, rows):
-    """Command latency, for the robots where ``rows`` is True: the oldest set-points fifo[i, 0]
-    go to cmd[i], the queue (N, k, n, 2) moves up by one and new[i] enters at its end."""
-    k = fifo.shape[1]
-    for i in range(fifo.shape[0]):
-        if rows[i]:
-            cmd[i] = fifo[i, 0]
-            for j in range(k - 1):
-                fifo[i, j] = fifo[i, j + 1]
-            fifo[i, k - 1] = new[i]
-
 
 # ---------------------------------------------------------------------- the task over N robots
 
@@ -145,7 +95,7 @@ class AzimutTask:
         self.n_robots = check_int("n_robots", n_robots, min_value=1)
         self.n = params.n
         self.params = params
-        track = self.check_track(track)
+        track = check_track(track)
         obstacles = coerce_obstacles(obstacles)
         self._builtin: dict[str, Track] = {}
         self.params = params
@@ -166,8 +116,6 @@ class AzimutTask:
         self._obs_offsets = field_offsets(n, K)
         self._weights = reward_weights(config)
         self._scales = reward_scales(config)
-        lim = params.limits
-        self._lim = (float(lim.steer_min), float(lim.steer_max), float(lim.wheel_speed_max))
         self.sensors = SensorState(params.sensors, config.control_period, N, n)
         # the last readings, by the names the task uses (the sensors' arrays, written in place)
         self.beta_m, self.phidot_m, self.motor_m = self.sensors.beta, self.sensors.phidot, self.sensors.motor
@@ -203,79 +151,19 @@ class AzimutTask:
         self.kicks: list[dict | None] = [None] * N
         self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
-        # command latency: set-points waiting to be applied, oldest first (N, k, n, 2)
-        self._cmd_fifo = np.zeros((N, config.action_latency, n, len(CMD)))
-        self._cmd_new = np.zeros((N, n, len(CMD)))
-        self._cmd_out = np.zeros((N, n, len(CMD)))  # the set-points leaving the FIFOs
-        # the pose source (azimut_env.localisation): with "odometry", the pose estimate and the
-        # track state seen from it; with "true" these stay unused and the observation reads the truth
+        self.commands = CommandPath(params.limits, N, n, config.action_latency)
+        # the pose source (azimut_env.localisation): with "odometry", the pose estimates and the
+        # track state seen from them; with "true" (None) the observation reads the truth
         self.pose_source = config.pose_source
-        self._odometry = config.pose_source == "odometry"
-        self._fix_every = config.localisation.fix_every(config.control_period)
-        loc = config.localisation
-        self._fix_sigma = np.array([loc.fix_noise_xy_m, loc.fix_noise_xy_m, loc.fix_noise_theta_rad])
-        self.pose_est = np.zeros((N, 3))
-        self.beta_m_prev = np.zeros((N, n))
-        self.track_out_est = np.zeros((N, len(TQ)))
-        self.look_est = np.zeros((N, K, 3))
-        self.vel_est = np.zeros((N, 2))
-        self._loc_rngs: list[np.random.Generator | None] = [None] * N
+        self.odometry = (OdometryPoses(config.localisation, config.control_period, params.geometry, N, n, K)
+                         if config.pose_source == "odometry" else None)
 
     # ------------------------------------------------------------------ reset
 
     def check_reset_options(self, options: dict[str, Any] | None, fresh_space: bool = False) -> dict[str, Any]:
-        """Validate ``reset`` options without touching any state; return them normalised.
-
-        Keys (all optional): ``track`` (a :class:`Track` or a built-in name), ``obstacles`` (only
-        with ``fresh_space``: a Space of one's own), ``kick`` (a dict with ``step`` (int >= 0),
-        ``wheels`` (distinct wheel indices, ints in 0..n−1), ``impulse`` [N·m·s], finite) and
-        ``start_progress`` [m], finite. Raises ``ValueError``/``TypeError`` on anything else."""
-        if options is None:
-            return {}
-        if not isinstance(options, dict):
-            raise TypeError(f"reset options must be a dict or None, got {type(options).__name__}")
-        unknown = set(options) - RESET_OPTIONS
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(map(str, unknown))}; valid: {sorted(RESET_OPTIONS)}")
-        out: dict[str, Any] = {}
-        if "track" in options:
-            out["track"] = self.check_track(options["track"], "options['track']")
-        if "obstacles" in options:
-            if not fresh_space or self.n_robots != 1:
-                raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
-                                 "obstacles between sub-envs (pass obstacles= to the constructor)")
-            out["obstacles"] = coerce_obstacles(options["obstacles"], "options['obstacles']")
-        if "kick" in options:
-            out["kick"] = self.check_kick(options["kick"])
-        if "start_progress" in options:
-            out["start_progress"] = check_finite("options['start_progress']", options["start_progress"])
-        return out
-
-    def check_kick(self, kick: Any) -> dict[str, Any]:
-        """A validated ``kick`` option: ``{"step": int >= 0, "wheels": [int], "impulse": float}``."""
-        if not isinstance(kick, dict):
-            raise TypeError(f"options['kick'] must be a dict, got {type(kick).__name__}")
-        extra = set(kick) - {"step", "wheels", "impulse"}
-        if extra:
-            raise ValueError(f"options['kick'] takes keys 'step', 'wheels', 'impulse', got {sorted(map(str, extra))}")
-        return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0),
-                    wheels=check_index_list("options['kick']['wheels']", kick.get("wheels", range(self.n)), self.n),
-                    impulse=check_finite("options['kick']['impulse']", kick.get("impulse", 0.5)))
-
-    def check_track(self, track: Any, what: str = "track") -> str | Track:
-        """A built-in track name or a :class:`Track` that fits in the simulated world."""
-        if isinstance(track, str):
-            if track not in TRACK_NAMES:
-                raise ValueError(f"{what}: unknown track {track!r}; choose from {list(TRACK_NAMES)} or pass a Track")
-            return track
-        if not isinstance(track, Track):
-            raise TypeError(f"{what} must be a Track or a built-in name, got {type(track).__name__}")
-        reach, world = float(np.max(np.abs(track.xy))), 0.9 * BlowUpLimits().position
-        if reach > world:
-            raise ValueError(f"{what}: the track reaches {reach:.3g} m from the origin; the simulated world ends at "
-                             f"|x|, |y| = {BlowUpLimits().position:g} m (BlowUpLimits.position): translate it "
-                             f"within {world:g} m")
-        return track
+        """:func:`~azimut_env.reset_options.check_reset_options` for this task's robots
+        (``obstacles`` only with ``fresh_space`` and a single robot)."""
+        return check_reset_options(options, self.n, own_space=fresh_space and self.n_robots == 1)
 
     def builtin_track(self, name: str, rng: np.random.Generator) -> Track:
         """The built-in track ``name`` (built once; ``random`` draws a new one from ``rng``)."""
@@ -341,7 +229,7 @@ class AzimutTask:
         geom = self.params.geometry
         beta = np.clip(beta, geom.steer_min + 1e-6, geom.steer_max)
         phys.reset_robot(i, pose, beta)
-        self._cmd_fifo[i] = phys.commands[i]  # latency: the reset set-points are held for k steps
+        self.commands.reset_robot(i, phys.commands[i])  # latency: the reset set-points are held for k steps
         clash = phys.overlapping_obstacles(i)
         if clash:
             raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
@@ -368,16 +256,13 @@ class AzimutTask:
         self.s_best[i] = self.s[i]
         self.v_along[i] = speed_along(phys.summary[i, RS_VEL_WORLD], self.track_out[i, TQ.PSI])
         obs_track, obs_look, va = self.track_out[i], self.look[i], self.v_along[i]
-        if self._odometry:
-            # the localisation system's generator, spawned from the robot's; the first fix now
-            self._loc_rngs[i] = np.random.default_rng(int(rng.integers(0, 2**63 - 1)))
-            self.beta_m_prev[i] = self.beta_m[i]
-            self.pose_est[i] = self._fix(i)
-            self.vel_est[i] = 0.0
-            s_, look = track.query_batch(self.pose_est[sl], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
-            self.track_out_est[i] = s_[0]
-            self.look_est[i] = look[0]
-            obs_track, obs_look, va = self.track_out_est[i], self.look_est[i], 0.0
+        odo = self.odometry
+        if odo is not None:  # the localisation system's generator, spawned from the robot's; the first fix now
+            odo.reset_robot(i, rng, phys.summary[i, RS_POSE], self.beta_m[i])
+            s_, look = track.query_batch(odo.pose[sl], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+            odo.track_state[i] = s_[0]
+            odo.look[i] = look[0]
+            obs_track, obs_look, va = odo.track_state[i], odo.look[i], 0.0
         fill_row(self.obs[i], self._obs_offsets, self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
                  self.motor_m[i], obs_track[TQ.LATERAL], obs_track[TQ.HEADING], va, obs_track[TQ.V_REF], obs_look,
                  self.prev_action[i], self.obs_low, self.obs_high)
@@ -421,7 +306,7 @@ class AzimutTask:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
         its reset), so that no NaN stays in the Space or in its joint, motor and tire states."""
         self.physics.reset_robot(i, (0.0, 0.0, 0.0), np.zeros(self.n))
-        self._cmd_fifo[i] = self.physics.commands[i]
+        self.commands.reset_robot(i, self.physics.commands[i])
         self.sensors.start(i, 0.0)
 
     def end_blown_up(self, codes: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
@@ -456,30 +341,10 @@ class AzimutTask:
     # ------------------------------------------------------------------ step
 
     def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all).
-
-        With ``config.action_latency`` = k > 0 the set-points enter the rows' FIFOs and the ones
-        given k calls earlier go to the motors. Returns the clipped float32 copy. Raises
-        ``ValueError`` (changing nothing) on NaN or inf."""
-        a = np.asarray(actions)
-        if a.dtype.kind not in "biuf":
-            raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
-        with np.errstate(over="ignore"):  # beyond float32: inf, refused below
-            a = np.array(a, dtype=np.float32)
-        if a.shape != (self.n_robots, 2 * self.n):
-            raise ValueError(f"actions must have shape {(self.n_robots, 2 * self.n)}, got {np.shape(actions)}")
-        rows = self._all if rows is None else rows
-        fifo = self._cmd_fifo
-        delayed = fifo.shape[1] > 0
-        bad = _apply_actions_kernel(a, self._cmd_new, rows, *self._lim)
-        if bad >= 0:
-            raise ValueError(f"action contains NaN or inf (robot {bad}): {np.asarray(actions)[bad]}")
-        cmd = self._cmd_new
-        if delayed:
-            cmd = self._cmd_out
-            _shift_fifo_kernel(fifo, self._cmd_new, cmd, rows)
-        self.physics.set_setpoints(cmd, None if rows is self._all else rows)
-        return a
+        """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all),
+        through the latency FIFO (:class:`~azimut_env.actions.CommandPath`). Returns the clipped
+        float32 copy; ``ValueError`` (changing nothing) on NaN or inf."""
+        return self.commands.apply(actions, self.physics, None if rows is None or rows is self._all else rows)
 
     def step_physics(self) -> np.ndarray:
         """Kicks due now, then one control period of physics for all robots. Returns the blow-up
@@ -556,45 +421,30 @@ class AzimutTask:
         self.beta_est[rows] = beta_est
         self.qua[rows] = qua
 
-    def _fix(self, i: int) -> np.ndarray:
-        """A localisation fix of robot i: its true pose plus Gaussian noise (draws 3 normals)."""
-        return self.physics.summary[i, RS_POSE] + self._fix_sigma * self._loc_rngs[i].standard_normal(3)
-
     def pose_estimate(self, i: int) -> np.ndarray:
         """Robot i's pose (x, y, θ) as the observation sees it: the estimate with
         ``pose_source="odometry"``, the true pose otherwise."""
-        return self.pose_est[i].copy() if self._odometry else self.physics.summary[i, RS_POSE].copy()
+        return self.odometry.pose[i].copy() if self.odometry else self.physics.summary[i, RS_POSE].copy()
 
     def pose_estimates(self) -> np.ndarray:
         """(N, 3) :meth:`pose_estimate` of every robot."""
-        return self.pose_est.copy() if self._odometry else self.physics.chassis_pose()
+        return self.odometry.pose.copy() if self.odometry else self.physics.chassis_pose()
 
     def _pose_source_state(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The track state (N, 5), look-ahead (N, K, 3) and world velocity (N, 2) that the
-        observation uses: the true ones, or (odometry) those of the pose estimate, which this
-        advances for ``rows`` by one control period of dead reckoning (and a fix where one is due)."""
-        if not self._odometry:
+        observation uses: the true ones, or (odometry) those of the pose estimates, which this
+        advances for ``rows`` by one control period (:class:`~azimut_env.localisation.OdometryPoses`)."""
+        odo = self.odometry
+        if odo is None:
             return self.track_out, self.look, self.physics.summary[:, RS_VEL_WORLD]
-        cfg, geom = self.config, self.params.geometry
-        dt = cfg.control_period
+        cfg = self.config
         idx = np.flatnonzero(rows)
-        beta_rate = (self.beta_m[idx] - self.beta_m_prev[idx]) / dt
-        twist = odometry_twist(self.lam_hat[idx], self.phidot_m[idx], self.beta_m[idx], beta_rate, geom)
-        pose = integrate_pose(self.pose_est[idx], twist, dt)
-        self.beta_m_prev[idx] = self.beta_m[idx]
-        th = pose[:, 2] - 0.5 * twist[:, 2] * dt  # the heading at mid-period
-        c, sn = np.cos(th), np.sin(th)
-        self.vel_est[idx, 0] = c * twist[:, 0] - sn * twist[:, 1]
-        self.vel_est[idx, 1] = sn * twist[:, 0] + c * twist[:, 1]
-        self.pose_est[idx] = pose
-        if self._fix_every > 0:
-            for i in idx[self.steps[idx] % self._fix_every == 0]:
-                self.pose_est[i] = self._fix(int(i))
-        out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho, self.pose_est,
-                                 self.track_out_est[:, TQ.S].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
-        self.track_out_est[idx] = out[idx]
-        self.look_est[idx] = look[idx]
-        return self.track_out_est, self.look_est, self.vel_est
+        odo.advance(idx, self.lam_hat, self.phidot_m, self.beta_m, self.steps, self.physics.summary[:, RS_POSE])
+        out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho, odo.pose,
+                                 odo.track_state[:, TQ.S].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
+        odo.track_state[idx] = out[idx]
+        odo.look[idx] = look[idx]
+        return odo.track_state, odo.look, odo.vel
 
     def _query_tracks(self, s_hint: np.ndarray) -> None:
         """Every robot's track state, each on its own track, in one compiled call."""

@@ -78,11 +78,11 @@ def test_refused_action_leaves_the_queue_alone():
     env = AzimutEnv(action_latency=2)
     env.reset(seed=0)
     task = env.unwrapped.task
-    fifo = task._cmd_fifo.copy()
+    fifo = task.commands.fifo.copy()
     bad = np.full(8, np.nan, dtype=np.float32)
     with pytest.raises(ValueError):
         env.step(bad)
-    assert np.array_equal(task._cmd_fifo, fifo)
+    assert np.array_equal(task.commands.fifo, fifo)
 
 
 def test_vector_env_with_latency_matches_single_envs():

@@ -1,0 +1,91 @@
+"""The options of ``reset`` and the constructor arguments that name a track or obstacles, checked
+where they enter: each function validates and normalises without touching any state, so a refused
+option changes nothing (``AzimutTask.reset_robot`` applies them).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .blowup import BlowUpLimits
+from .obstacles import Obstacle
+from .tracks import TRACK_NAMES, Track
+from .validation import check_finite, check_index_list, check_int
+
+__all__ = ["RESET_OPTIONS", "check_reset_options", "check_kick", "check_track", "coerce_obstacles"]
+
+#: the keys ``reset(options=...)`` accepts
+RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
+
+
+def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
+    """A sequence of obstacle specs (``Obstacle``, ``(x, y, radius)``, a dict of its fields or a
+    vertex list) as a tuple of :class:`~azimut_env.physics.Obstacle`; ``ValueError`` otherwise."""
+    if obstacles is None:
+        return ()
+    if isinstance(obstacles, (str, bytes, dict, Obstacle)) or not hasattr(obstacles, "__iter__"):
+        raise TypeError(f"{what} must be a sequence of obstacles, got {type(obstacles).__name__}")
+    try:
+        return tuple(Obstacle.coerce(o) for o in obstacles)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{what}: {exc}") from None
+
+
+def check_reset_options(options: dict[str, Any] | None, n: int, own_space: bool = False) -> dict[str, Any]:
+    """Validate ``reset`` options without touching any state; return them normalised.
+
+    For robots with n wheels; ``own_space``: the robot has a physics Space of its own (the single
+    env), which per-episode obstacles need. Keys (all optional): ``track`` (a :class:`Track` or a
+    built-in name), ``obstacles`` (only with ``own_space``), ``kick`` (a dict with ``step`` (int
+    >= 0), ``wheels`` (distinct wheel indices, ints in 0..n−1), ``impulse`` [N·m·s], finite) and
+    ``start_progress`` [m], finite. Raises ``ValueError``/``TypeError`` on anything else."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise TypeError(f"reset options must be a dict or None, got {type(options).__name__}")
+    unknown = set(options) - RESET_OPTIONS
+    if unknown:
+        raise ValueError(f"unknown reset options {sorted(map(str, unknown))}; valid: {sorted(RESET_OPTIONS)}")
+    out: dict[str, Any] = {}
+    if "track" in options:
+        out["track"] = check_track(options["track"], "options['track']")
+    if "obstacles" in options:
+        if not own_space:
+            raise ValueError("per-episode obstacles need a Space of their own: the vector env shares its "
+                             "obstacles between sub-envs (pass obstacles= to the constructor)")
+        out["obstacles"] = coerce_obstacles(options["obstacles"], "options['obstacles']")
+    if "kick" in options:
+        out["kick"] = check_kick(options["kick"], n)
+    if "start_progress" in options:
+        out["start_progress"] = check_finite("options['start_progress']", options["start_progress"])
+    return out
+
+
+def check_kick(kick: Any, n: int) -> dict[str, Any]:
+    """A validated ``kick`` option: ``{"step": int >= 0, "wheels": [int], "impulse": float}``."""
+    if not isinstance(kick, dict):
+        raise TypeError(f"options['kick'] must be a dict, got {type(kick).__name__}")
+    extra = set(kick) - {"step", "wheels", "impulse"}
+    if extra:
+        raise ValueError(f"options['kick'] takes keys 'step', 'wheels', 'impulse', got {sorted(map(str, extra))}")
+    return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0),
+                wheels=check_index_list("options['kick']['wheels']", kick.get("wheels", range(n)), n),
+                impulse=check_finite("options['kick']['impulse']", kick.get("impulse", 0.5)))
+
+
+def check_track(track: Any, what: str = "track") -> str | Track:
+    """A built-in track name or a :class:`Track` that fits in the simulated world."""
+    if isinstance(track, str):
+        if track not in TRACK_NAMES:
+            raise ValueError(f"{what}: unknown track {track!r}; choose from {list(TRACK_NAMES)} or pass a Track")
+        return track
+    if not isinstance(track, Track):
+        raise TypeError(f"{what} must be a Track or a built-in name, got {type(track).__name__}")
+    reach, world = float(np.max(np.abs(track.xy))), 0.9 * BlowUpLimits().position
+    if reach > world:
+        raise ValueError(f"{what}: the track reaches {reach:.3g} m from the origin; the simulated world ends at "
+                         f"|x|, |y| = {BlowUpLimits().position:g} m (BlowUpLimits.position): translate it "
+                         f"within {world:g} m")
+    return track
