@@ -16,8 +16,6 @@ import inspect
 from dataclasses import MISSING, dataclass, field, fields, replace
 from typing import Any, Callable
 
-import numpy as np
-
 from .localisation import LocalisationParams, check_pose_source
 from .params import RobotParams, SensorParams
 from .validation import check_int, check_nonnegative, check_positive, check_range
@@ -118,11 +116,6 @@ class TaskConfig:
         return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
                     overspeed=self.overspeed_weight, slip=self.slip_weight, internal_force=self.internal_force_weight,
                     action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
-
-    @property
-    def reward_scales(self) -> np.ndarray:
-        """(lateral_scale, heading_scale, antagonism_cap) as the reward kernel takes them."""
-        return np.array([self.lateral_scale, self.heading_scale, self.antagonism_cap])
 
 
 def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:

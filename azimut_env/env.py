@@ -81,21 +81,22 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
 
     ## Observation Space
     ``Box(float32)`` with finite bounds; values are clipped to them. With K = ``lookahead_count``
-    the layout is (:meth:`observation_slices` returns these slices by name):
+    the layout is (:meth:`observation_slices` returns these slices by name; the table is
+    ``observation.OBSERVATION_FIELDS``, which also sets the bounds and the fill):
 
-    | name            | size | content                                                        | unit  |
-    |-----------------|------|----------------------------------------------------------------|-------|
-    | lambda_hat      | 3    | IT-estimated ICR λ̂ (canonical: μ̂ ≥ 0, else w ≥ 0)              | -     |
-    | mu_hat          | 1    | μ̂ from the measured wheel speeds given λ̂ (least squares)      | m/s   |
-    | beta            | n    | measured steering angles (wheel side of the spring)            | rad   |
-    | phidot          | n    | measured wheel spin rates (encoder counts per period)          | rad/s |
-    | motor_angle     | n    | measured steering motor angles                                 | rad   |
-    | lateral_error   | 1    | signed distance to the path, positive to its left             | m     |
-    | heading_error   | 1    | θ − θ_ref, wrapped                                             | rad   |
-    | speed_along     | 1    | chassis velocity along the path direction                      | m/s   |
-    | speed_ref       | 1    | reference progress speed at the current progress              | m/s   |
-    | lookahead       | 3K   | K reference points ahead: (x, y) in the chassis frame, Δθ      | m, rad|
-    | prev_action     | 2n   | the previous action                                            | -     |
+    | name          | size | content                                                   | unit   |
+    |---------------|------|-----------------------------------------------------------|--------|
+    | lambda_hat    | 3    | IT-estimated ICR λ̂ (canonical: μ̂ ≥ 0, else w ≥ 0)         | -      |
+    | mu_hat        | 1    | μ̂ from the measured wheel speeds given λ̂ (least squares)  | m/s    |
+    | beta          | n    | measured steering angles (wheel side of the spring)       | rad    |
+    | phidot        | n    | measured wheel spin rates (encoder counts per period)     | rad/s  |
+    | motor_angle   | n    | measured steering motor angles                            | rad    |
+    | lateral_error | 1    | signed distance to the path, positive to its left         | m      |
+    | heading_error | 1    | θ − θ_ref, wrapped                                        | rad    |
+    | speed_along   | 1    | chassis velocity along the path direction                 | m/s    |
+    | speed_ref     | 1    | reference progress speed at the current progress          | m/s    |
+    | lookahead     | 3K   | K reference points ahead: (x, y) in the chassis frame, Δθ | m, rad |
+    | prev_action   | 2n   | the previous action                                       | -      |
 
     **What is privileged.** ``lambda_hat``, ``mu_hat``, ``beta``, ``phidot``, ``motor_angle``
     come from the simulated sensors (noise, quantisation) and the IT estimator; ``speed_ref`` is

@@ -21,6 +21,7 @@ in; :func:`fill_observation` writes the float32 rows, non-finite values as 0, cl
 from __future__ import annotations
 
 import math
+import unicodedata
 from enum import IntEnum
 from typing import NamedTuple
 
@@ -130,9 +131,12 @@ def observation_table() -> str:
         return " + ".join(p for p in (str(c) if c else "", f"{w if w > 1 else ''}n" if w else "",
                                       f"{k if k > 1 else ''}K" if k else "") if p)
 
+    def width(text: str) -> int:  # combining marks (the hat of λ̂) take no column
+        return sum(not unicodedata.combining(c) for c in text)
+
     rows = [("name", "size", "content", "unit")] + [(f.name, size(f), f.doc, f.unit) for f in OBSERVATION_FIELDS]
-    widths = [max(len(r[j]) for r in rows) for j in range(4)]
-    line = lambda r: "| " + " | ".join(x.ljust(w) for x, w in zip(r, widths)) + " |"  # noqa: E731
+    widths = [max(width(r[j]) for r in rows) for j in range(4)]
+    line = lambda r: "| " + " | ".join(x + " " * (w - width(x)) for x, w in zip(r, widths)) + " |"  # noqa: E731
     return "\n".join([line(rows[0]), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [line(r) for r in rows[1:]])
 
 

@@ -87,23 +87,19 @@ def compute_rewards(rows, track_state, s_prev, vel_world, max_speeds, slip, inte
             d = action[i, j] - prev_action[i, j]  # float32, as the actions
             da2 += d * d
         ds = min(max(s - s_prev[i], -v_max * dt), v_ref * dt + 1e-3 * dt)
-        t0 = weights[RewardTerm.PROGRESS] * ds / (v_max * dt)
-        t1 = -weights[RewardTerm.LATERAL] * (1.0 - math.exp(-abs(lat) / scales[0]))
-        t2 = -weights[RewardTerm.HEADING] * (1.0 - math.exp(-abs(head) / scales[1]))
-        t3 = -weights[RewardTerm.OVERSPEED] * max(0.0, va - v_ref) / v_max
-        t4 = -min(weights[RewardTerm.SLIP] * slip[i], scales[2])
-        t5 = -min(weights[RewardTerm.INTERNAL_FORCE] * internal[i], scales[2])
-        t6 = -weights[RewardTerm.ACTION_RATE] * da2
-        t7 = -weights[RewardTerm.OFF_TRACK] if off_track[i] else 0.0
-        terms[i, RewardTerm.PROGRESS] = t0
-        terms[i, RewardTerm.LATERAL] = t1
-        terms[i, RewardTerm.HEADING] = t2
-        terms[i, RewardTerm.OVERSPEED] = t3
-        terms[i, RewardTerm.SLIP] = t4
-        terms[i, RewardTerm.INTERNAL_FORCE] = t5
-        terms[i, RewardTerm.ACTION_RATE] = t6
-        terms[i, RewardTerm.OFF_TRACK] = t7
-        reward[i] = 0.0 + t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7
+        t = terms[i]
+        t[RewardTerm.PROGRESS] = weights[RewardTerm.PROGRESS] * ds / (v_max * dt)
+        t[RewardTerm.LATERAL] = -weights[RewardTerm.LATERAL] * (1.0 - math.exp(-abs(lat) / scales[0]))
+        t[RewardTerm.HEADING] = -weights[RewardTerm.HEADING] * (1.0 - math.exp(-abs(head) / scales[1]))
+        t[RewardTerm.OVERSPEED] = -weights[RewardTerm.OVERSPEED] * max(0.0, va - v_ref) / v_max
+        t[RewardTerm.SLIP] = -min(weights[RewardTerm.SLIP] * slip[i], scales[2])
+        t[RewardTerm.INTERNAL_FORCE] = -min(weights[RewardTerm.INTERNAL_FORCE] * internal[i], scales[2])
+        t[RewardTerm.ACTION_RATE] = -weights[RewardTerm.ACTION_RATE] * da2
+        t[RewardTerm.OFF_TRACK] = -weights[RewardTerm.OFF_TRACK] if off_track[i] else 0.0
+        total = 0.0  # the sum in the order of RewardTerm
+        for j in range(t.shape[0]):
+            total += t[j]
+        reward[i] = total
 
 
 def charge_penalty(mask: np.ndarray, penalty: float, reward: np.ndarray, terms: np.ndarray) -> None:

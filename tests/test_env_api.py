@@ -4,6 +4,7 @@ the controller interface, rendering, obstacles and kicks."""
 from __future__ import annotations
 
 import pickle
+import textwrap
 import warnings
 
 import gymnasium as gym
@@ -12,6 +13,7 @@ import pytest
 
 import azimut_env  # noqa: F401  (registers Azimut-v1)
 from azimut_env.env import AzimutEnv, h_state_from_measurements, observation_layout
+from azimut_env.observation import observation_table
 from azimut_env.params import ActuatorLimits, action_from_setpoints, setpoints_from_action
 from estimation import canonical_eta, estimate_icr, mu_from_wheel_speeds, quality, steering_from_lambda
 
@@ -128,6 +130,7 @@ def test_observation_layout_and_bounds():
     assert np.allclose(dec["lambda_hat"], lam_hat, atol=1e-6)
     assert np.allclose(dec["beta"], env.measured_beta, atol=1e-6)
     assert set(info["reward_terms"]) == set()
+    assert observation_table() in textwrap.dedent(AzimutEnv.__doc__)  # the docs show the layout table
     _, rew, _, _, info = env.step(env.action_space.sample())
     assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "overspeed", "slip", "internal_force",
                                          "action_rate", "off_track"}
