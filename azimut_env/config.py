@@ -65,7 +65,7 @@ class TaskConfig:
     substeps: int = 8
     solver_iterations: int = 20
     domain_randomization: float = 0.0
-    progress_weight: float = 1.0
+    progress_weight: float = 3.0
     lateral_weight: float = 0.5
     heading_weight: float = 0.3
     overspeed_weight: float = 2.0
