@@ -136,19 +136,25 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
 
     | term           | ICR, circle | ICR, paper | random, circle | random, paper |
     |----------------|-------------|------------|----------------|---------------|
-    | progress       | +0.987      | +0.505     | −0.004         | +0.002        |
+    | progress       | +2.961      | +1.515     | −0.012         | +0.006        |
     | lateral        | −0.006      | −0.063     | −0.264         | −0.252        |
     | heading        | −0.002      | −0.037     | −0.224         | −0.235        |
     | overspeed      | −0.0001     | −0.0004    | 0              | −0.006        |
     | slip           | −0.0003     | −0.005     | −0.376         | −0.377        |
     | internal_force | −0.012      | −0.133     | −1.21          | −1.22         |
     | action_rate    | −0.00002    | −0.00002   | −0.265         | −0.265        |
-    | reward         | +0.967      | +0.267     | −2.35          | −2.35         |
+    | reward         | +2.941      | +1.277     | −2.36          | −2.35         |
 
     (the paper track's reference slows down and stops to turn its wheels in place at its corners,
     hence its lower progress per step). A policy that fights its wheels (mean internal force
     120 N, slip 40 W, as a raw-action PPO agent trained on ``Azimut-v0`` did) loses about 2 per
-    step, more than the progress it can earn.
+    step, two thirds of the 3 that driving at the reference speed earns. ``progress_weight`` is 3
+    (it was 1 in the first ``Azimut-v1``): with 1, a policy exploring around a good constant raw
+    action on ``circle`` (per-step Gaussian noise σ = 0.135 on the set-points, which alone makes
+    the wheels fight: about 97 N) earned −0.58 per step, so standing still or leaving the track
+    paid, and raw-action PPO agents learned to stand still at the start; with 3 it earns about
+    +1.1 per step and the same noise with the wheels stopped −1.2
+    (``tests/test_reward_incentives.py``).
 
     ## Starting State
     At rest at the start of the track (progress ``options["start_progress"]``, default 0), with
