@@ -67,6 +67,12 @@ class ICRControllerConfig:
         reconfig_rate_fraction, reconfig_accel_fraction: fractions of the steering rate and
             acceleration limits used when turning the wheels in place [-] (slower turns scrub
             less: the compliant steering lags less behind its set-point).
+        mu_own_scale: give μ its own time scaling (default False): after the common factor κ of
+            the λ and μ motion is chosen, μ goes on toward its ramp target as far as the wheels'
+            φ̇ and φ̈ limits allow at the chosen λ (μ changes only those; the steering rate and
+            acceleration limits, which bind while λ turns quickly, do not involve μ). μ then
+            follows μ_d at its ramp while λ is being turned instead of waiting for λ: for targets
+            that change often (an exploring RL policy, :mod:`control.target_shaping`).
         stop_hysteresis: a target less than this arc [rad] past a steering stop is held at the
             stop (the robot goes on with λ at the stop) instead of triggering a reconfiguration.
         stop_hold_time: longest time [s] a target may stay held at a steering stop: one that stays
@@ -96,6 +102,7 @@ class ICRControllerConfig:
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
+    mu_own_scale: bool = False
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
@@ -108,3 +115,4 @@ class ICRControllerConfig:
         fix("n_kappa", check_int("ICRControllerConfig.n_kappa", self.n_kappa, min_value=2, max_value=100_000))
         fix("coupling_from_measurement", check_bool("ICRControllerConfig.coupling_from_measurement",
                                                     self.coupling_from_measurement))
+        fix("mu_own_scale", check_bool("ICRControllerConfig.mu_own_scale", self.mu_own_scale))

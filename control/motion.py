@@ -83,13 +83,38 @@ def coordinated_step(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu
     last_ok = nk - 1 - np.argmax(feasible[:, ::-1], axis=1)
     i = np.where(any_ok, last_ok, np.argmin(ratio, axis=1))
     beta_c, rate_c, phidot_c = beta_new[rows, i], b_rate[rows, i], phid[rows, i]
+    mu_c = mu_new[rows, i]
     sat = ~any_ok
+    if config.mu_own_scale:
+        mu_c, phidot_c = mu_own_step(mu_c, mu_des, c[rows, i], rate_c, phidot, any_ok & ~mu_first, geom, limits, dt)
     if np.any(sat):
         want = np.where(flipped[rows, i][:, None], beta, beta_c)
         sb, sr, sp = saturate(beta[sat], beta_rate[sat], phidot[sat], want[sat], phidot_c[sat], geom, limits, dt)
         beta_c, rate_c, phidot_c = beta_c.copy(), rate_c.copy(), phidot_c.copy()
         beta_c[sat], rate_c[sat], phidot_c[sat] = sb, sr, sp
-    return lam_new[rows, i], mu_new[rows, i], v[rows, i], beta_c, rate_c, phidot_c, kappa[i], sat
+    return lam_new[rows, i], mu_c, v[rows, i], beta_c, rate_c, phidot_c, kappa[i], sat
+
+
+def mu_own_step(mu, mu_des, c, beta_rate, phidot_prev, rows, geom: RobotGeometry, limits: ActuatorLimits, dt: float):
+    """``ICRControllerConfig.mu_own_scale``: move μ (N,) from its feasible value toward
+    ``mu_des`` (N,) as far as every wheel's |φ̇| and |φ̈| limits allow, λ fixed (so are the
+    coefficients c (N, n) and the steering rates β̇ (N, n)): r φ̇_k = μ c_k − b β̇_k is affine
+    in μ, each wheel bounds μ to an interval holding the feasible μ, and so does their
+    intersection. Rows where ``rows`` (N,) is False are left as they are. Returns (μ, φ̇_c)."""
+    slack = 1.0 - 1e-9
+    coupling = -geom.b * beta_rate / geom.r
+    hi = np.minimum(limits.wheel_speed_max * slack, phidot_prev + limits.wheel_accel_max * dt * slack) - coupling
+    lo = np.maximum(-limits.wheel_speed_max * slack, phidot_prev - limits.wheel_accel_max * dt * slack) - coupling
+    k = c / geom.r  # φ̇_k = k_k μ + coupling_k
+    free = np.abs(k) <= 1e-12
+    safe = np.where(free, 1.0, k)
+    a, b = lo / safe, hi / safe
+    mu_lo = np.max(np.where(free, -np.inf, np.minimum(a, b)), axis=-1)
+    mu_hi = np.min(np.where(free, np.inf, np.maximum(a, b)), axis=-1)
+    # the common step's μ is feasible (up to rounding): the interval holds it
+    mu_lo, mu_hi = np.minimum(mu_lo, mu), np.maximum(mu_hi, mu)
+    mu_out = np.where(rows, np.clip(mu_des, mu_lo, mu_hi), mu)
+    return mu_out, k * mu_out[:, None] + coupling
 
 
 

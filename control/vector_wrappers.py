@@ -60,7 +60,8 @@ from .limits import limit_violations
 from .follower_batch import BatchFollower
 from .path_follower import PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
-from .target_shaping import advance_target, exp_step, initial_frame, step_toward, transport_frame
+from .target_shaping import (SHAPED_TARGET_CONFIG, advance_target, exp_step, initial_frame, step_toward,
+                             transport_frame)
 from .wrappers import icr_target_from_action
 
 __all__ = ["VectorControllerAction", "ACTION_KINDS"]
@@ -120,7 +121,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         self.lambda_rate_max, self.mu_accel = float(lambda_rate_max), float(mu_accel)
         self.shape_targets = bool(shape_targets) and controller == "icr" and action in ("icr_target", "twist")
         self.target_rate, self.cross_push = float(target_rate), float(cross_push)
-        self._icr_config = icr_config or ICRControllerConfig()
+        self._icr_config = icr_config or (SHAPED_TARGET_CONFIG if self.shape_targets else ICRControllerConfig())
         self._swerve_config = swerve_config
         self._follower_config = follower_config or PathFollowerConfig()
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_KINDS[action],), dtype=np.float32)

@@ -38,7 +38,7 @@ from estimation.hrep import eta_from_twist
 from .icr_controller import ICRController, ICRControllerConfig, nearer_target
 from .limits import limit_violations
 from .swerve import SwerveConfig, SwerveController
-from .target_shaping import advance_target, step_toward
+from .target_shaping import SHAPED_TARGET_CONFIG, advance_target, step_toward
 
 __all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
 
@@ -78,7 +78,8 @@ class _ControllerWrapper(gym.Wrapper):
         if missing:
             raise ValueError(f"the wrapped env must be Azimut-v1 (missing {', '.join(map(repr, missing))})")
         self._kind = controller
-        self._icr_config, self._swerve_config = icr_config, swerve_config
+        self._icr_config = icr_config or (SHAPED_TARGET_CONFIG if self.shape_targets else None)
+        self._swerve_config = swerve_config
         self._ctl: ICRController | SwerveController | None = None
 
     def _new_controller(self) -> None:
