@@ -14,8 +14,8 @@ static obstacles. The pieces:
 * :mod:`azimut_env.blowup`: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
 
 Without obstacles the whole control period (all substeps, all robots) is one compiled call
-(:func:`~azimut_env.physics_kernels.step_kernel`) that integrates the chassis too; pymunk's bodies are read before it and
-written after it. With obstacles pymunk integrates the chassis: each substep the kernel's velocity
+(:func:`~azimut_env.physics_kernels.step_kernel`) that integrates the chassis too; pymunk's
+bodies are read before it and written after it. With obstacles pymunk integrates the chassis: each substep the kernel's velocity
 change is handed to pymunk as a force and torque, and ``space.step`` integrates them and resolves
 the contacts (Chipmunk moves the position with the velocity of the start of the substep, then
 updates the velocity: explicit Euler for the chassis pose while in the presence of obstacles).
@@ -421,8 +421,8 @@ class AzimutPhysics:
         ``write``, ``space_step`` and ``summary`` (``azimut bench-env``'s split)."""
         self.acc[:] = 0.0
         p = self.params
-        args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled, self.acc,
-                self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer, float(p.chassis.com_height),
+        args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
+                self.acc, self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer, float(p.chassis.com_height),
                 float(p.steering.stop_restitution), bool(p.steer_motor.is_dc), self.n, self.dt)
         tm = times if times is not None else self.stage_times
         t = time.perf_counter() if tm is not None else 0.0

@@ -93,8 +93,8 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
     accel (N, 2): chassis acceleration (a_x, a_y) in R from the tire forces at the last substep,
     updated. transfer (n, 2): the load change on each axis per unit moment (M_x, M_y) [1/m] (the
     last two columns of ``RobotParams.load_map``); com_h: the centre of mass height h [m].
-    restitution: the hard stops' e. dc: the steering motor model (False: kinematic position source; True: DC motor with back-EMF,
-    ``actuators.steer_actuator_kernel``).
+    restitution: the hard stops' e. dc: the steering motor model (False: kinematic position
+    source; True: DC motor with back-EMF, ``actuators.steer_actuator_kernel``).
     """
     n_robots = ms.shape[0]
     omega_new = np.empty(n)
@@ -215,7 +215,7 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
 @njit(cache=True)
 def summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, speed_max, yaw_rate_max, spin_max, position_max,
                    out_r, out_w):
-    """Per-step derived quantities for all robots (see the column constants), one call.
+    """Per-step derived quantities for all robots, one call: out_r (N, RS) and out_w (N, n, WS).
 
     Internal force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
     least-norm forces with the same wrench are F* = Gᵀ (G Gᵀ)⁻¹ W, and ‖F − F*‖ is the internal part.

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-__all__ = ["CS", "FT", "BODY", "CMD", "WP", "JS", "MS", "ACC", "RS", "WS", "RS_POSE", "RS_VEL_WORLD", "RS_TWIST_BODY", "WS_FORCE",
-           "WS_CONTACT"]
+__all__ = ["CS", "FT", "BODY", "CMD", "WP", "JS", "MS", "ACC", "RS", "WS", "RS_POSE", "RS_VEL_WORLD",
+           "RS_TWIST_BODY", "WS_FORCE", "WS_CONTACT"]
 
 
 class CS(IntEnum):

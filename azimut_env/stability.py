@@ -12,7 +12,8 @@ parameters, 8 substeps of 2.5 ms at the 20 ms control period:
   m = 1.6 kg, margin b + 2a = 1.25; across (e) only the chassis: 0.15; the patch twist on I_m:
   0.004. Refused above 3 (the margins grow with the load: room for 2.4× the nominal load, for
   randomised masses and load transfer; :meth:`AzimutPhysics.set_chassis_mass` refuses a mass
-  that would take a margin to :data:`LOADED_MARGIN_MAX`, :func:`check_load_scale`). The relaxation itself (|v_x| dt/σ) is implicit: no bound;
+  that would take a margin to :data:`LOADED_MARGIN_MAX`, :func:`check_load_scale`). The
+  relaxation itself (|v_x| dt/σ) is implicit: no bound;
 * the series spring on the module: ω = sqrt(k_s / I_m) = 55 rad/s, ω·dt = 0.14 (symplectic Euler
   is stable below 2; refused above 0.5), its damper c_s dt / I_m = 0.075 (refused above 1);
 * the propulsion velocity loop and bearing are implicit in the spin, and the DC steering motor's
