@@ -545,7 +545,7 @@ class AzimutPhysics:
     def check(self) -> tuple[np.ndarray, list[str]]:
         """Blow-up detection: (ok (N,) bool, reason per robot, '' where ok)."""
         codes = self.summary[:, RS.CODE]
-        ok = codes == BlowUp.NONE
+        ok = codes == BlowUp.NONE.value  # a plain int: an array against the IntEnum member is slow
         if ok.all():
             return ok, [""] * self.n_robots
         return ok, [BLOWUP_MESSAGES.get(int(c), "") if c else "" for c in codes]
