@@ -288,7 +288,7 @@ def test_aligning_moment_turns_a_misaligned_wheel_toward_the_travel_direction():
 @pytest.mark.slow
 def test_substep_convergence_is_first_order():
     """``azimut bench-env --convergence`` on a 10 s replay: the error halves when the substeps double."""
-    from azimut_env.bench import substep_convergence
+    from azimut_env.convergence import substep_convergence
 
     rows = substep_convergence((8, 16, 32), reference=128, seconds=10.0)
     orders = [r["order"] for r in rows[1:]]
