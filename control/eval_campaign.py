@@ -19,6 +19,7 @@ import argparse
 import functools
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -266,6 +267,10 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
                 lines.append("")
                 for f in plots.get((controller, track), []):
                     lines.append(f"![{Path(f).stem}]({f})")
+    if campaign.get("videos"):
+        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
+                  "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
+        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
     lines += ["", "## Per-seed rows", ""] + _seed_table(rows) + [""]
     (out / "report.md").write_text("\n".join(lines))
 
@@ -306,9 +311,11 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     plot_dir = out / "plots"
     store = TaskStore(out / "episodes")
     plot_seed = None if args.no_plots else seeds[0]
+    video = getattr(args, "video", None)
+    video_dir = out / "videos"
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
-                          plot_seed=plot_seed)
+                          plot_seed=seeds[0] if (plot_seed is not None or video) else None)
     executor = run_kwargs(args)["executor"]
     env0 = AzimutEnv()
     geom, limits = env0.geometry, env0.limits
@@ -318,7 +325,12 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
 
     def on_result(task: Task, rec: dict) -> None:
         art = (rec.get("result") or {}).get("artifacts")
-        if art and "log" in art:
+        if art and "log" in art and video:
+            from .video import write_video
+
+            name = re.sub(r"[^A-Za-z0-9_.-]+", "_", task.label)
+            rec["result"]["video"] = f"videos/{write_video(art['log'], video_dir / f'{name}.{video}', fmt=video).name}"
+        if art and "log" in art and plot_seed is not None:
             plot_dir.mkdir(exist_ok=True)
             store.folder.mkdir(parents=True, exist_ok=True)
             _save_trace(store.folder / f"{task.id}.npz", art["log"])
@@ -363,6 +375,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
             full.append(cell)
     plots: dict[tuple[str, str], list[str]] = {}
     compare: dict[str, list[str]] = {}
+    videos = {f"{rec['key']['controller']} on {rec['key']['track']}": rec["result"]["video"] for rec in records
+              if rec["status"] == "ok" and (rec.get("result") or {}).get("video")}
     if plot_seed is not None:
         for rec in records:
             if rec["status"] == "ok" and rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
@@ -381,7 +395,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
                 "limits": str(limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
-                "computed": len(tasks) - n_before, "resumed": n_before}
+                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos}
     write_campaign_report(out, rows, full, campaign, plots, compare)
     n_failed = len(rows) - len(ok_rows)
     print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")

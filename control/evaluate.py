@@ -17,7 +17,9 @@ rest, are left out), the standstill share (the other steps), the number of steps
 commanded limit was exceeded, and the number of stop-and-reconfigure events; and PNG plots: the
 trajectory over the track (the paper's Fig. 9), pairwise β projections against the constraining
 surface (Fig. 10), qua over time (Fig. 11), the ICR's path on the sphere, and the wheel commands
-against their limits.
+against their limits. ``--video`` adds a video (GIF, or MP4 with ffmpeg) of each (controller,
+track) episode of the first seed, the env's top-down view redrawn from the episode's log
+(:mod:`control.video`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from azimut_env.validation import arg_choice_list, arg_float, arg_int, arg_outpu
 # the episode runner lives in control.episode; its names stay importable from here
 from .episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
 from .plots import write_plots  # re-exported
+from .video import VIDEO_FORMATS, check_video_format
 
 __all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots", "write_report",
            "add_arguments", "run"]
@@ -124,6 +127,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="reports/eval", type=arg_output_path(directory=True),
                         help="report folder (default reports/eval)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--video", nargs="?", const="gif", default=None, choices=VIDEO_FORMATS, metavar="FORMAT",
+                        help="also write a video of each (controller, track) episode of the first seed to "
+                             "OUT/videos/ (gif, the default, or mp4 with an ffmpeg executable; needs pygame, the "
+                             "render extra), listed in report.md")
     parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
                         help="also run the robustness study: N trials per controller on 'paper' with random "
                              "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
@@ -139,6 +146,8 @@ def check_args(args: argparse.Namespace) -> None:
 
     if not args.no_plots:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+    if getattr(args, "video", None):
+        check_video_format(args.video)
     for item in args.controllers:  # load each trained policy once now, not after the other episodes
         if is_policy(item):
             require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
