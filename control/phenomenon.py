@@ -43,8 +43,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from azimut_env.env import AzimutEnv
 from azimut_env.params import RobotParams
+from azimut_env.stability import check_stability
 from azimut_env.tracks import TRACK_NAMES
 from azimut_env.validation import arg_float, arg_int, arg_output_path
 from estimation import estimate_icr, quality, steering_from_lambda
@@ -78,11 +78,9 @@ def stable_substeps(params: RobotParams, control_period: float = 0.02, start: in
     k = start
     while k <= most:
         try:
-            AzimutEnv(params=params, control_period=control_period, substeps=k).close()
+            check_stability(params, control_period / k)
             return k
-        except ValueError as exc:
-            if "stab" not in str(exc):
-                raise
+        except ValueError:
             k *= 2
     raise ValueError(f"no substep count up to {most} is stable for these steering parameters")
 
