@@ -29,7 +29,9 @@ one batched ``step`` of the vector env with all set-points):
   own arc is short and checked by the shaping) and crosses a steering stop or axis only when the
   command stays across it,
   so a policy whose target changes every step still drives (the unshaped controller sat in
-  RECONFIGURING for good under random targets). ``shape_targets=False`` restores the raw targets.
+  RECONFIGURING for good under random targets); without an ``icr_config`` the controller then
+  runs :data:`~control.target_shaping.SHAPED_TARGET_CONFIG` (μ with its own time scaling, ramped
+  at 0.95 of the wheel acceleration limit). ``shape_targets=False`` restores the raw targets.
   Twists may also go to the WPILib-style baseline (``controller="swerve"``, a per-robot Python
   object).
 

@@ -15,7 +15,9 @@ Through the ICR controller the target is *shaped* (:mod:`control.target_shaping`
 ``shape_targets=False`` turns it off): λ_d is one step of at most ``target_rate`` [rad/s] from the
 controller's reference λ toward the commanded direction, and crosses a steering stop only when the command keeps pushing past it for
 ``cross_push`` [rad] of arc, so a target that changes every step (an exploring policy) still drives
-instead of keeping the controller in RECONFIGURING.
+instead of keeping the controller in RECONFIGURING; without an ``icr_config`` the controller then
+runs :data:`~control.target_shaping.SHAPED_TARGET_CONFIG` (μ follows μ_d at the wheels'
+acceleration limit while λ turns).
 
 ``info`` gains ``controller_mode`` (an ``icr_controller.Mode`` value, or −1 for the baseline),
 ``limit_exceeded`` (whether the set-points exceeded a commanded limit), ``reconfigure_events`` and
