@@ -1,10 +1,12 @@
 """The Gymnasium task: drive a simulated AZIMUT-3 along a track (``Azimut-v1``).
 
-The physics lives in :mod:`azimut_env.physics` and the task (observation, reward, termination,
-resets, over N robots at once) in :mod:`azimut_env.task`; this module is the single env, the N = 1
-front end of that task (:class:`~azimut_env.vector_env.AzimutVectorEnv` is the N-robot one), and
-the interface that controllers use (limits, set-point mapping, measurements, estimated H state,
-track).
+The physics lives in :mod:`azimut_env.physics`, the task over N robots at once in
+:mod:`azimut_env.task` (which runs the stages: :mod:`~azimut_env.actions`,
+:mod:`~azimut_env.sensors`, :mod:`~azimut_env.termination`, :mod:`~azimut_env.reward`,
+:mod:`~azimut_env.observation`); this module is the single env, the N = 1 front end of that task
+(:class:`~azimut_env.vector_env.AzimutVectorEnv` is the N-robot one; the constructor, the
+controller interface and rendering they share are :class:`~azimut_env.frontend.AzimutFrontEnd`).
+The controller interface is typed as :class:`~azimut_env.interface.ControllerInterface`.
 
 Controller interface (stable names, on ``env.unwrapped``):
 

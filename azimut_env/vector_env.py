@@ -1,12 +1,15 @@
 """``AzimutVectorEnv``: N ``Azimut-v1`` robots in one pymunk Space, stepped as one batch.
 
 A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.AzimutTask`, the same task and
-physics code as the single env (which is its N = 1 case). Per control step: one compiled
-action check for all robots, ``substeps`` physics substeps (each: one ``pymunk.batch`` read of all
-bodies, the compiled actuator/spring/tire kernel over all robots × wheels, one batched write of all
-forces and torques, one ``space.step``), then the compiled sensor model over all wheels, one
-batched IT estimate (``estimation.estimate_eta``), one compiled track query for all robots (each on
-its own track) and one compiled reward/observation fill. Robots never collide with each other.
+physics code as the single env (which is its N = 1 case); the constructor, the controller
+interface and rendering are the shared front end (:mod:`azimut_env.frontend`). Per control step
+each stage runs once for all robots (the data flow is in :mod:`azimut_env.task`): the compiled
+action check and set-point map, ``substeps`` physics substeps (one compiled call per control step
+without obstacles), the compiled sensor model over all wheels, one batched IT estimate
+(``estimation.estimate_eta``), one compiled track query (each robot on its own track), then the
+compiled termination, reward and observation fill. This module adds seeding per sub-env, the
+autoreset modes, the batched info and the per-sub-env blow-up bookkeeping. Robots never collide
+with each other.
 
 ``gymnasium.make_vec("Azimut-v1", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
 (keyword arguments as for ``gymnasium.make("Azimut-v1", ...)``).

@@ -269,3 +269,28 @@ def test_steering_encoder_bias_is_constant_per_episode():
     assert np.allclose(env.measured_beta - info["beta_true"], d0, atol=1e-12)
     env.reset(seed=1)
     assert not np.allclose(env.measured_beta - env.physics.steering_angles()[0], d0)
+
+
+def test_one_front_end_for_both_envs():
+    """Both envs take the TaskConfig fields as keywords (their signatures list them, defaults from
+    TaskConfig), refuse an unknown keyword by name, and implement their controller Protocol."""
+    import dataclasses
+    import inspect
+
+    from azimut_env.config import TaskConfig
+    from azimut_env.interface import ControllerInterface, VectorControllerInterface, missing_members
+    from azimut_env.vector_env import AzimutVectorEnv
+
+    for cls in (AzimutEnv, AzimutVectorEnv):
+        params = inspect.signature(cls.__init__).parameters
+        for f in dataclasses.fields(TaskConfig):
+            assert f.name in params
+            if f.name != "localisation":
+                assert params[f.name].default == getattr(TaskConfig(), f.name)
+        with pytest.raises(TypeError, match="progress_wieght"):
+            cls(progress_wieght=2.0)
+    env, venv = AzimutEnv(lateral_weight=0.7), AzimutVectorEnv(num_envs=2, lateral_weight=0.7)
+    assert env.config == venv.config == TaskConfig(lateral_weight=0.7)
+    assert isinstance(env, ControllerInterface) and not missing_members(env, ControllerInterface)
+    assert isinstance(venv, VectorControllerInterface) and not missing_members(venv, VectorControllerInterface)
+    assert missing_members(venv, ControllerInterface) == ["track"]
