@@ -10,10 +10,10 @@ direction, and a speed profile.
 
 from .library import (TRACK_NAMES, circle_track, crab_track, figure8_track, make_track, paper_track, random_track,
                       square_track)
-from .query import (TQ, interp1, project_window_kernel, query_batch_kernel, query_tracks, wrap_angle, wrap_pi,
-                    wrap_progress)
+from .query import (TQ, interp1, project_window_kernel, query_batch_kernel, query_one_kernel, query_tracks, wrap_angle,
+                    wrap_pi, wrap_progress)
 from .track import Track
 
 __all__ = ["Track", "TQ", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle", "wrap_pi", "interp1",
-           "wrap_progress", "project_window_kernel", "query_batch_kernel", "paper_track", "circle_track",
-           "figure8_track", "square_track", "crab_track", "random_track"]
+           "wrap_progress", "project_window_kernel", "query_one_kernel", "query_batch_kernel", "paper_track",
+           "circle_track", "figure8_track", "square_track", "crab_track", "random_track"]

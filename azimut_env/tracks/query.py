@@ -2,8 +2,9 @@
 (progress, tracking errors, reference speed, look-ahead) of N robots, each on its own track.
 
 The tracks enter as :meth:`~azimut_env.tracks.Track.packed` arrays (6, m) = rows (s, x, y, θ, v, ψ).
-One kernel, :func:`query_batch_kernel`, serves :meth:`Track.query` (one robot),
-:meth:`Track.query_batch` (N robots on one track) and :func:`query_tracks` (N robots on N tracks).
+One kernel: :func:`query_one_kernel` for one robot (:meth:`Track.query`), and
+:func:`query_batch_kernel`, its loop over robots, for N robots on one track
+(:meth:`Track.query_batch`) or on N tracks (:func:`query_tracks`).
 The scalar helpers :func:`interp1`, :func:`wrap_pi` and :func:`wrap_progress` are public for other
 compiled code that reads packed tracks (``control.follower_batch``).
 """
@@ -16,8 +17,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "wrap_progress", "project_window_kernel", "query_batch_kernel",
-           "query_tracks"]
+__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "wrap_progress", "project_window_kernel", "query_one_kernel",
+           "query_batch_kernel", "query_tracks"]
 
 
 class TQ(IntEnum):
@@ -123,8 +124,10 @@ def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint,
 
 
 @njit(cache=True)
-def _query_one(p, closed, length, rho, px, py, pth, s_hint, back, ahead, spacing, out, look):
-    """One robot at pose (px, py, pth) on the packed track ``p`` (6, m): see :func:`query_batch_kernel`."""
+def query_one_kernel(p, closed, length, rho, px, py, pth, s_hint, back, ahead, spacing, out, look):
+    """One robot at pose (px, py, pth) on the packed track ``p`` (6, m), from the progress hint
+    ``s_hint``: its track state into ``out`` (5,) (columns :class:`TQ`) and its K look-ahead points
+    into ``look`` (K, 3); the body of :func:`query_batch_kernel` (see there)."""
     S = p[0]
     s = project_window_kernel(S, p[1], p[2], p[3], closed, length, rho, px, py, pth, s_hint, back, ahead, False)
     sw = s % length if closed else s
@@ -159,8 +162,8 @@ def query_batch_kernel(packs, which, closed, length, rho, poses, hints, back, ah
     look-ahead points at s + spacing·(1..K) in the robot's chassis frame into ``look[i]`` (K, 3)."""
     for i in range(poses.shape[0]):
         t = which[i]
-        _query_one(packs[t], closed[t], length[t], rho[t], poses[i, 0], poses[i, 1], poses[i, 2], hints[i], back,
-                   ahead, spacing, out[i], look[i])
+        query_one_kernel(packs[t], closed[t], length[t], rho[t], poses[i, 0], poses[i, 1], poses[i, 2], hints[i],
+                         back, ahead, spacing, out[i], look[i])
 
 
 def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: int, spacing: float,

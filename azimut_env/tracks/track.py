@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..validation import check_bool, check_nonnegative, check_positive, check_real_array
-from .query import query_batch_kernel, wrap_angle
+from .query import query_batch_kernel, query_one_kernel, wrap_angle
 
 __all__ = ["Track"]
 
@@ -319,10 +319,12 @@ class Track:
         """Everything the env needs per step, in one compiled call: ``(s, lateral error, heading
         error, v_ref, ψ, lookahead (K, 3))``, the same as :meth:`project` (windowed at ``s_hint``),
         :meth:`errors`, :meth:`sample`, :meth:`tangent_at` and :meth:`lookahead`."""
-        pose = np.array([[float(pose[0]), float(pose[1]), float(pose[2])]])
-        out, look = self.query_batch(pose, np.array([float(s_hint)]), lookahead_count, spacing, back, ahead)
-        s, lat, head, v, psi = (float(x) for x in out[0])
-        return s, lat, head, v, psi, look[0]
+        out = np.empty(5)
+        look = np.empty((int(lookahead_count), 3))
+        query_one_kernel(self.packed(), self.closed, self.length, self.progress_radius, float(pose[0]), float(pose[1]),
+                         float(pose[2]), float(s_hint), back, ahead, spacing, out, look)
+        s, lat, head, v, psi = out.tolist()
+        return s, lat, head, v, psi, look
 
     def query_batch(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
                     ahead: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -336,9 +338,9 @@ class Track:
             raise ValueError("query_batch needs one s_hint per pose")
         out = np.empty((n, 5))
         look = np.empty((n, int(lookahead_count), 3))
-        query_batch_kernel(self.packed()[None], np.zeros(n, dtype=np.int64), np.array([self.closed]),
-                           np.array([self.length]), np.array([self.progress_radius]), poses, hints, back, ahead,
-                           spacing, out, look)
+        pack, closed, length, rho = self._kernel_track()
+        query_batch_kernel(pack, np.zeros(n, dtype=np.int64), closed, length, rho, poses, hints, back, ahead, spacing,
+                           out, look)
         return out, look
 
     def query_many(self, poses, s_hints, lookahead_count: int, spacing: float, back: float = 0.5,
@@ -355,6 +357,16 @@ class Track:
             cached = np.ascontiguousarray(np.stack([self.s, self._x, self._y, self.heading, self.speed,
                                                     self.tangent]).astype(np.float64))
             object.__setattr__(self, "_packed", cached)
+        return cached
+
+    def _kernel_track(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """This track as :func:`~azimut_env.tracks.query.query_batch_kernel` reads a set of one:
+        ``(packs (1, 6, m), closed (1,), length (1,), rho (1,))`` (built once and cached)."""
+        cached = self.__dict__.get("_kernel_args")
+        if cached is None:
+            cached = (self.packed()[None], np.array([self.closed]), np.array([self.length]),
+                      np.array([self.progress_radius]))
+            object.__setattr__(self, "_kernel_args", cached)
         return cached
 
     def finished(self, s: float) -> bool:
