@@ -36,9 +36,11 @@ one batched ``step`` of the vector env with all set-points):
   object).
 
 ``info`` gains ``controller_mode`` (N,) (an ``icr_controller.Mode`` value, −1 for the baseline),
-``limit_exceeded`` (N,) (whether the commands exceeded a commanded actuator limit) and
+``limit_exceeded`` (N,) (whether the commands exceeded a commanded actuator limit),
 ``target_held`` (N,) (the shaped target was held at a steering stop or axis cap this step: why the
-robot does not follow the action there).
+robot does not follow the action there) and ``mu_lag`` (N,) [m/s] (|μ_d − μ| of the ICR controller
+after the step: how far its motion is behind the target's speed, held back by the wheels'
+acceleration ramp or by a stop; 0 for the baseline).
 """
 
 from __future__ import annotations
@@ -231,6 +233,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         modes = np.full(N, -1, dtype=np.int64)
         exceeded = np.zeros(N, dtype=np.bool_)
         held = np.zeros(N, dtype=np.bool_)
+        lag = np.zeros(N)
         active = np.flatnonzero(~self._pending)
         if self._controller == "icr" and active.size:
             lam_hat, mu_hat = base.estimated_eta
@@ -241,6 +244,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             self._icr = self._icr.put(active, sub)
             beta_c[active], phidot_c[active] = cmd.beta, cmd.phidot
             modes[active] = cmd.info["mode"]
+            lag[active] = np.abs(cmd.info["mu_target"] - sub.mu)
             exceeded[active] = limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot,
                                                 base.limits).any(axis=-1)
             self.last_command = cmd
@@ -260,5 +264,6 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             self._pending = done.copy() if next_step else np.zeros_like(done)
         every = np.ones(N, dtype=np.bool_)
         info = dict(info, controller_mode=modes, _controller_mode=every, limit_exceeded=exceeded,
-                    _limit_exceeded=every.copy(), target_held=held, _target_held=every.copy())
+                    _limit_exceeded=every.copy(), target_held=held, _target_held=every.copy(), mu_lag=lag,
+                    _mu_lag=every.copy())
         return obs, reward, terminated, truncated, info

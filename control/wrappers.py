@@ -21,7 +21,9 @@ acceleration limit while λ turns).
 
 ``info`` gains ``controller_mode`` (an ``icr_controller.Mode`` value, or −1 for the baseline),
 ``limit_exceeded`` (whether the set-points exceeded a commanded limit), ``reconfigure_events`` and
-``target_held`` (the shaped target was held at a steering stop or axis cap this step).
+``target_held`` (the shaped target was held at a steering stop or axis cap this step) and
+``mu_lag`` [m/s] (|μ_d − μ| of the ICR controller after the step: how far its motion is behind the
+target's speed, held back by the wheels' acceleration ramp or a stop; 0 for the baseline).
 For the batched versions and the residual and ICR-rate action spaces see
 :mod:`control.vector_wrappers`.
 """
@@ -118,12 +120,14 @@ class _ControllerWrapper(gym.Wrapper):
                 lam_d, mu_d = self._lam_s, float(mu_t[0])
             cmd = self._ctl.step(lam_hat, mu_hat, base.measured_beta, base.measured_phidot, lam_d, mu_d)
             mode, events = int(cmd.info["mode"]), self._ctl.state.events
+            lag = abs(float(cmd.info["mu_target"]) - float(self._ctl.state.mu))
         else:
             cmd = self._ctl.step(twist, base.measured_beta)
-            mode, events = -1, 0
+            mode, events, lag = -1, 0, 0.0
         exceeded = bool(limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, base.limits).any())
         obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(cmd.beta, cmd.phidot))
-        info = dict(info, controller_mode=mode, limit_exceeded=exceeded, reconfigure_events=events, target_held=held)
+        info = dict(info, controller_mode=mode, limit_exceeded=exceeded, reconfigure_events=events, target_held=held,
+                    mu_lag=lag)
         return obs, reward, terminated, truncated, info
 
 

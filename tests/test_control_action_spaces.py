@@ -45,6 +45,7 @@ def _random_rollout(kind: str, track: str, steps: int = 500, n: int = 8, seed: i
         pose0 = pose
         reconf += info["controller_mode"] != Mode.RUNNING
         exceeded += int(info["limit_exceeded"].sum())
+        assert np.all(np.isfinite(info["mu_lag"]) & (info["mu_lag"] >= 0))  # why the robot lags its target
     venv.close()
     return path, reconf / steps, exceeded
 
