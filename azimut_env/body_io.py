@@ -42,6 +42,7 @@ class BodyIO:
         self.rows = len(ids)
         #: (rows, len(CS)) pose and velocity in the world: :meth:`read` fills it, :meth:`write` writes it
         self.state = np.zeros((self.rows, len(CS)))
+        self._shape = self.state.shape
         self._set_buf = pb.Buffer()
         self._set_buf.set_float_buf(self.state)
         #: (rows, len(FT)) force and torque in the world that :meth:`write_forces` applies
@@ -77,7 +78,7 @@ class BodyIO:
             lib, get_data, _, get_fn, _ = self._fast
             buf._float_arr.num = 0
             lib.cpSpaceEachBody(self._space._space, get_fn, get_data)
-        self.state[:] = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(self.rows, len(CS))
+        self.state[:] = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(self._shape)
 
     def write(self) -> None:
         """Write :attr:`state` into every body."""
