@@ -156,7 +156,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     the wheels fight: about 97 N) earned −0.58 per step, so standing still or leaving the track
     paid, and raw-action PPO agents learned to stand still at the start; with 3 it earns about
     +1.1 per step and the same noise with the wheels stopped −1.2
-    (``tests/test_reward_incentives.py``).
+    (``tests/azimut_env/test_reward_incentives.py``).
 
     ## Starting State
     At rest at the start of the track (progress ``options["start_progress"]``, default 0), with

@@ -40,7 +40,7 @@ __all__ = ["advance_target", "step_toward", "exp_step", "transport_frame", "init
 #: target that changes every step has a zero-mean μ_d, so μ is a mean-reverting walk whose size
 #: grows with its acceleration. In 500 uniformly random steps on ``circle`` (4 robots × seeds 1, 2)
 #: random twists went 0.62–2.11 m with the reference tuning and 1.37–2.09 m with this one, random
-#: ICR targets 0.73–1.05 m and 0.92–1.28 m (``tests/test_control_action_spaces.py``).
+#: ICR targets 0.73–1.05 m and 0.92–1.28 m (``tests/control/test_action_spaces.py``).
 SHAPED_TARGET_CONFIG = ICRControllerConfig(mu_own_scale=True, mu_accel_fraction=0.95)
 
 

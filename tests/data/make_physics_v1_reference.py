@@ -1,6 +1,6 @@
 """Record reference motions of physics v1 (pymunk pivot + limit joints, commit 01360ef; running it on a later
 commit records that commit's model instead) for the
-v1-vs-v2 agreement tests in tests/test_physics_v2.py."""
+v1-vs-v2 agreement tests in tests/azimut_env/test_physics_v2.py."""
 import dataclasses
 import numpy as np
 from azimut_env.params import RobotParams, SteeringParams

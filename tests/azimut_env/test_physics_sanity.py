@@ -113,7 +113,7 @@ def test_tire_longitudinal_force_deflects_the_compliant_steering():
 
 
 def test_tire_model_saturates_on_the_friction_circle():
-    """The brush tire's steady forces stay inside μN and reach it at large slip (tests/test_tire.py
+    """The brush tire's steady forces stay inside μN and reach it at large slip (tests/azimut_env/test_tire.py
     has the closed forms)."""
     tire = TireParams()
     kappa = np.array([0.001, 0.5, -3.0])

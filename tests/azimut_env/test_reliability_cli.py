@@ -15,7 +15,7 @@ import pytest
 from azimut_env.cli import COMMANDS, main
 from azimut_env.validation import check_output_path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 UNWRITABLE = "/proc"  # creating a file there fails, even for root
 
 

@@ -15,7 +15,7 @@ from azimut_env.params import ChassisParams, RobotParams, SteeringParams, TirePa
 from azimut_env.physics import JS, RS, TS, WP, AzimutPhysics
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
-V1 = np.load(Path(__file__).parent / "data" / "physics_v1_reference.npz")
+V1 = np.load(Path(__file__).parent.parent / "data" / "physics_v1_reference.npz")
 
 
 def _setpoints(geom, twist):
