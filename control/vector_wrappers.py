@@ -81,8 +81,8 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         env: an ``AzimutVectorEnv`` (or a vector wrapper of one).
         action: ``"residual"``, ``"icr_rate"``, ``"icr_target"`` or ``"twist"``.
         controller: ``"icr"`` or (twists only) ``"swerve"``.
-        mu_max [m/s], min_norm: ICR targets (as :class:`~control.wrappers.ICRTargetAction`); mu_max
-            also bounds μ_d of ``icr_rate``.
+        mu_max [m/s], min_norm, signed_mu: ICR targets (as :class:`~control.wrappers.ICRTargetAction`);
+            mu_max also bounds μ_d of ``icr_rate``.
         v_max [m/s], w_max [rad/s]: twists at action ±1 (as :class:`~control.wrappers.TwistAction`).
         residual_angle [rad], residual_mu [m/s]: the residual correction at action ±1.
         lambda_rate_max [rad/s], mu_accel [m/s²]: ``icr_rate`` at action ±1.
@@ -97,7 +97,8 @@ class VectorControllerAction(gym.vector.VectorWrapper):
                  residual_angle: float = 0.15, residual_mu: float = 0.1, lambda_rate_max: float = 1.5,
                  mu_accel: float = 2.0, shape_targets: bool = True, target_rate: float = 3.0,
                  cross_push: float = 0.6, icr_config: ICRControllerConfig | None = None,
-                 swerve_config: SwerveConfig | None = None, follower_config: PathFollowerConfig | None = None) -> None:
+                 swerve_config: SwerveConfig | None = None, follower_config: PathFollowerConfig | None = None,
+                 signed_mu: bool = False) -> None:
         super().__init__(env)
         if not isinstance(action, str) or action not in ACTION_KINDS:
             raise ValueError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
@@ -113,6 +114,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             check_positive(name, value)
         min_norm = check_range("min_norm", min_norm, 0.0, 1.0, lo_open=True, hi_open=True)
         check_bool("shape_targets", shape_targets)
+        self.signed_mu = check_bool("signed_mu", signed_mu)
         for name, value, kind in (("icr_config", icr_config, ICRControllerConfig),
                                   ("swerve_config", swerve_config, SwerveConfig),
                                   ("follower_config", follower_config, PathFollowerConfig)):
@@ -207,13 +209,14 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             self._mu_s[rows] = np.clip(self._mu_s[rows] + a[:, 2] * self.mu_accel * dt, -self.mu_max, self.mu_max)
             return lam_new, self._mu_s[rows].copy(), held
         if self._kind == "icr_target":
-            lam_t, mu_t = icr_target_from_action(a, self.mu_max, self.min_norm)
+            lam_t, mu_t = icr_target_from_action(a, self.mu_max, self.min_norm, self.signed_mu)
         else:
             lam_t, mu_t = eta_from_twist(a * self.scale)
         if not self.shape_targets:
             return lam_t, mu_t, held
         lam = self._icr.lam[rows]  # one bounded step ahead of the controller's own reference λ
-        lam_t, mu_t = nearer_target(lam, lam_t, mu_t)
+        if self._kind == "twist" or self.signed_mu:  # else λ_d is the direction of motion (μ_d ≥ 0)
+            lam_t, mu_t = nearer_target(lam, lam_t, mu_t)
         prop = step_toward(lam, lam_t, self.target_rate * dt)
         lam_new, push, held = advance_target(lam, prop, self._push[rows], geom, cfg.axis_margin, self.cross_push)
         self._lam_s[rows], self._push[rows] = lam_new, push

@@ -3,8 +3,13 @@
 Both wrappers keep the env's observation and reward; they replace the per-wheel set-point action
 with a motion target that a controller turns into coordinated wheel set-points every step:
 
-* :class:`ICRTargetAction`: ``Box(-1, 1, (4,))``: λ_d ∝ action[:3] (a point of Λ; a vector of
-  norm below ``min_norm`` means "hold": μ_d = 0) and μ_d = action[3] · ``mu_max`` [m/s]; the
+* :class:`ICRTargetAction`: ``Box(-1, 1, (4,))``: λ_d ∝ action[:3] (a vector of norm below
+  ``min_norm`` means "hold": μ_d = 0) and μ_d = (action[3] + 1)/2 · ``mu_max`` ∈ [0, ``mu_max``]
+  [m/s]: λ_d on the whole unit sphere is the direction of the motion η = μ_d λ_d and μ_d ≥ 0 its
+  speed, the canonical representative (as the observation's λ̂, μ̂ ≥ 0). With ``signed_mu=True``
+  μ_d = action[3] · ``mu_max`` and λ_d is a point of Λ (λ ~ −λ), the behaviour before 2026-11;
+  under random actions the sign of μ_d then flips at random, μ does a zero-mean walk and the robot
+  barely moves (0.5–1.2 m in 500 steps against 2–4.7 m unsigned). The
   :class:`~control.icr_controller.ICRController` does the rest (limits, singularities,
   stop-and-reconfigure).
 * :class:`TwistAction`: ``Box(-1, 1, (3,))``: chassis-frame twist (v_x, v_y, ω) = action ·
@@ -13,7 +18,9 @@ with a motion target that a controller turns into coordinated wheel set-points e
 
 Through the ICR controller the target is *shaped* (:mod:`control.target_shaping`, on by default,
 ``shape_targets=False`` turns it off): λ_d is one step of at most ``target_rate`` [rad/s] from the
-controller's reference λ toward the commanded direction, and crosses a steering stop only when the command keeps pushing past it for
+controller's reference λ toward the commanded direction (unsigned μ: toward λ_d itself, so the
+motion turns continuously instead of decelerating through zero each time a random target lands in
+the other hemisphere; signed: toward the nearer of ±λ_d, μ_d's sign following), and crosses a steering stop only when the command keeps pushing past it for
 ``cross_push`` [rad] of arc, so a target that changes every step (an exploring policy) still drives
 instead of keeping the controller in RECONFIGURING; without an ``icr_config`` the controller then
 runs :data:`~control.target_shaping.SHAPED_TARGET_CONFIG` (μ follows μ_d at the wheels'
@@ -47,14 +54,19 @@ from .target_shaping import SHAPED_TARGET_CONFIG, advance_target, step_toward
 __all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
 
 
-def icr_target_from_action(action, mu_max: float, min_norm: float) -> tuple[np.ndarray, np.ndarray]:
+def icr_target_from_action(action, mu_max: float, min_norm: float,
+                           signed_mu: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Clipped ICR-target actions (..., 4) -> (λ_d (..., 3), μ_d (...)): λ_d = a[:3]/‖a[:3]‖ and
-    μ_d = a[3]·mu_max [m/s]; below ``min_norm`` the action means "hold": λ_d = (0, 0, 1), μ_d = 0."""
+    μ_d = a[3]·mu_max [m/s] (``signed_mu``) or (a[3] + 1)/2·mu_max ∈ [0, mu_max] (not
+    ``signed_mu``: λ_d on the whole sphere is then the direction of motion, the canonical
+    representative μ ≥ 0 of η = μλ, as the observation's λ̂); below ``min_norm`` the action means
+    "hold": λ_d = (0, 0, 1), μ_d = 0."""
     a = np.asarray(action, dtype=np.float64)
     norm = np.linalg.norm(a[..., :3], axis=-1)
     small = (norm < min_norm) | (norm == 0.0)  # a zero direction is "hold" whatever min_norm
     lam_d = np.where(small[..., None], np.array([0.0, 0.0, 1.0]), a[..., :3] / np.where(small, 1.0, norm)[..., None])
-    mu_d = np.where(small, 0.0, a[..., 3] * mu_max)
+    mu = a[..., 3] * mu_max if signed_mu else 0.5 * (a[..., 3] + 1.0) * mu_max
+    mu_d = np.where(small, 0.0, mu)
     return lam_d, mu_d
 
 
@@ -102,7 +114,7 @@ class _ControllerWrapper(gym.Wrapper):
         self._new_controller()
         return obs, info
 
-    def _drive(self, lam_d=None, mu_d=None, twist=None):
+    def _drive(self, lam_d=None, mu_d=None, twist=None, nearer: bool = True):
         base = self.env.unwrapped
         if self._ctl is None:
             raise ResetNeeded("call reset() before step()")
@@ -111,8 +123,9 @@ class _ControllerWrapper(gym.Wrapper):
             lam_hat, mu_hat = base.estimated_eta
             if self.shape_targets:  # one bounded step ahead of the controller's reference λ
                 self._lam_s = self._ctl.state.lam
-                lam_t, mu_t = nearer_target(self._lam_s[None, :], np.asarray(lam_d, dtype=np.float64)[None, :],
-                                            np.array([mu_d], dtype=np.float64))
+                lam_t, mu_t = np.asarray(lam_d, dtype=np.float64)[None, :], np.array([mu_d], dtype=np.float64)
+                if nearer:  # the representative of (λ_d, μ_d) nearer λ; else λ_d is the direction of motion
+                    lam_t, mu_t = nearer_target(self._lam_s[None, :], lam_t, mu_t)
                 prop = step_toward(self._lam_s[None, :], lam_t, self.target_rate * base.control_period)
                 lam_new, push, h = advance_target(self._lam_s[None, :], prop, np.array([self._push]), base.geometry,
                                                   self._ctl.config.axis_margin, self.cross_push)
@@ -135,16 +148,19 @@ class ICRTargetAction(_ControllerWrapper):
     """Action = ICR target (λ_d direction, μ_d); see the module docstring.
 
     Args:
-        env: an ``Azimut-v1`` env. mu_max: μ_d at action[3] = ±1 [m/s]. min_norm: below this norm
-        of action[:3] the target is "hold" (μ_d = 0). icr_config: the controller's tuning.
+        env: an ``Azimut-v1`` env. mu_max: μ_d at action[3] = 1 [m/s]. min_norm: below this norm
+        of action[:3] the target is "hold" (μ_d = 0). signed_mu: μ_d ∈ [−mu_max, mu_max] and
+        λ_d ∈ Λ (False, default: μ_d ∈ [0, mu_max], λ_d the direction of motion; module
+        docstring). icr_config: the controller's tuning.
         shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (module docstring).
     """
 
     def __init__(self, env: gym.Env, mu_max: float = 1.0, min_norm: float = 1e-3,
                  icr_config: ICRControllerConfig | None = None, shape_targets: bool = True, target_rate: float = 3.0,
-                 cross_push: float = 0.6) -> None:
+                 cross_push: float = 0.6, signed_mu: bool = False) -> None:
         super().__init__(env, "icr", icr_config, None, shape_targets, target_rate, cross_push)
         self.mu_max = check_positive("mu_max", mu_max)
+        self.signed_mu = check_bool("signed_mu", signed_mu)
         self.min_norm = check_range("min_norm", min_norm, 0.0, 1.0, lo_open=True, hi_open=True)
         self.action_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
 
@@ -152,8 +168,8 @@ class ICRTargetAction(_ControllerWrapper):
         a = check_real_array("action", action)
         if a.shape != (4,) or not np.all(np.isfinite(a)):
             raise ValueError(f"action must be a finite (4,) array, got {action!r}")
-        lam_d, mu_d = icr_target_from_action(np.clip(a, -1.0, 1.0), self.mu_max, self.min_norm)
-        return self._drive(lam_d=lam_d, mu_d=float(mu_d))
+        lam_d, mu_d = icr_target_from_action(np.clip(a, -1.0, 1.0), self.mu_max, self.min_norm, self.signed_mu)
+        return self._drive(lam_d=lam_d, mu_d=float(mu_d), nearer=self.signed_mu)
 
 
 class TwistAction(_ControllerWrapper):
