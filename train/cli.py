@@ -223,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
     for r in record["final_eval"]:
         print(f"  {r['track']:<8} return {r['return']:.1f}, RMS lat {100 * r['rms_lateral_m']:.2f} cm, "
               f"internal force {r['mean_internal_force_N']:.2f} N, slip {r['slip_energy_J']:.2f} J, "
-              f"{'lap ' + format(r['completion_time_s'], '.1f') + ' s' if r['completed'] else r['error']}")
+              f"{'lap ' + format(r['completion_time_s'], '.1f') + ' s' if r['completed'] else (r['error'] or 'lap not finished in the evaluation time')}")
     return 0
 
 

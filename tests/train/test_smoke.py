@@ -3,6 +3,7 @@ core (env, estimation, control) imports and runs without torch."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -33,6 +34,8 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
     for name in ("model.zip", "vecnormalize.pkl", "run.json", "evaluations.json"):
         assert (out / name).is_file(), name
     assert list((out / "checkpoints").glob("model_*_steps.zip"))
+    if importlib.util.find_spec("tensorboard") is not None:  # the rl extra installs it
+        assert list((out / "tb").glob("events.out.tfevents.*")) and (out / "tb" / "progress.csv").is_file()
     policy = load_policy(out / "model.zip")
     assert policy.algo == algo and policy.action == action and policy.obs_rms is not None
     assert policy.env_kwargs == SHORT
