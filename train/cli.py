@@ -184,6 +184,8 @@ def _plot_learning_curve(out: Path) -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
+        print("learning_curve.png not written: matplotlib is not installed (pip install 'azimut[plot]')",
+              file=sys.stderr)
         return
     import csv
 
