@@ -80,7 +80,14 @@ def main(argv: list[str] | None = None) -> int:
                 cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    return int(module.run(args) or 0)
+    try:
+        return int(module.run(args) or 0)
+    except ConnectionError as exc:
+        from control.campaign import ClusterUnreachable
+        if not isinstance(exc, ClusterUnreachable):
+            raise
+        print(f"azimut {name}: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

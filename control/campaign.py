@@ -50,7 +50,8 @@ import numpy as np
 
 from .statistics import bootstrap_ci, summarize  # re-exported
 
-__all__ = ["Task", "TaskStore", "EXECUTORS", "run_tasks", "resolve_executor", "ray_available", "limit_threads",
+__all__ = ["Task", "TaskStore", "EXECUTORS", "run_tasks", "resolve_executor", "ray_available", "check_ray_address",
+           "ClusterUnreachable", "limit_threads",
            "thread_env", "parse_seeds", "arg_seeds", "bootstrap_ci", "summarize", "CampaignInterrupted",
            "add_executor_arguments", "check_executor_args"]
 
@@ -221,6 +222,11 @@ def _json_default(obj: Any):
 # ------------------------------------------------------------------------------- executors
 
 
+class ClusterUnreachable(ConnectionError):
+    """``ray.init`` could not join the cluster at ``--ray-address`` (the command line reports it in
+    one line with status 2)."""
+
+
 def ray_available() -> bool:
     """True when Ray (the ``cluster`` extra) can be imported."""
     try:
@@ -329,7 +335,12 @@ def _ray(todo, workers, threads, retries, ray_address):
     if not ray.is_initialized():
         kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
         if ray_address:
-            ray.init(address=ray_address, **kwargs)
+            try:
+                ray.init(address=ray_address, **kwargs)
+            except (ConnectionError, RuntimeError) as exc:  # a port that answers but is no Ray head
+                raise ClusterUnreachable(f"--ray-address {ray_address}: no Ray cluster answered there "
+                                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+                                         ) from exc
         else:
             ray.init(num_cpus=workers, **kwargs)
         started = True
@@ -497,8 +508,54 @@ def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episode
                                  f"ones (without it, saved {what} are discarded)")
 
 
+def check_ray_address(address: str, timeout: float = 3.0) -> str:
+    """Refuse a Ray address that cannot be reached before any work starts (``ValueError``, one line).
+
+    ``auto`` is resolved the way ``ray.init`` resolves it (``RAY_ADDRESS``, else the cluster this
+    machine last started); then the head's ``host:port`` (``ray://`` client addresses too) must
+    accept a TCP connection within ``timeout`` seconds. Without this check ``ray.init`` retries an
+    unreachable GCS for minutes and ``auto`` with no cluster ends in a ``ConnectionError`` traceback.
+    Returns the ``host:port`` that answered."""
+    import socket
+
+    addr = str(address).strip()
+    target = addr
+    if addr == "auto" or addr == "local":
+        if addr == "local":
+            raise ValueError("--ray-address 'local' is not a cluster: leave --ray-address out and use "
+                             "--executor ray to start a local Ray instance")
+        try:
+            from ray._private.services import canonicalize_bootstrap_address
+            target = canonicalize_bootstrap_address("auto")
+        except ImportError:
+            raise ValueError("--ray-address needs Ray: pip install 'azimut[cluster]'") from None
+        except (ConnectionError, ValueError, OSError) as exc:
+            raise ValueError(f"--ray-address auto: no running Ray cluster found on this machine "
+                             f"({' '.join(str(exc).split())})") from None
+        if not target:
+            raise ValueError("--ray-address auto: no running Ray cluster found on this machine")
+    rest = target.split("://", 1)[1] if "://" in target else target
+    host, sep, port = rest.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"--ray-address must be 'auto' or HOST:PORT (e.g. 10.0.0.5:6379), got {addr!r}")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            pass
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, socket.timeout) else (exc.strerror or str(exc))
+        where = addr if target == addr else f"{addr} ({target})"
+        raise ValueError(f"--ray-address {where}: cannot reach a Ray head there within {timeout:g} s "
+                         f"({reason})") from None
+    return f"{host}:{port}"
+
+
 def check_executor_args(args: argparse.Namespace) -> str:
-    """Check the executor flags together; return the executor that will run (``ValueError``)."""
+    """Check the executor flags together; return the executor that will run (``ValueError``).
+    A ``--ray-address`` must answer (:func:`check_ray_address`) before any work starts."""
     if args.ray_address is not None and not str(args.ray_address).strip():
         raise ValueError("--ray-address must not be empty")
-    return resolve_executor(args.executor, args.workers, args.ray_address)
+    executor = resolve_executor(args.executor, args.workers, args.ray_address)
+    if args.ray_address is not None:
+        check_ray_address(args.ray_address)
+    return executor

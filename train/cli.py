@@ -84,6 +84,13 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"--hyperparams {args.hyperparams}: not valid JSON ({exc})") from None
         if not isinstance(data, dict):
             raise ValueError(f"--hyperparams {args.hyperparams}: expected a JSON object")
+        from .envs import action_key
+        from .hyperparams import check_hyperparams
+
+        try:  # before --out is created: unknown keys, wrong types and ranges, the constructor's refusals
+            check_hyperparams(args.algo, action_key(args.action), data)
+        except ValueError as exc:
+            raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
     if getattr(args, "seeds", None) is not None:
         from .seeds import check_seed_args
 

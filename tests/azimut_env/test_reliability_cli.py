@@ -149,3 +149,57 @@ def test_eval_refuses_an_unloadable_policy_before_the_other_episodes(tmp_path, c
                                  str(tmp_path / "r")], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot load" in err and out == ""
     assert not (tmp_path / "r").exists()
+
+
+def _eval_with_ray_address(address, tmp_path, capsys):
+    return run_cli(["eval", "--ray-address", address, "--tracks", "crab", "--max-time", "2", "--no-plots",
+                    "--out", str(tmp_path / "r")], capsys)
+
+
+def test_unreachable_ray_address_refused_in_one_line_within_seconds(tmp_path, capsys):
+    """New-user trial: ``--ray-address 127.0.0.1:1`` hung (Ray's GCS client retries for ever)."""
+    pytest.importorskip("ray")
+    code, out, err, dt = _eval_with_ray_address("127.0.0.1:1", tmp_path, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot reach" in err, err
+    assert dt < 20.0 and not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("address", ["nohostport", "host:notaport", "host:70000"])
+def test_malformed_ray_address_refused(address, tmp_path, capsys):
+    pytest.importorskip("ray")
+    code, out, err, _ = _eval_with_ray_address(address, tmp_path, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "HOST:PORT" in err, err
+
+
+def test_ray_address_auto_without_a_cluster_is_one_line(tmp_path, capsys, monkeypatch):
+    """New-user trial: ``--ray-address auto`` with no Ray running gave exit 1 and a 29-line traceback."""
+    pytest.importorskip("ray")
+    from ray._private.services import canonicalize_bootstrap_address
+
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    try:
+        canonicalize_bootstrap_address("auto")
+        pytest.skip("a Ray cluster runs on this machine")
+    except ConnectionError:
+        pass
+    code, out, err, dt = _eval_with_ray_address("auto", tmp_path, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "no running Ray cluster" in err, err
+    assert not (tmp_path / "r").exists()
+
+
+def test_ray_init_failure_after_the_check_is_one_line(tmp_path, capsys, monkeypatch):
+    """A port that accepts TCP but is no Ray head passes the socket check; ray.init's
+    ConnectionError then ends the command with one line and status 2 (not a traceback)."""
+    ray = pytest.importorskip("ray")
+    import socket
+
+    def refuse(*a, **k):
+        raise ConnectionError("Failed to connect to Ray cluster")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    with socket.socket() as srv:
+        srv.bind(("127.0.0.1", 0))
+        srv.listen(4)
+        code, out, err, _ = _eval_with_ray_address(f"127.0.0.1:{srv.getsockname()[1]}", tmp_path, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "no Ray cluster answered" in err, err

@@ -70,6 +70,32 @@ def test_cli_refuses_bad_arguments_with_one_line(tmp_path, argv, capsys):
     assert rc == 2 and len(err) == 1 and err[0].startswith("azimut train: error:")
 
 
+@pytest.mark.parametrize("algo,content,match", [
+    ("ppo", {"bogus_key": 1}, "unknown PPO hyperparameter"), ("ppo", {"learning_rate": -1}, "learning_rate"),
+    ("ppo", {"n_steps": "x"}, "n_steps"), ("ppo", {"n_steps": 1.5}, "integer"), ("ppo", {"gamma": 2}, "gamma"),
+    ("ppo", {"seed": 3}, "cannot be set"), ("ppo", {"policy_kwargs": {"net_arch": "x"}}, "constructor"),
+    ("ppo", {"use_sde": 1}, "true or false"), ("sac", {"tau": 0}, "tau"), ("sac", {"clip_range": 0.2}, "unknown SAC"),
+])
+def test_hyperparams_with_wrong_contents_refused_before_out_is_created(tmp_path, algo, content, match, capsys):
+    """New-user trial: valid JSON with a wrong key, type or range gave exit 1, a traceback and an
+    empty --out folder; now one line, exit 2, and no folder."""
+    from azimut_env.cli import main
+
+    hp = tmp_path / "hp.json"
+    hp.write_text(json.dumps(content))
+    rc = main(["train", "--algo", algo, "--hyperparams", str(hp), "--steps", "16", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("azimut train: error:") and match in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_good_hyperparams_pass_the_check():
+    from train.hyperparams import check_hyperparams
+
+    assert check_hyperparams("ppo", "raw", {"n_steps": 128, "learning_rate": 1e-4})["n_steps"] == 128
+    assert check_hyperparams("sac", "residual", {"ent_coef": "auto_0.1"})["ent_coef"] == "auto_0.1"
+
+
 def test_core_imports_and_runs_without_torch():
     code = textwrap.dedent("""
         import sys, importlib.abc
