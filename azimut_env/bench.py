@@ -303,7 +303,7 @@ def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: 
 
 def _int_list(text: str) -> list[int]:
     try:
-        values = [int(x) for x in text.split(",") if x.strip()]
+        values = [int(x) for x in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a comma-separated list of integers, got {text!r}") from None
     if not values or any(v < 1 for v in values):
@@ -340,7 +340,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_args(args: argparse.Namespace) -> None:
-    """The reference env must exist before minutes of timing are spent."""
+    """The reference env must exist and the substeps be inside the physics' stability budget
+    before minutes of timing are spent (``--convergence`` sweeps its own substep counts)."""
+    if not args.convergence:
+        from .stability import check_substeps
+
+        check_substeps(args.substeps)
     if args.reference:
         import gymnasium as gym
 

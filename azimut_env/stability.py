@@ -36,7 +36,7 @@ import numpy as np
 from .params import RobotParams
 from .tire import stability_numbers
 
-__all__ = ["stability_figures", "check_stability", "check_load_scale", "LOADED_MARGIN_MAX"]
+__all__ = ["stability_figures", "check_stability", "check_substeps", "check_load_scale", "LOADED_MARGIN_MAX"]
 
 #: the largest tire stability margin (b + 2a) a changed load may take (symplectic Euler diverges at 4)
 LOADED_MARGIN_MAX = 4.0
@@ -77,6 +77,28 @@ def check_stability(params: RobotParams, dt: float) -> None:
         hint = "lower com_height" if set(bad) == {"load_transfer_gain"} else "raise substeps"
         raise ValueError(f"substep {dt:.4g} s with these parameters is outside the stability budget: "
                          f"{what}: {hint}")
+
+
+def check_substeps(substeps: int, params: RobotParams | None = None, control_period: float = 0.02,
+                   flag: str = "--substeps") -> None:
+    """Command-line form of :func:`check_stability`: refuse ``substeps`` per ``control_period``
+    [s] outside the budget for ``params`` (default :class:`RobotParams`) before any work, in one
+    line that names the flag and the smallest count that passes (``ValueError``)."""
+    p = params if params is not None else RobotParams()
+    try:
+        check_stability(p, control_period / substeps)
+    except ValueError as exc:
+        least = next((k for k in range(substeps + 1, 4097) if _stable(p, control_period / k)), None)
+        need = f"use at least {least}" if least else "no count up to 4096 passes"
+        raise ValueError(f"{flag} {substeps}: {exc} ({need} at the {control_period:g} s control period)") from None
+
+
+def _stable(params: RobotParams, dt: float) -> bool:
+    try:
+        check_stability(params, dt)
+        return True
+    except ValueError:
+        return False
 
 
 def check_load_scale(params: RobotParams, dt: float, chassis_mass: float) -> None:

@@ -236,6 +236,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_args(args: argparse.Namespace) -> None:
+    from azimut_env.stability import check_substeps
+
+    check_substeps(args.substeps)  # the compliant run's physics, before any episode
     if args.plot:
         try:
             import matplotlib  # noqa: F401

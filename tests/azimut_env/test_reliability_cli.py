@@ -55,6 +55,9 @@ BAD = [
     "record-d2 --points 0", "record-d2 --out {file}/x.npz", "record-d2 --speed-scale 0", "record-d2 --seed -5",
     "record-d2 --out {tmp}", "nope", "eval --out ''",
     "eval --controllers ppo:{file}", "eval --controllers sac:{tmp}/none.zip", "eval --workers 0", "eval --seeds 5-1",
+    # the new-user trial: substeps outside the stability budget, an empty list entry
+    "sim-paper --substeps 1", "sim-paper --substeps 4", "bench-env --substeps 1 --num-envs 1 --steps 10",
+    "bench-env --num-envs 1,,2", "bench-env --num-envs ,1",
 ]
 
 
@@ -203,3 +206,8 @@ def test_ray_init_failure_after_the_check_is_one_line(tmp_path, capsys, monkeypa
         srv.listen(4)
         code, out, err, _ = _eval_with_ray_address(f"127.0.0.1:{srv.getsockname()[1]}", tmp_path, capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "no Ray cluster answered" in err, err
+
+
+def test_substeps_error_names_the_flag_and_the_smallest_stable_count(capsys):
+    code, out, err, _ = run_cli(["sim-paper", "--substeps", "4"], capsys)
+    assert code == 2 and "--substeps 4" in err and "use at least 5" in err, err
