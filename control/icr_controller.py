@@ -188,6 +188,14 @@ class ICRController:
 
     def __init__(self, geom: RobotGeometry, limits: ActuatorLimits | None = None, dt: float = 0.02,
                  config: ICRControllerConfig | None = None) -> None:
+        if not isinstance(geom, RobotGeometry):
+            raise TypeError(f"geom must be a RobotGeometry, got {type(geom).__name__}")
+        if limits is not None and not isinstance(limits, ActuatorLimits):
+            raise TypeError(f"limits must be an ActuatorLimits or None, got {type(limits).__name__}")
+        if config is not None and not isinstance(config, ICRControllerConfig):
+            raise TypeError(f"config must be an ICRControllerConfig or None, got {type(config).__name__}")
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
+            raise TypeError(f"dt must be a number of seconds, got {type(dt).__name__}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be finite and > 0, got {dt!r}")
         self.geom = geom

@@ -288,6 +288,14 @@ def test_bad_input_raises():
         ICRController(GEOM, LIM, 0.0)
 
 
+@pytest.mark.parametrize("args", [(None,), ("geom",), (GEOM, "limits"), (GEOM, LIM, "0.02"), (GEOM, LIM, True),
+                                  (GEOM, LIM, DT, {"stop_hold_time": 1.0}), (LIM, GEOM)])
+def test_constructor_refuses_wrong_types(args):
+    """New-user trial: ``ICRController(None)`` was accepted and failed at the first step()."""
+    with pytest.raises(TypeError, match="geom|limits|config|dt"):
+        ICRController(*args)
+
+
 lam_strategy = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
 
 
