@@ -13,7 +13,7 @@ travel (path length of the chassis centre, per robot):
   μ_d flips at random, so μ is a mean-reverting walk whose size the wheels' acceleration limit
   sets (E|μ| ≈ 0.14 m/s), as the last test here pins.
 * ``icr_rate``: ≥ 1 m on average; μ_d is the integral of the random μ rate, a random walk from
-  rest, so some robots move less (0.75–3.1 m).
+  rest, so some robots move less (0.75–3.1 m with seed 1; 0.36–3.2 m over seeds 1 and 2).
 
 For comparison, raw set-points travel 0.56–0.87 m in 500 random steps.
 """
