@@ -210,7 +210,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       noise [m], [rad]; default 1 s, 2 cm, 0.01 rad).
 
     ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode
-    only), ``"start_progress"`` [m], ``"obstacles"`` (for this episode; one that overlaps the
+    only), ``"start_progress"`` [m] (on an open track within [0, length], else ``ValueError``; on
+    a closed track any finite value, wrapped modulo the length), ``"obstacles"`` (for this
+    episode; one that overlaps the
     robot at its start raises ``ValueError``) and ``"kick": {"step": int, "wheels": [...],
     "impulse": N·m·s}``, an angular impulse on chosen modules at a given step; :meth:`kick` does it
     immediately. A physics blow-up gives the reward ``−off_track_penalty``.

@@ -14,7 +14,8 @@ from .obstacles import Obstacle
 from .tracks import TRACK_NAMES, Track
 from .validation import check_finite, check_index_list, check_int
 
-__all__ = ["RESET_OPTIONS", "check_reset_options", "check_kick", "check_track", "coerce_obstacles"]
+__all__ = ["RESET_OPTIONS", "check_reset_options", "check_kick", "check_track", "coerce_obstacles",
+           "start_progress_on"]
 
 #: the keys ``reset(options=...)`` accepts
 RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
@@ -40,7 +41,8 @@ def check_reset_options(options: dict[str, Any] | None, n: int, own_space: bool 
     env), which per-episode obstacles need. Keys (all optional): ``track`` (a :class:`Track` or a
     built-in name), ``obstacles`` (only with ``own_space``), ``kick`` (a dict with ``step`` (int
     >= 0), ``wheels`` (distinct wheel indices, ints in 0..n−1), ``impulse`` [N·m·s], finite) and
-    ``start_progress`` [m], finite. Raises ``ValueError``/``TypeError`` on anything else."""
+    ``start_progress`` [m], finite (its range depends on the track: :func:`start_progress_on`).
+    Raises ``ValueError``/``TypeError`` on anything else."""
     if options is None:
         return {}
     if not isinstance(options, dict):
@@ -61,6 +63,20 @@ def check_reset_options(options: dict[str, Any] | None, n: int, own_space: bool 
     if "start_progress" in options:
         out["start_progress"] = check_finite("options['start_progress']", options["start_progress"])
     return out
+
+
+def start_progress_on(track: Track, s0: float, what: str = "options['start_progress']") -> float:
+    """The starting progress ``s0`` [m] on ``track``: on a closed track any finite value, wrapped
+    into [0, length) (one lap is the same place); on an open track it must lie in [0, length]
+    (``ValueError``: before, −5 and 1e9 on ``paper`` were silently clamped to its ends, and 1e9
+    on ``circle`` ended the episode after one step)."""
+    length = float(track.length)
+    if track.closed:
+        s = float(s0) % length
+        return 0.0 if s >= length else s
+    if not 0.0 <= s0 <= length:
+        raise ValueError(f"{what} = {s0!r} m is off the open track: it must lie in [0, {length:.6g}] m")
+    return float(s0)
 
 
 def check_kick(kick: Any, n: int) -> dict[str, Any]:

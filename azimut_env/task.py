@@ -55,6 +55,7 @@ from .params import RobotParams, action_from_setpoints
 from .physics import AzimutPhysics, BlowUpLimits, default_wheel_params
 from .physics_layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
 from .reset_options import RESET_OPTIONS, check_reset_options, check_track, coerce_obstacles  # noqa: F401
+from .reset_options import start_progress_on
 from .reward import REWARD_TERMS, RewardTerm, charge_penalty, compute_rewards, reward_scales, reward_weights
 from .sensors import SensorState
 from .termination import check_stalls, check_track_limits, episode_step_limit
@@ -165,7 +166,13 @@ class AzimutTask:
     def check_reset_options(self, options: dict[str, Any] | None, fresh_space: bool = False) -> dict[str, Any]:
         """:func:`~azimut_env.reset_options.check_reset_options` for this task's robots
         (``obstacles`` only with ``fresh_space`` and a single robot)."""
-        return check_reset_options(options, self.n, own_space=fresh_space and self.n_robots == 1)
+        out = check_reset_options(options, self.n, own_space=fresh_space and self.n_robots == 1)
+        if "start_progress" in out:  # its range is the episode's track's (a random one: at reset, closed)
+            spec = out.get("track", self.track_spec)
+            if isinstance(spec, Track) or spec != "random":
+                track = spec if isinstance(spec, Track) else self.builtin_track(spec, None)
+                out["start_progress"] = start_progress_on(track, out["start_progress"])
+        return out
 
     def builtin_track(self, name: str, rng: np.random.Generator) -> Track:
         """The built-in track ``name`` (built once; ``random`` draws a new one from ``rng``)."""
@@ -207,6 +214,7 @@ class AzimutTask:
         phys, cfg, n = self.physics, self.config, self.n
         spec = options.get("track", self.track_spec)
         track = spec if isinstance(spec, Track) else self.builtin_track(spec, rng)
+        s0 = start_progress_on(track, float(options.get("start_progress", 0.0)))  # before any state changes
         if track is not self.tracks[i]:
             self.tracks[i] = track
             self._packs[i] = track.packed()
@@ -223,7 +231,6 @@ class AzimutTask:
             self._kick_step[i] = self.kicks[i]["step"]
         self._randomize(i, rng)
         self.sensors.draw_bias(i, rng)
-        s0 = float(options.get("start_progress", 0.0))
         ref = track.sample(s0)
         noise = cfg.start_noise
         pose = ref[:3] + rng.uniform(-noise, noise, size=3)

@@ -182,6 +182,13 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
             raise ValueError(f"seed must be an int or a list of {N} seeds, got {len(seeds)}")
         return [check_seed(f"seed[{i}]", s) for i, s in enumerate(seeds)]
 
+    def _check_sub_env_options(self, i: int, options) -> dict:
+        """Sub-env i's options, checked; a refusal names the sub-env (``options[i]: ...``)."""
+        try:
+            return self.task.check_reset_options(options)
+        except (ValueError, TypeError) as exc:
+            raise type(exc)(f"options[{i}] (sub-env {i}): {exc}") from None
+
     def _options_list(self, options) -> tuple[list[dict], np.ndarray]:
         """Per-sub-env validated options (``AzimutTask.check_reset_options``) and the reset mask."""
         N, task = self.num_envs, self.task
@@ -205,7 +212,7 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
             per = list(options)
             if len(per) != N or not all(o is None or isinstance(o, dict) for o in per):
                 raise ValueError(f"options must be a dict or a sequence of {N} dicts (or None)")
-            per = [task.check_reset_options(o) for o in per]
+            per = [self._check_sub_env_options(i, o) for i, o in enumerate(per)]
         if self._needs_reset and not mask.all() and not task.ready[~mask].all():
             never = np.flatnonzero(~mask & ~task.ready).tolist()
             raise ValueError(f"options['reset_mask'] leaves out sub-envs {never}, which have not been reset "

@@ -85,6 +85,9 @@ def test_good_kick_option_still_works(env, reference):
     ({"obstacles": [(1.0, 1.0, -0.1)]}, ValueError),
     ({"unknown": 1}, ValueError),
     ("paper", TypeError),
+    ({"start_progress": -5.0}, ValueError),  # paper is open: [0, length]; was clamped silently
+    ({"start_progress": 1e9}, ValueError),
+    ({"track": "crab", "start_progress": 4.8}, ValueError),
 ])
 def test_bad_reset_options_refused_without_side_effects(options, err, env, zero_action, reference):
     with pytest.raises(err):
@@ -248,3 +251,41 @@ def test_refused_first_reset_through_gym_make_leaves_the_next_good_episode_intac
     assert out[1] == out_ref[1]
     env.close()
     ref.close()
+
+
+def test_start_progress_on_a_closed_track_wraps_modulo_its_length(make_env):
+    """New-user trial: on ``circle`` start_progress 1e9 was not wrapped and the episode ended
+    after one step; now a lap later is the same place (the env docstring's reset options)."""
+    from azimut_env.tracks import make_track
+
+    length = make_track("circle").length
+    a, b = make_env(track="circle"), make_env(track="circle")
+    far = 1e6 * length + 2.0
+    obs_far, _ = a.reset(seed=1, options={"start_progress": far})
+    obs_near, _ = b.reset(seed=1, options={"start_progress": far % length})
+    assert np.allclose(obs_far, obs_near)
+    obs_neg, _ = b.reset(seed=1, options={"start_progress": 2.0 - length})
+    assert np.allclose(obs_neg, a.reset(seed=1, options={"start_progress": 2.0})[0], atol=1e-9)
+    for _ in range(5):
+        *_, term, trunc, _ = a.step(np.zeros(a.action_space.shape, np.float32))
+        assert not (term or trunc)
+
+
+def test_start_progress_on_an_open_track_is_kept_inside_it(make_env):
+    env = make_env(track="paper")
+    from azimut_env.tracks import make_track
+
+    length = make_track("paper").length
+    env.reset(seed=0, options={"start_progress": length})  # the end itself is allowed
+    env.reset(seed=0, options={"start_progress": 0.0})
+    with pytest.raises(ValueError, match=r"start_progress.*\[0, "):
+        env.reset(seed=0, options={"start_progress": length + 0.01})
+
+
+def test_vector_option_errors_name_the_sub_env(make_vector_env):
+    """New-user trial: with a per-env options list the error did not say which sub-env."""
+    env = make_vector_env(num_envs=3)
+    with pytest.raises(ValueError, match=r"options\[2\] \(sub-env 2\).*start_progress"):
+        env.reset(seed=0, options=[None, {}, {"start_progress": -1.0}])
+    with pytest.raises(TypeError, match=r"options\[1\] \(sub-env 1\)"):
+        env.reset(seed=0, options=[None, {"kick": 3}, None])
