@@ -25,7 +25,8 @@ import time
 
 from azimut_env.tracks import TRACK_NAMES
 
-from .campaign import EXECUTORS, arg_seeds, resolve_executor, run_tasks
+from .campaign import EXECUTORS, resolve_executor, run_tasks
+from .campaign_args import arg_seeds
 from .evaluate import CONTROLLERS, DEFAULT_TRACKS
 from .eval_campaign import episode_task, episode_tasks
 

@@ -30,8 +30,8 @@ import numpy as np
 from azimut_env.task import nominal_duration
 from azimut_env.tracks import make_track
 
-from .campaign import (CampaignInterrupted, Task, TaskStore, add_executor_arguments, arg_seeds, check_executor_args,
-                       resolve_executor, run_tasks, summarize)
+from .campaign import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
+from .campaign_args import add_executor_arguments, arg_seeds, check_executor_args
 from .plots import comparison_plots, write_plots
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",

@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--progress-bar", action="store_true",
                         help="SB3's progress bar (needs tqdm and rich; otherwise a line per evaluation)")
     parser.add_argument("--quiet", action="store_true", help="no SB3 log table on stdout")
-    from control.campaign import add_executor_arguments, arg_seeds
+    from control.campaign_args import add_executor_arguments, arg_seeds
 
     parser.add_argument("--seeds", type=arg_seeds, default=None, metavar="SEEDS",
                         help="train one agent per seed (0-4, 0,3,5) into OUT/seed_N, with --workers at a time; "

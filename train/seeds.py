@@ -112,7 +112,7 @@ def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict
 
 def check_seed_args(args: argparse.Namespace) -> None:
     """``--seeds`` with the other flags (``ValueError``, one line)."""
-    from control.campaign import check_executor_args
+    from control.campaign_args import check_executor_args
 
     if args.seed not in (None, 0) and args.seeds != [args.seed]:
         raise ValueError("give --seed or --seeds, not both")

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from azimut_env.cli import main
-from control.campaign import (CampaignInterrupted, Task, TaskStore, bootstrap_ci, parse_seeds, run_tasks,
-                              summarize)
+from control.campaign import CampaignInterrupted, Task, TaskStore, bootstrap_ci, run_tasks, summarize
+from control.campaign_args import parse_seeds
 from control.eval_campaign import draw_kick, episode_tasks
 
 EXECUTORS = ["process", "ray"]
