@@ -506,7 +506,7 @@ class AzimutTask:
             key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
             if key < 0:
                 lam, mu = -lam, -mu
-        terms = {name: float(self.reward_terms[i, j]) for j, name in enumerate(REWARD_TERMS)} if with_terms else {}
+        terms = dict(zip(REWARD_TERMS, self.reward_terms[i].tolist())) if with_terms else {}  # tolist: Python floats
         return {
             "pose": summ[RS_POSE].copy(),
             "pose_estimate": self.pose_estimate(i),
