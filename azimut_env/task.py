@@ -460,7 +460,8 @@ class AzimutTask:
         idx = np.flatnonzero(rows)
         odo.advance(idx, self.lam_hat, self.phidot_m, self.beta_m, self.steps, self.physics.summary[:, RS_POSE])
         out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho, odo.pose,
-                                 odo.track_state[:, _TQ_S].copy(), cfg.lookahead_count, cfg.lookahead_spacing)
+                                 odo.track_state[:, _TQ_S].copy(), cfg.lookahead_count, cfg.lookahead_spacing,
+                                 n_packs=self.n_robots)
         odo.track_state[idx] = out[idx]
         odo.look[idx] = look[idx]
         return odo.track_state, odo.look, odo.vel
@@ -469,7 +470,8 @@ class AzimutTask:
         """Every robot's track state, each on its own track, in one compiled call."""
         cfg = self.config
         out, look = query_tracks(self._packs, self.track_closed, self.track_length, self.track_rho,
-                                 self.physics.summary[:, RS_POSE], s_hint, cfg.lookahead_count, cfg.lookahead_spacing)
+                                 self.physics.summary[:, RS_POSE], s_hint, cfg.lookahead_count, cfg.lookahead_spacing,
+                                 n_packs=self.n_robots)
         self.track_out[:] = out
         self.look[:] = look
         self._unpack_track(slice(None))
