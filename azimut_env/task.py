@@ -151,6 +151,7 @@ class AzimutTask:
         self.best_step = np.zeros(N, dtype=np.int64)
         #: per-robot step limit of the current episode (``time_limit_factor``; huge when off)
         self.step_limit = np.full(N, np.iinfo(np.int64).max, dtype=np.int64)
+        self._limit_track: list[Track | None] = [None] * N  # the (immutable) track step_limit[i] is of
         self.steps = np.zeros(N, dtype=np.int64)
         self.ready = np.zeros(N, dtype=np.bool_)  # robot i's last reset succeeded (step needs it)
         self.track_length = np.array([t.length for t in self.tracks])
@@ -259,8 +260,10 @@ class AzimutTask:
         self.finished[i] = False
         self.stalled[i] = False
         self.best_step[i] = 0
-        self.step_limit[i] = episode_step_limit(track, cfg.time_limit_factor, cfg.control_period,
-                                                self.params.geometry, self.params.limits)
+        if track is not self._limit_track[i]:  # the reference lap (~0.7 ms) once per track, not per reset
+            self.step_limit[i] = episode_step_limit(track, cfg.time_limit_factor, cfg.control_period,
+                                                    self.params.geometry, self.params.limits)
+            self._limit_track[i] = track
         sl = slice(i, i + 1)
         self.sensors.draw_noise_robot(i, rng)
         self._measure(sl)
