@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimation.geometry import RobotGeometry
+from estimation.hrep import exp_map, sphere_angle
 from estimation.kinematics import steering_from_lambda
 
 from .icr_config import ICRControllerConfig
@@ -73,10 +74,7 @@ def exp_step(lam: np.ndarray, e1: np.ndarray, rate: np.ndarray, dt: float) -> np
     """exp_λ(dt (r₁ e₁ + r₂ e₂)) with e₂ = λ × e₁: λ moved by the tangent rate ``rate`` (N, 2)
     [rad/s] for ``dt`` [s], on the unit sphere."""
     e2 = np.cross(lam, e1)
-    v = dt * (rate[:, :1] * e1 + rate[:, 1:2] * e2)
-    nv = np.linalg.norm(v, axis=-1, keepdims=True)
-    out = np.cos(nv) * lam + np.sin(nv) * v / np.where(nv > 0, nv, 1.0)
-    return _unit(out)
+    return exp_map(lam, dt * (rate[:, :1] * e1 + rate[:, 1:2] * e2))
 
 
 def step_toward(lam: np.ndarray, target: np.ndarray, max_angle: float) -> np.ndarray:
@@ -111,7 +109,7 @@ def advance_target(lam: np.ndarray, proposal: np.ndarray, push: np.ndarray, geom
     crosses = np.any(np.abs(beta1 - beta0) > 0.5 * np.pi, axis=-1)
     cos_axis = np.abs(proposal @ geom.s_unit.T)  # (N, n): |cos| of the angle to ±ŝ_k
     in_cap = np.any(cos_axis > np.cos(axis_margin), axis=-1)
-    step = np.arctan2(np.linalg.norm(np.cross(lam, proposal), axis=-1), np.sum(lam * proposal, axis=-1))
+    step = sphere_angle(lam, proposal)
     blocked = crosses | in_cap
     push = np.where(crosses & ~in_cap, push + step, 0.0)
     accept = ~blocked | (crosses & ~in_cap & (push > cross_push))
