@@ -28,12 +28,12 @@ from __future__ import annotations
 import numpy as np
 
 from estimation.geometry import RobotGeometry
-from estimation.hrep import exp_map, sphere_angle
+from estimation.hrep import exp_map, nearer_representative, sphere_angle
 from estimation.kinematics import steering_from_lambda
 
 from .icr_config import ICRControllerConfig
 
-__all__ = ["advance_target", "step_toward", "exp_step", "transport_frame", "initial_frame", "SHAPED_TARGET_CONFIG"]
+__all__ = ["shape_target", "advance_target", "step_toward", "exp_step", "transport_frame", "initial_frame", "SHAPED_TARGET_CONFIG"]
 
 #: The ICR controller's tuning behind shaped absolute targets when none is given: μ gets its own
 #: time scaling (``mu_own_scale``) and ramps at 0.95 of the wheel acceleration limit (instead of
@@ -115,3 +115,25 @@ def advance_target(lam: np.ndarray, proposal: np.ndarray, push: np.ndarray, geom
     accept = ~blocked | (crosses & ~in_cap & (push > cross_push))
     push = np.where(accept, 0.0, push)
     return np.where(accept[:, None], proposal, lam), push, ~accept
+
+
+def shape_target(lam: np.ndarray, lam_t: np.ndarray, mu_t: np.ndarray, push: np.ndarray, geom: RobotGeometry,
+                 axis_margin: float, max_angle: float, cross_push: float, nearer: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One shaping step (see the module docstring), shared by the single and the vector action
+    wrappers: (with ``nearer``) the representative of (λ_t, μ_t) nearer λ, one step of at most
+    ``max_angle`` [rad] from λ toward λ_t, then :func:`advance_target`. Without ``nearer`` λ_t is
+    the direction of motion (μ_t ≥ 0) and is approached as given.
+
+    Args:
+        lam: (N, 3) the controller's reference λ (unit). lam_t, mu_t: (N, 3) unit, (N,) target.
+        push: (N,) arc [rad] pushed past a stop so far.
+
+    Returns:
+        (λ_s (N, 3), μ_t (N,), push (N,), held (N,) bool).
+    """
+    if nearer:
+        lam_t, mu_t = nearer_representative(lam, lam_t, mu_t)
+    prop = step_toward(lam, lam_t, max_angle)
+    lam_s, push, held = advance_target(lam, prop, push, geom, axis_margin, cross_push)
+    return lam_s, mu_t, push, held

@@ -59,12 +59,12 @@ from azimut_env.validation import ResetNeeded, check_bool, check_positive, check
 from estimation.hrep import eta_from_twist
 
 from .icr_controller import (ICRBatchState, ICRControllerConfig, icr_control_step_batch, initial_state_batch,
-                             nearer_target, reference_stop_mask)
+                             reference_stop_mask)
 from .limits import limit_violations
 from .follower_batch import BatchFollower
 from .path_follower import PathFollowerConfig
 from .swerve import SwerveConfig, SwerveController
-from .target_shaping import (SHAPED_TARGET_CONFIG, advance_target, exp_step, initial_frame, step_toward,
+from .target_shaping import (SHAPED_TARGET_CONFIG, advance_target, exp_step, initial_frame, shape_target,
                              transport_frame)
 from .wrappers import icr_target_from_action
 
@@ -214,12 +214,12 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             lam_t, mu_t = eta_from_twist(a * self.scale)
         if not self.shape_targets:
             return lam_t, mu_t, held
-        lam = self._icr.lam[rows]  # one bounded step ahead of the controller's own reference λ
-        if self._kind == "twist" or self.signed_mu:  # else λ_d is the direction of motion (μ_d ≥ 0)
-            lam_t, mu_t = nearer_target(lam, lam_t, mu_t)
-        prop = step_toward(lam, lam_t, self.target_rate * dt)
-        lam_new, push, held = advance_target(lam, prop, self._push[rows], geom, cfg.axis_margin, self.cross_push)
-        self._lam_s[rows], self._push[rows] = lam_new, push
+        # one bounded step ahead of the controller's own reference λ; unsigned ICR targets: λ_d is
+        # the direction of motion (μ_d ≥ 0), else the nearer representative
+        lam_new, mu_t, push, held = shape_target(self._icr.lam[rows], lam_t, mu_t, self._push[rows], geom,
+                                                 cfg.axis_margin, self.target_rate * dt, self.cross_push,
+                                                 nearer=self._kind == "twist" or self.signed_mu)
+        self._push[rows] = push
         return lam_new, mu_t, held
 
     def step(self, actions) -> tuple[Any, ...]:

@@ -46,10 +46,10 @@ from azimut_env.validation import (ResetNeeded, check_bool, check_positive, chec
                                    check_real_array)
 from estimation.hrep import eta_from_twist
 
-from .icr_controller import ICRController, ICRControllerConfig, nearer_target
+from .icr_controller import ICRController, ICRControllerConfig
 from .limits import limit_violations
 from .swerve import SwerveConfig, SwerveController
-from .target_shaping import SHAPED_TARGET_CONFIG, advance_target, step_toward
+from .target_shaping import SHAPED_TARGET_CONFIG, shape_target
 
 __all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
 
@@ -85,8 +85,7 @@ class _ControllerWrapper(gym.Wrapper):
             raise TypeError(f"swerve_config must be SwerveConfig or None, got {type(swerve_config).__name__}")
         self.shape_targets = bool(shape_targets) and controller == "icr"
         self.target_rate, self.cross_push = float(target_rate), float(cross_push)
-        self._lam_s = np.array([0.0, 0.0, 1.0])
-        self._push = 0.0
+        self._push = 0.0  # arc [rad] the shaped target has pushed past a steering stop
         if controller not in ("icr", "swerve"):
             raise ValueError(f"controller must be 'icr' or 'swerve', got {controller!r}")
         base = env.unwrapped
@@ -104,7 +103,7 @@ class _ControllerWrapper(gym.Wrapper):
             self._ctl = ICRController(base.geometry, base.limits, base.control_period, self._icr_config)
             lam_hat, _ = base.estimated_eta
             self._ctl.reset(lam_hat, base.measured_beta, base.measured_phidot)
-            self._lam_s, self._push = self._ctl.state.lam.copy(), 0.0
+            self._push = 0.0
         else:
             self._ctl = SwerveController(base.geometry, base.limits, base.control_period, self._swerve_config)
             self._ctl.reset(base.measured_beta, base.measured_phidot)
@@ -122,15 +121,13 @@ class _ControllerWrapper(gym.Wrapper):
         if isinstance(self._ctl, ICRController):
             lam_hat, mu_hat = base.estimated_eta
             if self.shape_targets:  # one bounded step ahead of the controller's reference λ
-                self._lam_s = self._ctl.state.lam
-                lam_t, mu_t = np.asarray(lam_d, dtype=np.float64)[None, :], np.array([mu_d], dtype=np.float64)
-                if nearer:  # the representative of (λ_d, μ_d) nearer λ; else λ_d is the direction of motion
-                    lam_t, mu_t = nearer_target(self._lam_s[None, :], lam_t, mu_t)
-                prop = step_toward(self._lam_s[None, :], lam_t, self.target_rate * base.control_period)
-                lam_new, push, h = advance_target(self._lam_s[None, :], prop, np.array([self._push]), base.geometry,
-                                                  self._ctl.config.axis_margin, self.cross_push)
-                self._lam_s, self._push, held = lam_new[0], float(push[0]), bool(h[0])
-                lam_d, mu_d = self._lam_s, float(mu_t[0])
+                # nearer: the representative of (λ_d, μ_d) nearer λ; else λ_d is the direction of motion
+                lam_s, mu_t, push, h = shape_target(
+                    self._ctl.state.lam[None, :], np.asarray(lam_d, dtype=np.float64)[None, :],
+                    np.array([mu_d], dtype=np.float64), np.array([self._push]), base.geometry,
+                    self._ctl.config.axis_margin, self.target_rate * base.control_period, self.cross_push, nearer)
+                self._push, held = float(push[0]), bool(h[0])
+                lam_d, mu_d = lam_s[0], float(mu_t[0])
             cmd = self._ctl.step(lam_hat, mu_hat, base.measured_beta, base.measured_phidot, lam_d, mu_d)
             mode, events = int(cmd.info["mode"]), self._ctl.state.events
             lag = abs(float(cmd.info["mu_target"]) - float(self._ctl.state.mu))
