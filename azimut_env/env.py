@@ -36,6 +36,7 @@ import numpy as np
 
 from estimation import estimate_eta
 
+from .actions import float32_copy
 from .config import front_signature
 from .frontend import AzimutFrontEnd
 from .params import RobotParams, SensorParams
@@ -289,8 +290,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
         a = np.asarray(action)
         if a.dtype.kind not in "biuf":
             raise TypeError(f"action must hold real numbers, got dtype {a.dtype}")
-        with np.errstate(over="ignore"):  # beyond float32: inf, refused below
-            a = a.astype(np.float32)
+        a = float32_copy(a)  # beyond float32: inf, refused below
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
         task = self.task
