@@ -30,7 +30,7 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
     policy's training env arguments (e.g. ``domain_randomization``)."""
     from azimut_env.task import nominal_duration
 
-    from control.episode import EpisodeLog
+    from control.episode import EpisodeLog, record_step
     from control.icr_controller import Mode
     from control.limits import limit_violations
 
@@ -45,9 +45,7 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
     max_time = max_time if max_time is not None else 3.0 * nominal_duration(base.tracks[0]) + 10.0
     dt, limits = base.control_period, base.limits
     log = EpisodeLog(label or f"{policy.algo}-{policy.action}", base.tracks[0], dt)
-    rec: dict[str, list] = {k: [] for k in ("pose", "lateral", "heading", "slip_power", "internal_force", "qua",
-                                            "beta_meas", "beta_true", "motor_true", "beta_cmd", "phidot_cmd",
-                                            "beta_rate", "phiddot", "lam_hat", "mu_true", "mode", "violations")}
+    rec: dict[str, list] = {}
     ret = 0.0
     beta_prev, phidot_prev = base.setpoints_from_action(base.task.prev_action)
     beta_prev, phidot_prev = beta_prev[0], phidot_prev[0]
@@ -71,17 +69,11 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
             viol = bool(limit_violations(rate, accel, phidot_c, phiddot, limits).any())
         beta_prev, rate_prev, phidot_prev = beta_c, rate, phidot_c
         mode = int(info["controller_mode"][0]) if "controller_mode" in info else int(Mode.RUNNING)
-        if rec["mode"] and mode == int(Mode.STOPPING) and rec["mode"][-1] == int(Mode.RUNNING):
+        if rec.get("mode") and mode == int(Mode.STOPPING) and rec["mode"][-1] == int(Mode.RUNNING):
             events += 1
         lam_hat, _ = base.estimated_eta
-        for key, value in (("pose", info["pose"][0]), ("lateral", info["lateral_error"][0]),
-                           ("heading", info["heading_error"][0]), ("slip_power", info["slip_power"][0]),
-                           ("internal_force", info["internal_force"][0]), ("qua", info["qua"][0]),
-                           ("beta_meas", base.measured_beta[0]), ("beta_true", sub["beta_true"]),
-                           ("motor_true", base.physics.motor_angles()[0]), ("beta_cmd", beta_c),
-                           ("phidot_cmd", phidot_c), ("beta_rate", rate), ("phiddot", phiddot), ("lam_hat", lam_hat[0]),
-                           ("mu_true", abs(float(sub["eta_true"][1]))), ("mode", mode), ("violations", viol)):
-            rec[key].append(value)
+        record_step(rec, _SubEnv(base), sub, lam_hat[0], beta_c, phidot_c, beta_rate=rate, phiddot=phiddot,
+                    mode=mode, violations=viol)
         if info["finished"][0]:
             log.completed = True
             break
@@ -96,11 +88,20 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
             break
     for key, values in rec.items():
         setattr(log, key, np.asarray(values))
-    log.t = dt * np.arange(1, len(rec["lateral"]) + 1)
+    log.t = dt * np.arange(1, log.lateral.size + 1)
     log.events = events
     log.ret = ret
     venv.close()
     return log, ret
+
+
+class _SubEnv:
+    """Sub-env 0 of a one-robot vector env, seen as :func:`control.episode.record_step` reads a
+    single env (``measured_beta`` of that robot, ``physics``)."""
+
+    def __init__(self, base):
+        self.measured_beta = base.measured_beta[0]
+        self.physics = base.physics
 
 
 def policy_metrics(policy, track: str | Track, seed: int = 0, label: str | None = None,
