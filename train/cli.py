@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--track", choices=TRACK_NAMES, default="random",
                         help="training track (default random: a new track per episode; the built-ins are held out)")
     parser.add_argument("--seed", type=arg_int(0, 2**31 - 1), default=0, help="seed (default 0)")
-    parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1e6)")
+    parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1000000)")
     parser.add_argument("--out", type=arg_output_path(directory=True), required=True, help="run folder")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
     parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(EVAL_TRACKS[:2]),
@@ -91,7 +91,13 @@ def check_args(args: argparse.Namespace) -> None:
             check_hyperparams(args.algo, action_key(args.action), data)
         except ValueError as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
-    if getattr(args, "seeds", None) is not None:
+    if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
+        given = [flag for flag, value, default in (("--workers", args.workers, 1), ("--executor", args.executor, "auto"),
+                                                   ("--ray-address", args.ray_address, None), ("--retries", args.retries, 1))
+                 if value != default]
+        if given:
+            raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
+    else:
         from .seeds import check_seed_args
 
         check_seed_args(args)
