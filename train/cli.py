@@ -200,17 +200,13 @@ def _plot_learning_curve(out: Path) -> None:
         print("learning_curve.png not written: matplotlib is not installed (pip install 'azimut[plot]')",
               file=sys.stderr)
         return
-    import csv
+    from .plots import evaluation_history, training_returns
 
-    csv_file = next(iter(out.glob("*/progress.csv")), None)
     fig, ax = plt.subplots(figsize=(7, 4))
-    if csv_file is not None:
-        rows = list(csv.DictReader(csv_file.open()))
-        pts = [(float(r["time/total_timesteps"]), float(r["rollout/ep_rew_mean"])) for r in rows
-               if r.get("rollout/ep_rew_mean") not in (None, "") and r.get("time/total_timesteps") not in (None, "")]
-        if pts:
-            ax.plot(*zip(*pts), label="training episodes (random tracks)")
-    ev = json.loads((out / "evaluations.json").read_text()) if (out / "evaluations.json").is_file() else []
+    pts = training_returns(out)
+    if pts:
+        ax.plot(*zip(*pts), label="training episodes (random tracks)")
+    ev = evaluation_history(out)
     if ev:
         ax.plot([e["timesteps"] for e in ev], [e["mean_return"] for e in ev], "o-", label="held-out tracks (mean)")
     ax.set_xlabel("environment steps")
