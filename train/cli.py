@@ -74,6 +74,7 @@ def check_args(args: argparse.Namespace) -> None:
     if args.progress_bar:
         require_module("rich", "--progress-bar")
         require_module("tqdm", "--progress-bar")
+    data = None
     if args.hyperparams is not None:
         p = Path(args.hyperparams)
         if not p.is_file():
@@ -84,6 +85,21 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"--hyperparams {args.hyperparams}: not valid JSON ({exc})") from None
         if not isinstance(data, dict):
             raise ValueError(f"--hyperparams {args.hyperparams}: expected a JSON object")
+    if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
+        given = [flag for flag, value, default in (("--workers", args.workers, 1), ("--executor", args.executor, "auto"),
+                                                   ("--ray-address", args.ray_address, None), ("--retries", args.retries, 1))
+                 if value != default]
+        if given:
+            raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
+        if args.resume and _latest_checkpoint(Path(args.out)) is None:
+            raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
+        if not args.resume and (Path(args.out) / "model.zip").exists():
+            raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
+    else:
+        from .seeds import check_seed_args
+
+        check_seed_args(args)
+    if data is not None:  # last, as it imports SB3 and builds the algorithm (seconds): the cheap refusals first
         from .envs import action_key
         from .hyperparams import check_hyperparams
 
@@ -91,21 +107,6 @@ def check_args(args: argparse.Namespace) -> None:
             check_hyperparams(args.algo, action_key(args.action), data)
         except ValueError as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
-    if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
-        given = [flag for flag, value, default in (("--workers", args.workers, 1), ("--executor", args.executor, "auto"),
-                                                   ("--ray-address", args.ray_address, None), ("--retries", args.retries, 1))
-                 if value != default]
-        if given:
-            raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
-    else:
-        from .seeds import check_seed_args
-
-        check_seed_args(args)
-        return
-    if args.resume and _latest_checkpoint(Path(args.out)) is None:
-        raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
-    if not args.resume and (Path(args.out) / "model.zip").exists():
-        raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
 
 
 def _latest_checkpoint(out: Path) -> Path | None:
