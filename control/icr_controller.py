@@ -110,8 +110,7 @@ def icr_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phi
     Raises:
         ValueError: on non-finite input, wrong shapes, a zero λ_d, or dt <= 0.
     """
-    n = geom.n
-    nrows = state.num
+    n, nrows = geom.n, state.num
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0, got {dt!r}")
     check_unit_batch(lam_hat, "lam_hat")
@@ -124,10 +123,9 @@ def icr_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phi
     if lam_d.shape[0] != nrows:
         raise ValueError(f"lam_d must have shape ({nrows}, 3)")
     mu_d = check_finite_array(mu_d, "mu_d", (nrows,))
-
-
     lam_d, mu_d, zero_cmd, axis_k = feasible_target(state.lam, lam_d, mu_d, geom, limits, config)
-    info: dict = {"lam_target": lam_d.copy(), "mu_target": mu_d.copy(), "axis_cap": axis_k}
+    # feasible_target's arrays are new and mode_transitions works on copies: no copy for info
+    info: dict = {"lam_target": lam_d, "mu_target": mu_d, "axis_cap": axis_k}
     upd = mode_transitions(state, mu_hat, beta_meas, lam_d, mu_d, zero_cmd, geom, config, dt)
     new_state, cmd = mode_commands(state, upd, beta_meas, zero_cmd, geom, limits, config, dt)
     info.update(cmd.info)
