@@ -137,7 +137,8 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         self._icr: ICRBatchState | None = None  # the batched ICR controllers' state
         self._icr_ready = np.zeros(N, dtype=np.bool_)
         self._pending = np.zeros(N, dtype=np.bool_)
-        # shaped targets (icr_rate, shaped absolute targets): λ_s, μ_s, tangent frame, push past a stop
+        # icr_rate's integrated target λ_s, μ_s and tangent frame; push past a stop (icr_rate and
+        # shaped absolute targets, which step from the controller's own reference λ)
         self._lam_s = np.tile([0.0, 0.0, 1.0], (N, 1))
         self._mu_s = np.zeros(N)
         self._e1 = initial_frame(self._lam_s)
