@@ -55,7 +55,7 @@ __all__ = ["ICRTargetAction", "TwistAction", "icr_target_from_action"]
 
 
 def icr_target_from_action(action, mu_max: float, min_norm: float,
-                           signed_mu: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                           signed_mu: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Clipped ICR-target actions (..., 4) -> (λ_d (..., 3), μ_d (...)): λ_d = a[:3]/‖a[:3]‖ and
     μ_d = a[3]·mu_max [m/s] (``signed_mu``) or (a[3] + 1)/2·mu_max ∈ [0, mu_max] (not
     ``signed_mu``: λ_d on the whole sphere is then the direction of motion, the canonical
