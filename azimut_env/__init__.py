@@ -10,7 +10,7 @@ source), ``frontend`` and ``interface`` (what both envs share; the controller ``
 ``env`` (the single env, N = 1), ``vector_env`` (``AzimutVectorEnv``: N robots in one Space, also what
 ``gymnasium.make_vec("Azimut-v1", num_envs=N, vectorization_mode="vector_entry_point")`` returns),
 ``sb3`` (an SB3 ``VecEnv`` over it), ``rendering``, ``bench``. (``azimut sim-paper`` drives the
-ICR controller, so it lives in ``control.phenomenon``.)
+ICR controller, so it lives in ``jobs.sim_paper``.)
 """
 
 from gymnasium.envs.registration import register, registry

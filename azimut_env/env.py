@@ -1,9 +1,9 @@
 """The Gymnasium task: drive a simulated AZIMUT-3 along a track (``Azimut-v1``).
 
-The physics lives in :mod:`azimut_env.physics`, the task over N robots at once in
-:mod:`azimut_env.task` (which runs the stages: :mod:`~azimut_env.actions`,
-:mod:`~azimut_env.sensors`, :mod:`~azimut_env.termination`, :mod:`~azimut_env.reward`,
-:mod:`~azimut_env.observation`); this module is the single env, the N = 1 front end of that task
+The physics lives in :mod:`azimut_env.physics.engine`, the task over N robots at once in
+:mod:`azimut_env.task.core` (which runs the stages: :mod:`~azimut_env.task.actions`,
+:mod:`~azimut_env.task.sensors`, :mod:`~azimut_env.task.termination`, :mod:`~azimut_env.task.reward`,
+:mod:`~azimut_env.task.observation`); this module is the single env, the N = 1 front end of that task
 (:class:`~azimut_env.vector_env.AzimutVectorEnv` is the N-robot one; the constructor, the
 controller interface and rendering they share are :class:`~azimut_env.frontend.AzimutFrontEnd`).
 The controller interface is typed as :class:`~azimut_env.interface.ControllerInterface`.
@@ -23,7 +23,7 @@ Controller interface (stable names, on ``env.unwrapped``):
   ``reference_twist_body``, ``query``...) and ``progress`` (s along it [m], from the true pose).
 * ``estimated_pose``: the pose (x, y, θ) the observation is computed from: the true pose with
   ``pose_source="true"``, the odometry + localisation estimate with ``"odometry"``
-  (:mod:`azimut_env.localisation`). Controllers that follow the track should read this one.
+  (:mod:`azimut_env.task.localisation`). Controllers that follow the track should read this one.
 * ground truth for evaluation only: ``true_pose``, ``true_twist``, and ``info`` of each step.
 """
 
@@ -34,15 +34,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from azimut_env.frontend import AzimutFrontEnd
+from azimut_env.params import RobotParams, SensorParams
+from azimut_env.task.actions import float32_copy
+from azimut_env.task.config import front_signature
+from azimut_env.task.core import observation_layout
+from azimut_env.tracks import Track
+from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_seed
 from estimation import estimate_eta
-
-from .actions import float32_copy
-from .config import front_signature
-from .frontend import AzimutFrontEnd
-from .params import RobotParams, SensorParams
-from .task import observation_layout
-from .tracks import Track
-from .validation import ResetNeeded, check_finite, check_index_list, check_seed
 
 __all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_state_batch"]
 
@@ -109,7 +108,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     noise does not reach them). With ``pose_source="odometry"`` they are computed from a pose
     estimate: dead reckoning from the estimated H state and the wheel encoders, corrected by a
     noisy absolute localisation fix every ``localisation.fix_period_s``
-    (:mod:`azimut_env.localisation`), and ``speed_along`` from the odometry twist. In both modes
+    (:mod:`azimut_env.task.localisation`), and ``speed_along`` from the odometry twist. In both modes
     the reward, the termination, ``progress`` and ``info`` (``pose``, ``twist``, ``eta_true``,
     ``beta_true``, ``lateral_error``...) use the ground truth; ``info["pose_estimate"]`` is the
     pose the observation used.
@@ -207,7 +206,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       steps of an episode); for sim-to-real work. The steering motor model (a kinematic position
       source, or a DC motor under its torque–speed limit) is ``params.steer_motor``.
     * ``pose_source``: ``"true"`` (default) or ``"odometry"`` (see "What is privileged");
-      ``localisation``: :class:`~azimut_env.localisation.LocalisationParams` (fix period [s], fix
+      ``localisation``: :class:`~azimut_env.task.localisation.LocalisationParams` (fix period [s], fix
       noise [m], [rad]; default 1 s, 2 cm, 0.01 rad).
 
     ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode

@@ -1,12 +1,12 @@
 """The front end both envs share: construction, the controller interface, rendering.
 
 :class:`~azimut_env.env.AzimutEnv` (one robot) and :class:`~azimut_env.vector_env.AzimutVectorEnv`
-(N robots) are front ends over one :class:`~azimut_env.task.AzimutTask`. What they have in
+(N robots) are front ends over one :class:`~azimut_env.task.core.AzimutTask`. What they have in
 common lives here, once:
 
 * construction (:meth:`AzimutFrontEnd._build`): the keyword arguments become
-  (:class:`~azimut_env.params.RobotParams`, :class:`~azimut_env.config.TaskConfig`) through
-  :func:`~azimut_env.config.task_settings`, then the task, the action and observation spaces;
+  (:class:`~azimut_env.params.RobotParams`, :class:`~azimut_env.task.config.TaskConfig`) through
+  :func:`~azimut_env.task.config.task_settings`, then the task, the action and observation spaces;
 * the controller interface (:mod:`azimut_env.interface`): the same properties, reading the
   task's arrays at ``self._robots``, which is ``0`` for the single env (per-robot shapes) and
   ``slice(None)`` for the vector env (a leading robot axis);
@@ -25,12 +25,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .config import task_settings
-from .params import ActuatorLimits, action_from_setpoints, setpoints_from_action
-from .physics import AzimutPhysics
-from .rendering import Trail
-from .task import AzimutTask
-from .tracks import Track
+from azimut_env.params import ActuatorLimits, action_from_setpoints, setpoints_from_action
+from azimut_env.physics.engine import AzimutPhysics
+from azimut_env.rendering import Trail
+from azimut_env.task.config import task_settings
+from azimut_env.task.core import AzimutTask
+from azimut_env.tracks import Track
 
 __all__ = ["AzimutFrontEnd"]
 
@@ -189,7 +189,7 @@ class AzimutFrontEnd:
         if not 0 <= i < self.task.n_robots:
             raise ValueError(f"render_index {i} out of range 0..{self.task.n_robots - 1}")
         if self._renderer is None:
-            from .rendering import Renderer
+            from azimut_env.rendering import Renderer
 
             self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
         phys = self.physics

@@ -23,9 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from azimut_env.physics.layout import CMD
 from estimation.geometry import RobotGeometry
-
-from .physics_layout import CMD
 
 __all__ = [
     "ActuatorLimits",
@@ -171,7 +170,7 @@ class SteeringMotorParams:
     * ``"dc"``: a torque source with inertia that follows the same rate profile while its torque
       allows, under the torque–speed line of a DC motor, τ ≤ τ_stall (1 − |ω|/ω₀) while motoring,
       and the current limit ``ActuatorLimits.steer_torque_max``
-      (:func:`~azimut_env.actuators.steer_dc_motor_kernel`). Under a load τ_L the steering slows
+      (:func:`~azimut_env.physics.actuators.steer_dc_motor_kernel`). Under a load τ_L the steering slows
       to ω₀ (1 − τ_L/τ_stall); the kinematic model keeps its rate.
 
     Defaults are an assumption of the class of a ~20 W brushed DC motor (e.g. a Maxon RE 25:
@@ -223,7 +222,7 @@ class WheelParams:
 
 @dataclass(frozen=True)
 class TireParams:
-    """Tire-ground contact: the brush tire with relaxation lengths of :mod:`azimut_env.tire`.
+    """Tire-ground contact: the brush tire with relaxation lengths of :mod:`azimut_env.physics.tire`.
 
     Defaults describe a 0.16 m solid-rubber-tread wheel carrying about 86 N (a quarter of the
     35 kg robot). No tire data of AZIMUT-3 are published; the values are assumptions of the right
@@ -338,7 +337,7 @@ class SensorParams:
             raise ValueError(f"SensorParams.wheel_cpr must be a non-negative integer, got {self.wheel_cpr!r}")
 
     @classmethod
-    def ideal(cls) -> "SensorParams":
+    def ideal(cls) -> SensorParams:
         """Noise-free, unquantised sensors."""
         return cls(0.0, 0.0, 0.0, 0, 0.0, 0.0)
 

@@ -94,7 +94,7 @@ class Renderer:
             pose: chassis pose (x, y, θ) [m, m, rad]. twist: chassis-frame twist (ẋ, ẏ, θ̇)
                 (the true ICR). beta: (n,) true steering angles [rad].
             lam_hat: (3,) the estimated ICR λ̂. trail: sequence of (x, y) positions [m].
-            obstacles: :class:`~azimut_env.physics.Obstacle` sequence.
+            obstacles: :class:`~azimut_env.physics.engine.Obstacle` sequence.
             chassis: ``ChassisParams`` (length, width [m]). geometry: ``RobotGeometry``.
         """
         pg = self.pygame

@@ -1,9 +1,9 @@
 """``AzimutVectorEnv``: N ``Azimut-v1`` robots in one pymunk Space, stepped as one batch.
 
-A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.AzimutTask`, the same task and
+A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.core.AzimutTask`, the same task and
 physics code as the single env (which is its N = 1 case); the constructor, the controller
 interface and rendering are the shared front end (:mod:`azimut_env.frontend`). Per control step
-each stage runs once for all robots (the data flow is in :mod:`azimut_env.task`): the compiled
+each stage runs once for all robots (the data flow is in :mod:`azimut_env.task.core`): the compiled
 action check and set-point map, ``substeps`` physics substeps (one compiled call per control step
 without obstacles), the compiled sensor model over all wheels, one batched IT estimate
 (``estimation.estimate_eta``), one compiled track query (each robot on its own track), then the
@@ -17,7 +17,8 @@ with each other.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -26,13 +27,13 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 from numba.typed import List as NumbaList
 
-from .config import front_signature
-from .frontend import AzimutFrontEnd
-from .params import RobotParams, SensorParams
-from .physics_layout import RS, RS_POSE
-from .task import REWARD_TERMS
-from .tracks import Track
-from .validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
+from azimut_env.frontend import AzimutFrontEnd
+from azimut_env.params import RobotParams, SensorParams
+from azimut_env.physics.layout import RS, RS_POSE
+from azimut_env.task.config import front_signature
+from azimut_env.task.core import REWARD_TERMS
+from azimut_env.tracks import Track
+from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
 __all__ = ["AzimutVectorEnv"]
 

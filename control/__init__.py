@@ -19,9 +19,9 @@ Modules (the maths comes from ``estimation``; the robot from ``azimut_env``):
 * ``kinematic_model``: a rigid kinematic test bench.
 """
 
-from .icr_controller import ICRController, ICRControllerConfig, Mode
-from .path_follower import PathFollower, PathFollowerConfig
-from .swerve import SwerveConfig, SwerveController
+from control.follow.path_follower import PathFollower, PathFollowerConfig
+from control.icr.controller import ICRController, ICRControllerConfig, Mode
+from control.twist.wpilib import SwerveConfig, SwerveController
 
 __all__ = ["ICRController", "ICRControllerConfig", "Mode", "PathFollower", "PathFollowerConfig", "SwerveConfig",
            "SwerveController"]

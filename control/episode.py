@@ -1,8 +1,8 @@
 """One episode of a built-in controller on a track: :func:`run_episode`, its per-step
 :class:`EpisodeLog`, and the metrics row of a log (:func:`episode_metrics`).
 
-The runner behind ``azimut eval`` (:mod:`control.evaluate`), the kick study
-(:mod:`control.robustness`), ``azimut sim-paper`` (:mod:`control.phenomenon`, whose feed-forward
+The runner behind ``azimut eval`` (:mod:`jobs.eval.command`), the kick study
+(:mod:`jobs.eval.robustness`), ``azimut sim-paper`` (:mod:`jobs.sim_paper`, whose feed-forward
 driver fills the same log through :func:`record_step`) and the trained-policy rollout
 (:mod:`train.rollout`). It imports none of them, so none of them imports another through it.
 """
@@ -18,13 +18,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from azimut_env.env import AzimutEnv
-from azimut_env.task import nominal_duration
+from azimut_env.task.core import nominal_duration
 from azimut_env.tracks import TRACK_NAMES, Track, make_track
-
-from .icr_controller import ICRController, ICRControllerConfig, Mode, reference_stop_mask
-from .limits import limit_violations
-from .path_follower import PathFollower, PathFollowerConfig
-from .swerve import SwerveConfig, SwerveController
+from control.follow.path_follower import PathFollower, PathFollowerConfig
+from control.icr.controller import ICRController, ICRControllerConfig, Mode, reference_stop_mask
+from control.limits import limit_violations
+from control.twist.wpilib import SwerveConfig, SwerveController
 
 __all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "record_step", "moving_mask", "episode_metrics",
            "progress_bar"]

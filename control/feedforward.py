@@ -15,12 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from azimut_env.env import AzimutEnv
-from azimut_env.task import nominal_duration
+from azimut_env.task.core import nominal_duration
 from azimut_env.tracks import make_track
+from control.episode import EpisodeLog, record_step
+from control.icr.config import Mode
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
-
-from .episode import EpisodeLog, record_step
-from .icr_config import Mode
 
 __all__ = ["FeedForwardController", "run_feedforward"]
 

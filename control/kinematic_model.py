@@ -32,7 +32,7 @@ class KinematicRobot:
     phidot: np.ndarray
 
     @classmethod
-    def at_rest(cls, geom: RobotGeometry, pose=(0.0, 0.0, 0.0), beta=None) -> "KinematicRobot":
+    def at_rest(cls, geom: RobotGeometry, pose=(0.0, 0.0, 0.0), beta=None) -> KinematicRobot:
         beta = np.zeros(geom.n) if beta is None else np.asarray(beta, dtype=np.float64).copy()
         return cls(geom, np.asarray(pose, dtype=np.float64).copy(), beta, np.zeros(geom.n))
 

@@ -4,19 +4,42 @@ Reference: the paper "Estimation of the Instantaneous Centre of Rotation with No
 Omnidirectional Mobile Robots" (§2–4). Equation numbers in docstrings refer to it.
 """
 
-from .datasets import dataset_d1, dataset_d2, dataset_d3
-from .estimate import IT_BEST, IT_PAPER, METHODS, ITDiagnostics, estimate_eta, estimate_icr, estimate_icr_it
-from .geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
-from .it import ITParams
-from .oracle import OracleParams
-from .quality import QUALITY_F, quality
-from .hrep import (canonical_eta, canonical_lambda, chart_params, eta_from_twist, lambda_distance,
-                   lambda_from_chart, lambda_from_plane, normalize, plane_from_lambda, point_velocity,
-                   select_chart, twist_from_eta)
-from .kinematics import (integrate_pose, mu_from_wheel_speeds, odometry_twist, propulsion_circle_normals, s_perp,
-                         singular_wheels, steering_chart_jacobian, steering_from_lambda, steering_gradient,
-                         steering_path_derivatives, twist_from_wheels, wheel_speed_coefficients,
-                         wheel_speed_path_derivative, wheel_speeds)
+from estimation.datasets import dataset_d1, dataset_d2, dataset_d3
+from estimation.estimate import IT_BEST, IT_PAPER, METHODS, ITDiagnostics, estimate_eta, estimate_icr, estimate_icr_it
+from estimation.geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry
+from estimation.hrep import (
+                   canonical_eta,
+                   canonical_lambda,
+                   chart_params,
+                   eta_from_twist,
+                   lambda_distance,
+                   lambda_from_chart,
+                   lambda_from_plane,
+                   normalize,
+                   plane_from_lambda,
+                   point_velocity,
+                   select_chart,
+                   twist_from_eta,
+)
+from estimation.it import ITParams
+from estimation.kinematics import (
+                   integrate_pose,
+                   mu_from_wheel_speeds,
+                   odometry_twist,
+                   propulsion_circle_normals,
+                   s_perp,
+                   singular_wheels,
+                   steering_chart_jacobian,
+                   steering_from_lambda,
+                   steering_gradient,
+                   steering_path_derivatives,
+                   twist_from_wheels,
+                   wheel_speed_coefficients,
+                   wheel_speed_path_derivative,
+                   wheel_speeds,
+)
+from estimation.oracle import OracleParams
+from estimation.quality import QUALITY_F, quality
 
 __all__ = [
     "AZIMUT3_ASSUMPTIONS",

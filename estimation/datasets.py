@@ -14,9 +14,9 @@ from importlib import resources
 
 import numpy as np
 
-from .geometry import RobotGeometry
-from .hrep import eta_from_twist, normalize
-from .kinematics import steering_from_lambda
+from estimation.geometry import RobotGeometry
+from estimation.hrep import eta_from_twist, normalize
+from estimation.kinematics import steering_from_lambda
 
 __all__ = ["dataset_d1", "dataset_d2", "dataset_d3", "d2_standin", "D2_FILE", "load_d2_recorded"]
 

@@ -7,13 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import RobotGeometry
-from .hrep import _canonicalize_batch
-from .it import ITParams, it_kernel_batch
-from .kinematics import _eta_kernel
-from .operational import ls_kernel_batch, ne_kernel_batch, ns_batch
-from .oracle import OracleParams, oracle_kernel_batch, oracle_tables
-from .quality import QUALITY_F
+from estimation.geometry import RobotGeometry
+from estimation.hrep import _canonicalize_batch
+from estimation.it import ITParams, it_kernel_batch
+from estimation.kinematics import _eta_kernel
+from estimation.operational import ls_kernel_batch, ne_kernel_batch, ns_batch
+from estimation.oracle import OracleParams, oracle_kernel_batch, oracle_tables
+from estimation.quality import QUALITY_F
 
 __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "IT_BEST", "IT_PAPER"]
 

@@ -128,7 +128,7 @@ class RobotGeometry:
         return int(self.alpha.shape[0])
 
     @classmethod
-    def azimut3(cls) -> "RobotGeometry":
+    def azimut3(cls) -> RobotGeometry:
         """The default robot, a stand-in for AZIMUT-3 (see ``AZIMUT3_ASSUMPTIONS``)."""
         A = AZIMUT3_ASSUMPTIONS
         return cls(
@@ -139,7 +139,7 @@ class RobotGeometry:
         )
 
     @classmethod
-    def regular(cls, n: int, l: float = 0.3, b: float = 0.0, r: float = 0.08) -> "RobotGeometry":
+    def regular(cls, n: int, l: float = 0.3, b: float = 0.0, r: float = 0.08) -> RobotGeometry:
         """n wheels evenly spaced on a circle of radius ``l`` [m], the first at α = 0."""
         return cls(alpha=2 * np.pi * np.arange(n) / n, l=l, b=b, r=r)
 

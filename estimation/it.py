@@ -39,7 +39,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .kinematics import SINGULAR_TOL, _beta_grad_wheel, _beta_wheel, _grad_wheel, _steering_dist2, _steering_dist2_upto
+from estimation.kinematics import (
+    SINGULAR_TOL,
+    _beta_grad_wheel,
+    _beta_wheel,
+    _grad_wheel,
+    _steering_dist2,
+    _steering_dist2_upto,
+)
 
 __all__ = ["ITParams", "it_kernel_batch"]
 

@@ -35,9 +35,9 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import RobotGeometry
-from .hrep import _canonical_eta_sign, twist_from_eta
-from .quality import _quality_from_d2
+from estimation.geometry import RobotGeometry
+from estimation.hrep import _canonical_eta_sign, twist_from_eta
+from estimation.quality import _quality_from_d2
 
 __all__ = [
     "SINGULAR_TOL",
@@ -286,7 +286,7 @@ def steering_chart_jacobian(lam, geom: RobotGeometry) -> tuple[np.ndarray, np.nd
     Uses the chart selected for λ and its representative with λ_c > 0. Returns ``(chart, J)`` with
     J of shape (n, 2) or (N, n, 2): column j is ∂β/∂p_j for the chart's coordinate p_j.
     """
-    from .hrep import chart_tangents, select_chart
+    from estimation.hrep import chart_tangents, select_chart
 
     flat, batch = _check_lambda(lam)
     chart = select_chart(flat)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kinematics import propulsion_circle_normals
+from estimation.kinematics import propulsion_circle_normals
 
 __all__ = ["ne_kernel_batch", "ls_kernel_batch", "ns_batch"]
 

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .geometry import RobotGeometry
-from .it import _descend, _starting_points, _workspace
-from .kinematics import _steering_dist2, steering_from_lambda
+from estimation.geometry import RobotGeometry
+from estimation.it import _descend, _starting_points, _workspace
+from estimation.kinematics import _steering_dist2, steering_from_lambda
 
 __all__ = ["OracleParams", "oracle_grid", "oracle_kernel_batch"]
 

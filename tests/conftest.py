@@ -8,7 +8,7 @@ default run leaves them out, see ``pyproject.toml``).
 
 from __future__ import annotations
 
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """train: RL baselines on ``Azimut-v1`` (Stable-Baselines3 + PyTorch CPU, the ``rl`` extra).
 
-* ``azimut train --algo ppo|sac --action raw|residual|icr-rate ...`` (:mod:`train.cli`): N robots in
+* ``azimut train --algo ppo|sac --action raw|residual|icr-rate ...`` (:mod:`jobs.training.command`): N robots in
   one vector env behind the chosen action space (:mod:`train.envs`), VecNormalize saved with the
   model, versioned defaults per algorithm × action space (``train/hyperparams/*.json``), periodic
   evaluation on held-out tracks with the ``azimut eval`` metrics (:mod:`train.callbacks`),

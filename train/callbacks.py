@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from .policy import TrainedPolicy
-from .rollout import policy_metrics
+from train.policy import TrainedPolicy
+from train.rollout import policy_metrics
 
 __all__ = ["InfoStatsCallback", "HeldOutEvalCallback", "WallClockLimit"]
 

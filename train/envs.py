@@ -8,8 +8,8 @@ Action spaces (``ACTIONS``):
   reference controller);
 * ``icr_rate``: the policy moves the ICR target on the sphere and changes μ_d (rates);
 
-the last two are :class:`control.vector_wrappers.VectorControllerAction`. The SB3 adapter is
-:class:`azimut_env.sb3.AzimutSB3VecEnv` (needs the ``rl`` extra).
+the last two are :class:`control.action_spaces.vector.VectorControllerAction`. The SB3 adapter is
+:class:`train.sb3_vec_env.AzimutSB3VecEnv` (needs the ``rl`` extra).
 """
 
 from __future__ import annotations
@@ -41,13 +41,13 @@ def make_vector_env(action: str, num_envs: int, track: str = "random",
     kind = ACTIONS[action]
     if kind is None:
         return venv
-    from control.vector_wrappers import VectorControllerAction
+    from control.action_spaces.vector import VectorControllerAction
 
     return VectorControllerAction(venv, action=kind)
 
 
 def make_sb3_env(action: str, num_envs: int, track: str = "random", env_kwargs: dict[str, Any] | None = None):
     """:func:`make_vector_env` as an SB3 ``VecEnv`` (same-step autoreset)."""
-    from azimut_env.sb3 import AzimutSB3VecEnv
+    from train.sb3_vec_env import AzimutSB3VecEnv
 
     return AzimutSB3VecEnv(venv=make_vector_env(action, num_envs, track, AutoresetMode.SAME_STEP, env_kwargs))

@@ -13,8 +13,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from azimut_env.tracks import TRACK_NAMES, Track, make_track
-
-from .envs import make_vector_env
+from train.envs import make_vector_env
 
 __all__ = ["run_policy_episode", "policy_metrics"]
 
@@ -28,10 +27,9 @@ def run_policy_episode(policy, track: str | Track, seed: int = 0, label: str | N
     track, or after ``max_time`` [s] (default 3 × the track's nominal duration + 10 s, the env's
     own time limit being off); ``kick`` is the env's reset option; ``env_kwargs`` are added to the
     policy's training env arguments (e.g. ``domain_randomization``)."""
-    from azimut_env.task import nominal_duration
-
+    from azimut_env.task.core import nominal_duration
     from control.episode import EpisodeLog, record_step
-    from control.icr_controller import Mode
+    from control.icr.controller import Mode
     from control.limits import limit_violations
 
     if isinstance(track, str):

@@ -8,11 +8,28 @@ direction, and a speed profile.
   robots on N tracks) and the scalar helpers other compiled code shares.
 """
 
-from .library import (TRACK_NAMES, circle_track, crab_track, figure8_track, make_track, paper_track, random_track,
-                      square_track)
-from .query import (TQ, interp1, project_window_kernel, query_batch_kernel, query_one_kernel, query_tracks, wrap_angle,
-                    wrap_pi, wrap_progress)
-from .track import Track
+from azimut_env.tracks.library import (
+                      TRACK_NAMES,
+                      circle_track,
+                      crab_track,
+                      figure8_track,
+                      make_track,
+                      paper_track,
+                      random_track,
+                      square_track,
+)
+from azimut_env.tracks.query import (
+                      TQ,
+                      interp1,
+                      project_window_kernel,
+                      query_batch_kernel,
+                      query_one_kernel,
+                      query_tracks,
+                      wrap_angle,
+                      wrap_pi,
+                      wrap_progress,
+)
+from azimut_env.tracks.track import Track
 
 __all__ = ["Track", "TQ", "make_track", "query_tracks", "TRACK_NAMES", "wrap_angle", "wrap_pi", "interp1",
            "wrap_progress", "project_window_kernel", "query_one_kernel", "query_batch_kernel", "paper_track",

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .track import Track
+from azimut_env.tracks.track import Track
 
 __all__ = ["TRACK_NAMES", "make_track", "paper_track", "circle_track", "figure8_track", "square_track",
            "crab_track", "random_track"]

@@ -6,7 +6,7 @@ One kernel: :func:`query_one_kernel` for one robot (:meth:`Track.query`), and
 :func:`query_batch_kernel`, its loop over robots, for N robots on one track
 (:meth:`Track.query_batch`) or on N tracks (:func:`query_tracks`).
 The scalar helpers :func:`interp1`, :func:`wrap_pi` and :func:`wrap_progress` are public for other
-compiled code that reads packed tracks (``control.follower_batch``).
+compiled code that reads packed tracks (``control.follow.batch``).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint,
     """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
     s_hint + ahead], metric ‖Δxy‖² + (ρ Δθ)², refined along the segment (the compiled
     :meth:`Track.project`; unwrapped on a closed track). ``always_wrap``: wrap every heading
-    difference as ``Track.project`` does (``control.follower_batch`` matches ``PathFollower``
+    difference as ``Track.project`` does (``control.follow.batch`` matches ``PathFollower``
     to the last bit that way); otherwise only those outside ]−π, π] (the env's hot loop)."""
     m = S.shape[0]
     mu = m - 1

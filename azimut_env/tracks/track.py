@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..validation import check_bool, check_nonnegative, check_positive, check_real_array
-from .query import query_batch_kernel, query_one_kernel, wrap_angle
+from azimut_env.tracks.query import query_batch_kernel, query_one_kernel, wrap_angle
+from azimut_env.validation import check_bool, check_nonnegative, check_positive, check_real_array
 
 __all__ = ["Track"]
 
@@ -132,7 +132,7 @@ class Track:
 
     @classmethod
     def from_waypoints(cls, waypoints, heading=None, speed=0.5, closed: bool = False, spacing: float = 0.02,
-                       name: str = "waypoints", progress_radius: float = 0.3, ramp: float = 0.3) -> "Track":
+                       name: str = "waypoints", progress_radius: float = 0.3, ramp: float = 0.3) -> Track:
         """A track through user waypoints, linearly interpolated at ``spacing`` [m].
 
         Args:
@@ -200,7 +200,7 @@ class Track:
             track = track.with_ramps(ramp)
         return track
 
-    def with_ramps(self, ramp: float) -> "Track":
+    def with_ramps(self, ramp: float) -> Track:
         """A copy whose speed rises from 0 over the first and falls to 0 over the last ``ramp`` m."""
         ramp = check_positive("ramp", ramp)
         scale = np.clip(np.minimum(self.s, self.length - self.s) / ramp, 0.0, 1.0)

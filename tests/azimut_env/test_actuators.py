@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from azimut_env.actuators import rolling_resistance_kernel, wheel_spin_step_kernel
-from azimut_env.params import RobotParams, TireParams
-from azimut_env.tire import stability_numbers, tire_step_kernel
+from azimut_env.params import RobotParams
+from azimut_env.physics.actuators import rolling_resistance_kernel, wheel_spin_step_kernel
+from azimut_env.physics.tire import stability_numbers, tire_step_kernel
 
 P = RobotParams()
 TIRE = P.tire
@@ -100,8 +100,8 @@ def test_braking_on_a_light_load_locks_within_the_friction_limit():
 
 # ---------------------------------------------------------------------- steering motor models
 
-from azimut_env.actuators import dc_torque_limits_kernel, steer_actuator_kernel  # noqa: E402
 from azimut_env.params import SteeringMotorParams  # noqa: E402
+from azimut_env.physics.actuators import dc_torque_limits_kernel, steer_actuator_kernel  # noqa: E402
 
 SM = SteeringMotorParams(model="dc")
 LIM = P.limits

@@ -13,8 +13,8 @@ import pytest
 
 import azimut_env  # noqa: F401  (registers Azimut-v1)
 from azimut_env.env import AzimutEnv, h_state_from_measurements, observation_layout
-from azimut_env.observation import observation_table
 from azimut_env.params import ActuatorLimits, action_from_setpoints, setpoints_from_action
+from azimut_env.task.observation import observation_table
 from estimation import canonical_eta, estimate_icr, mu_from_wheel_speeds, quality, steering_from_lambda
 
 
@@ -243,7 +243,7 @@ def test_h_state_batch_matches_single(geom):
 
 
 def test_domain_randomization_varies_parameters_per_reset(make_env):
-    from azimut_env.physics import WP
+    from azimut_env.physics.engine import WP
 
     env = make_env(domain_randomization=0.3)
     env.reset(seed=1)
@@ -277,8 +277,8 @@ def test_one_front_end_for_both_envs():
     import dataclasses
     import inspect
 
-    from azimut_env.config import TaskConfig
     from azimut_env.interface import ControllerInterface, VectorControllerInterface, missing_members
+    from azimut_env.task.config import TaskConfig
     from azimut_env.vector_env import AzimutVectorEnv
 
     for cls in (AzimutEnv, AzimutVectorEnv):

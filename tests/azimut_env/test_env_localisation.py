@@ -9,10 +9,17 @@ import numpy as np
 import pytest
 
 from azimut_env.env import AzimutEnv
-from azimut_env.localisation import LocalisationParams
+from azimut_env.task.localisation import LocalisationParams
 from azimut_env.vector_env import AzimutVectorEnv
-from estimation import (RobotGeometry, eta_from_twist, integrate_pose, odometry_twist, steering_from_lambda,
-                        twist_from_wheels, wheel_speeds)
+from estimation import (
+    RobotGeometry,
+    eta_from_twist,
+    integrate_pose,
+    odometry_twist,
+    steering_from_lambda,
+    twist_from_wheels,
+    wheel_speeds,
+)
 
 NO_FIX = LocalisationParams(fix_period_s=math.inf, fix_noise_xy_m=0.0, fix_noise_theta_rad=0.0)
 

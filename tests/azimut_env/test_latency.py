@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_vector_env import _run_equivalence  # tests/ is on sys.path (pytest rootdir-relative import)
 
 from azimut_env.env import AzimutEnv
 from azimut_env.params import RobotParams, setpoints_from_action
-from azimut_env.task import AzimutTask, TaskConfig
-from test_vector_env import _run_equivalence  # tests/ is on sys.path (pytest rootdir-relative import)
+from azimut_env.task.core import AzimutTask, TaskConfig
 
 PARAMS = RobotParams()
 

@@ -9,10 +9,10 @@ import pickle
 import numpy as np
 import pytest
 
-from azimut_env.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.params import ChassisParams, RobotParams
-from azimut_env.physics import AzimutPhysics, Obstacle, default_wheel_params
-from azimut_env.physics_layout import CMD, CS, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS
+from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
+from azimut_env.physics.engine import AzimutPhysics, Obstacle, default_wheel_params
+from azimut_env.physics.layout import CMD, CS, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
 

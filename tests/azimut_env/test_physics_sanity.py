@@ -1,4 +1,4 @@
-"""Physics sanity of azimut_env.physics: straight driving, rotation in place, coasting, and the
+"""Physics sanity of azimut_env.physics.engine: straight driving, rotation in place, coasting, and the
 internal force of concurrent vs non-concurrent propulsion axes."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from azimut_env.params import RobotParams, TireParams
-from azimut_env.physics import AzimutPhysics
-from azimut_env.physics_layout import WS_CONTACT
-from azimut_env.tire import brush_forces
+from azimut_env.physics.engine import AzimutPhysics
+from azimut_env.physics.layout import WS_CONTACT
+from azimut_env.physics.tire import brush_forces
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
 

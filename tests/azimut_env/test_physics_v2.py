@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from azimut_env.params import ChassisParams, RobotParams, SteeringParams, TireParams
-from azimut_env.physics import JS, RS, TS, WP, AzimutPhysics
+from azimut_env.physics.engine import JS, RS, TS, WP, AzimutPhysics
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
 V1 = np.load(Path(__file__).parent.parent / "data" / "physics_v1_reference.npz")
@@ -288,7 +288,7 @@ def test_aligning_moment_turns_a_misaligned_wheel_toward_the_travel_direction():
 @pytest.mark.slow
 def test_substep_convergence_is_first_order():
     """``azimut bench-env --convergence`` on a 10 s replay: the error halves when the substeps double."""
-    from azimut_env.convergence import substep_convergence
+    from azimut_env.physics.convergence import substep_convergence
 
     rows = substep_convergence((8, 16, 32), reference=128, seconds=10.0)
     orders = [r["order"] for r in rows[1:]]

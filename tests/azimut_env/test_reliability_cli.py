@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from azimut_env.cli import COMMANDS, main
-from azimut_env.validation import check_output_path
+from jobs.args import check_output_path
+from jobs.cli import COMMANDS, main
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 UNWRITABLE = "/proc"  # creating a file there fails, even for root
@@ -101,7 +101,7 @@ def test_help_of_every_command_exits_0(capsys):
 
 
 def _available():
-    from azimut_env.cli import _available as av
+    from jobs.cli import _available as av
 
     return av()
 
@@ -111,14 +111,14 @@ def test_cli_starts_without_importlib_util_preloaded():
     imports it at start-up, a plain one does not). ``python -S`` skips site's imports likewise."""
     paths = [str(ROOT), *site.getsitepackages()]
     code = (f"import sys; sys.path[:0] = {paths!r}; assert 'importlib.util' not in sys.modules; "
-            "from azimut_env.cli import main; sys.exit(main(['--help']))")
+            "from jobs.cli import main; sys.exit(main(['--help']))")
     proc = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=os.sep, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "eval" in proc.stdout
 
 
 def test_subprocess_error_has_no_traceback(tmp_path, a_file):
-    proc = subprocess.run([sys.executable, "-m", "azimut_env.cli", "eval", "--out", a_file], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "jobs.cli", "eval", "--out", a_file], capture_output=True,
                           text=True, cwd=ROOT, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
 

@@ -12,8 +12,8 @@ from azimut_env.env import AzimutEnv
 from azimut_env.tracks import Track
 from azimut_env.validation import ResetNeeded, check_choice, check_index_list, check_int, check_range
 from azimut_env.vector_env import AzimutVectorEnv
-from control.vector_wrappers import VectorControllerAction
-from control.wrappers import ICRTargetAction, TwistAction
+from control.action_spaces.single import ICRTargetAction, TwistAction
+from control.action_spaces.vector import VectorControllerAction
 
 NAN = float("nan")
 
@@ -94,7 +94,7 @@ def test_validation_helpers():
 
 def test_icr_target_zero_direction_is_hold_not_nan():
     """Found by the property tests: min_norm=0 with a zero direction divided 0/0 (NaN target)."""
-    from control.wrappers import icr_target_from_action
+    from control.action_spaces.single import icr_target_from_action
 
     lam, mu = icr_target_from_action(np.array([0.0, 0.0, 0.0, 0.3]), 1.0, 0.0)
     assert np.array_equal(lam, [0.0, 0.0, 1.0]) and mu == 0.0
@@ -103,13 +103,13 @@ def test_icr_target_zero_direction_is_hold_not_nan():
 
 
 @pytest.mark.parametrize("make", [
-    lambda: __import__("azimut_env.physics", fromlist=["x"]).BlowUpLimits(speed=NAN),
+    lambda: __import__("azimut_env.physics.engine", fromlist=["x"]).BlowUpLimits(speed=NAN),
     lambda: __import__("azimut_env.params", fromlist=["x"]).RobotParams(limits=None),
-    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(stop_hysteresis=NAN),
-    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(n_kappa=2.5),
-    lambda: __import__("control.icr_controller", fromlist=["x"]).ICRControllerConfig(reconfig_rate_fraction=2.0),
-    lambda: __import__("control.swerve", fromlist=["x"]).SwerveConfig(discretize=NAN),
-    lambda: __import__("control.path_follower", fromlist=["x"]).PathFollowerConfig(preview=NAN),
+    lambda: __import__("control.icr.controller", fromlist=["x"]).ICRControllerConfig(stop_hysteresis=NAN),
+    lambda: __import__("control.icr.controller", fromlist=["x"]).ICRControllerConfig(n_kappa=2.5),
+    lambda: __import__("control.icr.controller", fromlist=["x"]).ICRControllerConfig(reconfig_rate_fraction=2.0),
+    lambda: __import__("control.twist.wpilib", fromlist=["x"]).SwerveConfig(discretize=NAN),
+    lambda: __import__("control.follow.path_follower", fromlist=["x"]).PathFollowerConfig(preview=NAN),
     lambda: __import__("estimation.it", fromlist=["x"]).ITParams(accept_rms=NAN),
     lambda: __import__("estimation.it", fromlist=["x"]).ITParams(max_iter=2.5),
     lambda: __import__("estimation.oracle", fromlist=["x"]).OracleParams(grid_points=0),

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from azimut_env.env import AzimutEnv
-from azimut_env.task import TaskConfig
+from azimut_env.task.core import TaskConfig
 from azimut_env.tracks import Track, make_track
 from azimut_env.validation import ResetNeeded
 

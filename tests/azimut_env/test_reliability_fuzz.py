@@ -20,15 +20,15 @@ import shlex
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from azimut_env.cli import _available, main
 from azimut_env.env import AzimutEnv
-from azimut_env.task import RESET_OPTIONS
 from azimut_env.tracks import TRACK_NAMES, Track
 from azimut_env.validation import ResetNeeded
 from azimut_env.vector_env import AzimutVectorEnv
 from estimation import METHODS, RobotGeometry, estimate_eta, estimate_icr, quality
+from jobs.cli import _available, main
 
 CLEAR = (ValueError, TypeError, ResetNeeded)
 TRIED: collections.Counter = collections.Counter()
@@ -229,7 +229,7 @@ test_vector_constructor_and_step, test_vector_constructor_and_step_slow = _profi
 
 
 def _prop_wrappers(kind, kwargs, action):
-    from control.wrappers import ICRTargetAction, TwistAction
+    from control.action_spaces.single import ICRTargetAction, TwistAction
 
     TRIED["wrapper"] += 1
     cls = ICRTargetAction if kind == "icr" else TwistAction
@@ -267,8 +267,13 @@ test_wrappers, test_wrappers_slow = _profiles(
 def _config_classes():
     import dataclasses
 
-    from azimut_env import localisation, params, physics, task
-    from control import icr_controller, path_follower, swerve
+    import azimut_env.physics.engine as physics
+    import azimut_env.task.core as task
+    import azimut_env.task.localisation as localisation
+    import control.follow.path_follower as path_follower
+    import control.icr.controller as icr_controller
+    import control.twist.wpilib as swerve
+    from azimut_env import params
     from estimation import it, oracle
 
     classes = [params.ActuatorLimits, params.SteeringParams, params.SteeringMotorParams, params.WheelParams,
@@ -342,7 +347,7 @@ test_estimators, test_estimators_slow = _profiles(
 def _flags() -> dict[str, list[str]]:
     """Every subcommand's option strings, read from its own parser (new subcommands and flags are
     fuzzed without editing this file)."""
-    from azimut_env.cli import CommandParser
+    from jobs.cli import CommandParser
 
     out = {}
     for name, (module_name, _) in _available().items():

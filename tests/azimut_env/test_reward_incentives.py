@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from azimut_env.params import action_from_setpoints
-from azimut_env.task import TaskConfig
+from azimut_env.task.core import TaskConfig
 from azimut_env.vector_env import AzimutVectorEnv
 from control.episode import run_episode
 

@@ -1,4 +1,4 @@
-"""The brush tire of azimut_env.tire against its closed forms (unit tests on the kernels).
+"""The brush tire of azimut_env.physics.tire against its closed forms (unit tests on the kernels).
 
 Env-level behaviour (loads, the steering modules) is tested with the physics."""
 
@@ -12,8 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from azimut_env.params import TireParams
-from azimut_env.tire import (TRAIL_SPEED_EPS, brush_forces, brush_trail, stability_numbers, tire_elastic_energy,
-                             tire_step, tire_step_kernel)
+from azimut_env.physics.tire import (
+    TRAIL_SPEED_EPS,
+    brush_forces,
+    brush_trail,
+    stability_numbers,
+    tire_elastic_energy,
+    tire_step,
+    tire_step_kernel,
+)
 
 TIRE = TireParams()
 N = 86.0  # [N] a quarter of the 35 kg robot
@@ -346,7 +353,7 @@ def test_domain_randomisation_draws_the_tire_with_a_fixed_contact_stiffness():
     """Slip stiffness and relaxation lengths share a factor (σ = C/k, k the carcass stiffness):
     C/σ, and so the contact's stability figures, stay; the patch size varies on its own."""
     from azimut_env.env import AzimutEnv
-    from azimut_env.physics import WP
+    from azimut_env.physics.engine import WP
 
     env = AzimutEnv(domain_randomization=0.4)
     seen = []

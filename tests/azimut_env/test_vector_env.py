@@ -58,7 +58,7 @@ def test_equivalence_with_single_envs_500_steps_with_resets():
 
 def test_equivalence_with_odometry_pose_source():
     # the pose estimate (dead reckoning + a noisy fix every 5 steps) replays bit for bit, resets included
-    from azimut_env.localisation import LocalisationParams
+    from azimut_env.task.localisation import LocalisationParams
 
     counts = _run_equivalence(3, 300, 60, seed=4, track="random", max_lateral_error=0.15, pose_source="odometry",
                               localisation=LocalisationParams(fix_period_s=0.1))

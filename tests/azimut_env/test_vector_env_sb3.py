@@ -10,8 +10,8 @@ pytest.importorskip("stable_baselines3")
 from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.vec_env import VecMonitor  # noqa: E402
 
-from azimut_env.sb3 import AzimutSB3VecEnv  # noqa: E402
 from azimut_env.vector_env import AzimutVectorEnv  # noqa: E402
+from train.sb3_vec_env import AzimutSB3VecEnv  # noqa: E402
 
 
 def test_sb3_semantics_terminal_observation_and_time_limit():

@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from azimut_env.vector_env import AzimutVectorEnv
-from control.icr_controller import Mode
-from control.vector_wrappers import VectorControllerAction
+from control.action_spaces.vector import VectorControllerAction
+from control.icr.controller import Mode
 
 
 def _random_rollout(kind: str, track: str, steps: int = 500, n: int = 8, seed: int = 1, **kwargs):
@@ -94,9 +94,9 @@ def test_mu_own_scale_lets_mu_ramp_while_lambda_turns(geom, limits):
     """``mu_own_scale``: when the steering limits slow a quick turn of λ (κ < 1), μ still takes
     its ramp step as far as the wheel speed and acceleration limits allow; the commands stay
     within every limit and λ moves exactly as without it."""
-    from control.icr_config import ICRControllerConfig
+    from control.icr.config import ICRControllerConfig
+    from control.icr.motion import coordinated_step
     from control.limits import limit_violations
-    from control.motion import coordinated_step
     from estimation.kinematics import steering_from_lambda, wheel_speed_coefficients
 
     lam = np.array([[1.0, 0.0, 0.0], [0.6, 0.0, 0.8]])

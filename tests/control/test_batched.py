@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from control.icr_controller import (
+from control.icr.controller import (
     ICRController,
     ICRControllerConfig,
     arc_check,
@@ -120,7 +120,7 @@ def test_batched_rejects_bad_input():
 
 
 def test_single_robot_state_is_a_batch_of_one():
-    from control.icr_controller import ICRControllerState, Mode, icr_control_step, initial_state
+    from control.icr.controller import ICRControllerState, Mode, icr_control_step, initial_state
 
     beta0 = np.array([0.3, -0.2, 0.1, 1.2])
     st = initial_state([0.0, 0.0, 1.0], beta0, np.zeros(GEOM.n), GEOM)

@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from azimut_env.cli import main
-from control.campaign import CampaignInterrupted, Task, TaskStore, bootstrap_ci, run_tasks, summarize
-from control.campaign_args import parse_seeds
-from control.eval_campaign import draw_kick, episode_tasks
+from jobs.campaign.args import parse_seeds
+from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, bootstrap_ci, run_tasks, summarize
+from jobs.cli import main
+from jobs.eval.campaign import draw_kick, episode_tasks
 
 EXECUTORS = ["process", "ray"]
 
@@ -218,7 +218,7 @@ def test_cli_eval_refuses_bad_campaign_flags(flags, tmp_path, capsys):
 def test_kick_study_on_workers_equals_the_serial_study(tmp_path):
     from dataclasses import asdict
 
-    from control.robustness import kick_study, kick_study_campaign
+    from jobs.eval.robustness import kick_study, kick_study_campaign
 
     serial = kick_study(2, "icr", seed0=1003)
     parallel = kick_study_campaign(2, "icr", seed0=1003, store=tmp_path / "kicks", executor="process", workers=2)
@@ -226,7 +226,7 @@ def test_kick_study_on_workers_equals_the_serial_study(tmp_path):
 
 
 def test_auto_executor_is_processes_on_one_machine_and_ray_with_an_address():
-    from control.campaign import ray_available, resolve_executor
+    from jobs.campaign.engine import ray_available, resolve_executor
     assert resolve_executor("auto", 1, None) == "serial"
     assert resolve_executor("auto", 2, None) == "process"  # faster than a local Ray instance here
     if ray_available():

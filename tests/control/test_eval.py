@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from azimut_env.cli import main
 from azimut_env.tracks import Track
 from control.episode import episode_metrics, run_episode
-from control.evaluate import write_plots, write_report
+from jobs.cli import main
+from jobs.eval.command import write_plots, write_report
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_icr_scrubs_less_than_the_twist_baseline(runs):
 
 def test_qua_while_moving_leaves_out_stops_and_reconfigurations(runs):
     from control.episode import MOVING_MU, moving_mask
-    from control.icr_controller import Mode
+    from control.icr.controller import Mode
 
     log = runs["icr"]
     moving = moving_mask(log)
@@ -90,7 +90,7 @@ def test_cli_eval_writes_a_report(tmp_path):
 
 
 def test_kick_trials_recover():
-    from control.robustness import kick_trial, summarize_kicks
+    from jobs.eval.robustness import kick_trial, summarize_kicks
 
     trials = [kick_trial(seed) for seed in (1003, 1005)]  # 3 and 4 wheels kicked by 45-70°
     summ = summarize_kicks(trials)
@@ -101,7 +101,7 @@ def test_kick_trials_recover():
 @pytest.mark.slow
 def test_robustness_study_200_kicks(tmp_path):
     """The issue's bar: 200 kicked runs, all recover (no failure, no limit exceeded, < 5 cm in 3 s)."""
-    from control.robustness import kick_study, summarize_kicks
+    from jobs.eval.robustness import kick_study, summarize_kicks
 
     summ = summarize_kicks(kick_study(200))
     (tmp_path / "kicks.json").write_text(json.dumps(summ, allow_nan=True))
@@ -116,7 +116,7 @@ def test_episode_runner_imports_none_of_its_users():
     import sys
 
     code = ("import sys, control.episode; "
-            "print(sorted(m for m in ('control.evaluate', 'control.robustness', 'control.phenomenon', "
-            "'control.eval_campaign') if m in sys.modules))")
+            "print(sorted(m for m in ('jobs.eval.command', 'jobs.eval.robustness', 'jobs.sim_paper', "
+            "'jobs.eval.campaign') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from azimut_env.tracks import TRACK_NAMES, make_track
-from control.follower_batch import BatchFollower
-from control.icr_controller import reference_stop_mask
-from control.path_follower import PathFollower
+from control.follow.batch import BatchFollower
+from control.follow.path_follower import PathFollower
+from control.icr.controller import reference_stop_mask
 from estimation.geometry import RobotGeometry
 
 

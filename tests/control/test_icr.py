@@ -8,14 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from control.icr_controller import (
+from control.icr.controller import (
     ICRController,
     ICRControllerConfig,
     Mode,
     arc_blocked,
     clamp_mu,
     initial_state,
-    icr_control_step,
     nearer_target,
     project_off_axes,
 )

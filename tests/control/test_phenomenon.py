@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from azimut_env.cli import main
 from azimut_env.params import RobotParams
 from estimation import steering_from_lambda
-from control.phenomenon import attribute, qua_of_angles, run_feedforward, run_phenomenon, stable_substeps, stiff_params
+from jobs.cli import main
+from jobs.sim_paper import attribute, qua_of_angles, run_feedforward, run_phenomenon, stable_substeps, stiff_params
 
 
 @pytest.fixture(scope="module")

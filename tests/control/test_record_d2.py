@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from control.record_d2 import DEFAULT_OUT, record_d2
 from estimation import RobotGeometry
 from estimation.datasets import dataset_d2
+from jobs.record_d2 import DEFAULT_OUT, record_d2
 
 
 def test_shipped_d2_is_the_recorded_one():

@@ -13,7 +13,7 @@ from __future__ import annotations
 import pytest
 
 from control.episode import episode_metrics, run_episode
-from control.evaluate import DEFAULT_TRACKS
+from jobs.eval.command import DEFAULT_TRACKS
 
 pytestmark = pytest.mark.slow
 

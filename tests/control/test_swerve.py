@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from azimut_env.tracks import Track
+from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.kinematic_model import KinematicRobot
-from control.path_follower import PathFollower, PathFollowerConfig
-from control.swerve import (
+from control.twist.wpilib import (
     SwerveConfig,
     SwerveController,
     desaturate,
@@ -19,6 +19,7 @@ from control.swerve import (
     optimize_module,
     slew_limit,
 )
+
 
 def _exp_pose(twist, dt):
     """Pose reached from the origin after dt at a constant chassis twist (SE(2) exponential)."""

@@ -1,5 +1,5 @@
 """The ICR-target and twist action spaces on the vector env: sub-env i matches the single-env
-wrapper (control.wrappers) on an env seeded with seed + i, with autoresets."""
+wrapper (control.action_spaces.single) on an env seeded with seed + i, with autoresets."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 
 from azimut_env.env import AzimutEnv
 from azimut_env.vector_env import AzimutVectorEnv
-from control.vector_wrappers import VectorControllerAction
-from control.wrappers import ICRTargetAction, TwistAction
+from control.action_spaces.single import ICRTargetAction, TwistAction
+from control.action_spaces.vector import VectorControllerAction
 
 
 @pytest.mark.parametrize("action,controller", [("icr_target", "icr"), ("twist", "icr"), ("twist", "swerve")])

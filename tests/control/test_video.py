@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from azimut_env.cli import main
+from jobs.cli import main
 
 pytest.importorskip("pygame")
 Image = pytest.importorskip("PIL.Image")
@@ -32,7 +32,7 @@ def test_eval_video_writes_a_gif_per_episode_listed_in_the_report(tmp_path, caps
 
 
 def test_video_format_refused_before_any_work(tmp_path, capsys, monkeypatch):
-    import control.video as video
+    import jobs.eval.video as video
 
     out = tmp_path / "eval"
     assert main(["eval", "--video", "avi", "--out", str(out)]) == 2
@@ -45,7 +45,7 @@ def test_video_format_refused_before_any_work(tmp_path, capsys, monkeypatch):
 
 def test_mp4_through_ffmpeg(tmp_path):
     from control.episode import run_episode
-    from control.video import ffmpeg_executable, write_video
+    from jobs.eval.video import ffmpeg_executable, write_video
 
     if ffmpeg_executable() is None:
         pytest.skip("no ffmpeg executable (PATH or imageio-ffmpeg)")

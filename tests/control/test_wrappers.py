@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import azimut_env  # noqa: F401  (registers Azimut-v1)
-from control.wrappers import ICRTargetAction, TwistAction
+from control.action_spaces.single import ICRTargetAction, TwistAction
 
 
 def _rollout(wrapper_cls, actions, seed=0, **kw):

@@ -2,10 +2,13 @@
 commit records that commit's model instead) for the
 v1-vs-v2 agreement tests in tests/azimut_env/test_physics_v2.py."""
 import dataclasses
+
 import numpy as np
-from azimut_env.params import RobotParams, SteeringParams
-from azimut_env.physics import AzimutPhysics
+
+from azimut_env.params import RobotParams
+from azimut_env.physics.engine import AzimutPhysics
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
+
 
 def sp(geom, tw):
     lam, mu = eta_from_twist(np.asarray(tw, float))

@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from estimation import (
-    IT_BEST,
     METHODS,
     ITParams,
     RobotGeometry,
@@ -22,8 +21,8 @@ from estimation import (
     quality,
     steering_from_lambda,
 )
-from estimation.bench import robustness_inputs, run_benchmark
 from estimation.quality import joint_distance_metric
+from jobs.bench_estimators import robustness_inputs, run_benchmark
 
 G = RobotGeometry.azimut3()
 FAST = [m for m in METHODS if m != "ORACLE"]
@@ -218,7 +217,7 @@ def test_bench_runs_small_and_is_json(tmp_path):
 
 
 def test_cli_bad_arguments_exit_2(capsys):
-    from azimut_env.cli import main
+    from jobs.cli import main
     assert main(["bench-estimators", "--methods", "IT,FOO"]) == 2
     assert main(["no-such-command"]) == 2
 

@@ -3,7 +3,7 @@ the printed eq. (18) carries sign errors), singularities (eq. 21), wheel speeds 
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 

@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimation import METHODS, RobotGeometry, estimate_eta, estimate_icr, quality
 from estimation.quality import joint_distance_metric

@@ -6,13 +6,13 @@ import json
 
 import pytest
 
-from azimut_env.cli import main
+from jobs.cli import main
 
 pytest.importorskip("stable_baselines3")
 
 
 def test_learning_curve_stats_over_seeds():
-    from train.seeds import learning_curve_stats
+    from jobs.training.seeds import learning_curve_stats
 
     hist = [[{"timesteps": 10, "mean_return": 1.0}, {"timesteps": 20, "mean_return": 3.0}],
             [{"timesteps": 10, "mean_return": 2.0}, {"timesteps": 20, "mean_return": 5.0},
@@ -43,9 +43,9 @@ def test_train_refuses_to_overwrite_a_trained_seed(tmp_path, capsys):
 def test_two_seeds_on_two_workers_equal_the_serial_runs(tmp_path):
     """Two tiny PPO runs per executor (about a minute on a quiet machine): the same final metrics
     and learning curve serially and on 2 worker processes; report and plot written."""
-    from azimut_env.cli import CommandParser
-    from train import cli as tcli
-    from train.seeds import run_seeds
+    import jobs.training.command as tcli
+    from jobs.cli import CommandParser
+    from jobs.training.seeds import run_seeds
 
     hp = tmp_path / "hp.json"
     hp.write_text(json.dumps({"n_steps": 32, "batch_size": 64, "n_epochs": 1}))

@@ -21,7 +21,7 @@ SHORT = {"time_limit_factor": 0.1}
 
 @pytest.mark.parametrize("algo,action", [("ppo", "raw"), ("sac", "residual")])
 def test_train_save_load_evaluate(tmp_path, algo, action):
-    from train.cli import train
+    from jobs.training.command import train
     from train.policy import load_policy
     from train.rollout import policy_metrics
 
@@ -47,7 +47,7 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
 
 
 def test_resume_continues_from_the_checkpoint(tmp_path):
-    from train.cli import train
+    from jobs.training.command import train
 
     hp = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
     out = tmp_path / "run"
@@ -63,7 +63,7 @@ def test_resume_continues_from_the_checkpoint(tmp_path):
                                   ["--num-robots", "x"], ["--track", "moon"], ["--time-limit", "nan"],
                                   ["--resume"], ["--hyperparams", "/nonexistent.json"]])
 def test_cli_refuses_bad_arguments_with_one_line(tmp_path, argv, capsys):
-    from azimut_env.cli import main
+    from jobs.cli import main
 
     rc = main(["train", "--out", str(tmp_path / "o"), *argv])
     err = capsys.readouterr().err.strip().splitlines()
@@ -79,7 +79,7 @@ def test_cli_refuses_bad_arguments_with_one_line(tmp_path, argv, capsys):
 def test_hyperparams_with_wrong_contents_refused_before_out_is_created(tmp_path, algo, content, match, capsys):
     """New-user trial: valid JSON with a wrong key, type or range gave exit 1, a traceback and an
     empty --out folder; now one line, exit 2, and no folder."""
-    from azimut_env.cli import main
+    from jobs.cli import main
 
     hp = tmp_path / "hp.json"
     hp.write_text(json.dumps(content))
@@ -107,18 +107,18 @@ def test_core_imports_and_runs_without_torch():
         sys.meta_path.insert(0, Block())
         import numpy as np, gymnasium as gym
         import azimut_env, estimation, control, train
-        import control.evaluate, control.vector_wrappers, train.envs, train.hyperparams
+        import jobs.eval.command, control.action_spaces.vector, train.envs, train.hyperparams
         env = gym.make("Azimut-v1", track="crab")
         env.reset(seed=0)
         for _ in range(5):
             env.step(env.action_space.sample())
         from azimut_env.vector_env import AzimutVectorEnv
-        from control.vector_wrappers import VectorControllerAction
+        from control.action_spaces.vector import VectorControllerAction
         v = VectorControllerAction(AzimutVectorEnv(num_envs=2, track="crab"), action="residual")
         v.reset(seed=0)
         v.step(np.zeros((2, 3)))
         assert "torch" not in sys.modules and "stable_baselines3" not in sys.modules
-        from azimut_env.cli import main
+        from jobs.cli import main
         assert main(["train", "--out", "/tmp/x"]) == 2  # refused in one line: the rl extra is missing
         print("ok")
     """)
@@ -128,8 +128,8 @@ def test_core_imports_and_runs_without_torch():
 
 
 def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
-    from azimut_env.cli import main
-    from train.cli import train
+    from jobs.cli import main
+    from jobs.training.command import train
 
     out = tmp_path / "run"
     train("ppo", "raw", "crab", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,

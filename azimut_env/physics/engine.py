@@ -1,0 +1,558 @@
+"""Rigid-body physics of N AZIMUT-3-like robots (top-down 2D): one rigid body per robot in a
+pymunk Space, the steering modules as joint coordinates in a compiled substep.
+
+One :class:`AzimutPhysics` simulates ``n_robots`` robots (the single env is ``n_robots=1``; the
+vector env uses the same class with many). Robots do not collide with each other, only with
+static obstacles. The pieces:
+
+* :mod:`azimut_env.physics.kernels`: the model (Newton–Euler equations of chassis and modules,
+  tires, actuators, hard stops, load transfer) and its compiled substep and summary kernels;
+* :mod:`azimut_env.physics.layout`: the names of the columns of every state and parameter array;
+* :mod:`azimut_env.physics.stability`: the stability budget that bounds the substep (checked here at
+  construction and on a change of mass);
+* :mod:`azimut_env.physics.body_io`: the batched reads and writes of the pymunk bodies;
+* :mod:`azimut_env.physics.blowup`: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
+
+Without obstacles the whole control period (all substeps, all robots) is one compiled call
+(:func:`~azimut_env.physics.kernels.step_kernel`) that integrates the chassis too; pymunk's
+bodies are read before it and written after it. With obstacles pymunk integrates the chassis: each substep the kernel's velocity
+change is handed to pymunk as a force and torque, and ``space.step`` integrates them and resolves
+the contacts (Chipmunk moves the position with the velocity of the start of the substep, then
+updates the velocity: explicit Euler for the chassis pose while in the presence of obstacles).
+Robots have collision shapes (the chassis box; the wheels lie within its footprint up to 2 cm)
+only when there are obstacles.
+
+Per-robot parameters live in arrays (``wheel_params``, columns :class:`WP`) so that domain
+randomisation can vary them robot by robot (:meth:`AzimutPhysics.set_wheel_params`,
+:meth:`AzimutPhysics.set_chassis_mass`). After each step, ``summary`` (N, len(RS)) and
+``wheel_summary`` (N, n, len(WS)) hold the derived per-robot quantities (pose, twists, slip power,
+internal force, blow-up code; β, β̇, tire forces and contact points in the chassis frame),
+computed by one compiled call for all robots. Other modules read them by the column names of
+:mod:`azimut_env.physics.layout` and change the physics only through its methods.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import pymunk
+
+from azimut_env.params import RobotParams
+from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
+from azimut_env.physics.body_io import BodyIO
+from azimut_env.physics.kernels import step_kernel, summary_kernel
+from azimut_env.physics.layout import ACC, BODY, CMD, CS, FT, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
+from azimut_env.physics.obstacles import Obstacle
+from azimut_env.physics.stability import check_load_scale, check_stability, stability_figures
+from azimut_env.physics.tire import TS
+
+__all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "BlowUp", "default_wheel_params", "WP", "MS", "JS", "TS",
+           "ACC", "BODY", "CMD", "CS", "FT", "RS", "WS"]
+
+#: Collision categories: robots collide with obstacles only, never with each other.
+_CAT_ROBOT = 0b01
+_CAT_OBSTACLE = 0b10
+
+
+def default_wheel_params(params: RobotParams, n_robots: int = 1) -> np.ndarray:
+    """(n_robots, n, len(WP)) per-wheel parameters of ``params`` (the same for every robot):
+    each column of :class:`WP` from its parameter class."""
+    g, st, wh, t, lim, m = params.geometry, params.steering, params.wheel, params.tire, params.limits, \
+        params.steer_motor
+    columns = {
+        WP.B: g.b, WP.R: g.r, WP.ALPHA: g.alpha, WP.LOAD: params.static_normal_loads(), WP.MU: t.friction,
+        WP.K_S: st.stiffness, WP.C_S: st.damping, WP.KP: st.position_gain, WP.I_MOD: st.module_inertia,
+        WP.I_W: wh.inertia, WP.KV: wh.velocity_gain, WP.BEARING: wh.bearing_damping,
+        WP.RR_TORQUE: t.rolling_resistance, WP.RR_KNEE: t.rolling_knee,
+        WP.STEER_RATE: lim.steer_rate_max, WP.STEER_ACCEL: lim.steer_accel_max, WP.STEER_TORQUE: lim.steer_torque_max,
+        WP.WHEEL_ACCEL: lim.wheel_accel_max, WP.WHEEL_TORQUE: lim.wheel_torque_max, WP.STEER_MIN: lim.steer_min,
+        WP.STEER_MAX: lim.steer_max,
+        WP.C_KAPPA: t.longitudinal_stiffness, WP.C_ALPHA: t.cornering_stiffness,
+        WP.SIGMA_LONG: t.longitudinal_relaxation_length, WP.SIGMA_LAT: t.relaxation_length,
+        WP.HALF_LEN: t.contact_half_length, WP.DAMP_TIME: t.damping_time,
+        WP.MOTOR_STALL: m.stall_torque, WP.MOTOR_NO_LOAD: m.no_load_speed, WP.MOTOR_INERTIA: m.rotor_inertia,
+    }
+    assert set(columns) == set(WP), "every wheel parameter column has its source"
+    wp = np.zeros((n_robots, params.n, len(WP)))
+    for col, value in columns.items():
+        wp[..., col] = value
+    return wp
+
+
+class AzimutPhysics:
+    """N robots in one pymunk Space, stepped at ``control_period`` with ``substeps`` substeps.
+
+    Args:
+        params: the robot's physical parameters (shared by all robots; per-robot variations go
+            through :meth:`set_wheel_params` and :meth:`set_chassis_mass`).
+        n_robots: number of robots N (1 for the single env).
+        control_period: duration of one :meth:`step` [s].
+        substeps: physics substeps per step; the substep is ``control_period / substeps``.
+        blowup: thresholds of :meth:`check`.
+        solver_iterations: pymunk solver iterations per substep (obstacle contacts only since the
+            steering modules left pymunk; kept as a knob).
+
+    State accessors return arrays with a leading robot axis N. The state of record between steps
+    is the pymunk chassis bodies (pose, velocity) plus ``joint_state`` (β, module rates),
+    ``motor_state`` and ``chassis_accel``; all of it pickles.
+    """
+
+    def __init__(self, params: RobotParams | None = None, n_robots: int = 1, control_period: float = 0.02,
+                 substeps: int = 8, blowup: BlowUpLimits | None = None, solver_iterations: int = 20) -> None:
+        self.params = params if params is not None else RobotParams()
+        if int(n_robots) != n_robots or n_robots < 1:
+            raise ValueError(f"n_robots must be a positive integer, got {n_robots!r}")
+        if not (math.isfinite(control_period) and control_period > 0):
+            raise ValueError(f"control_period must be > 0 [s], got {control_period!r}")
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
+        self.n_robots = int(n_robots)
+        self.n = self.params.n
+        self.control_period = float(control_period)
+        self.substeps = int(substeps)
+        if int(solver_iterations) != solver_iterations or solver_iterations < 1:
+            raise ValueError(f"solver_iterations must be a positive integer, got {solver_iterations!r}")
+        self.solver_iterations = int(solver_iterations)
+        self.dt = self.control_period / self.substeps
+        self.blowup = blowup if blowup is not None else BlowUpLimits()
+        check_stability(self.params, self.dt)
+        p = self.params
+        #: (n, 2) load change on each axis per unit moment (M_x, M_y) about the centre [1/m]
+        self._load_transfer = np.ascontiguousarray(p.load_map()[:, 1:3])
+        #: (N, n, len(WP)) per-wheel parameters (change them with set_wheel_params/set_chassis_mass)
+        self.wheel_params = default_wheel_params(p, self.n_robots)
+        self.motor_state = np.zeros((self.n_robots, self.n, len(MS)))
+        self.joint_state = np.zeros((self.n_robots, self.n, len(JS)))
+        #: (N, n, len(TS)) tire states (contact patch deflections u_long, u_lat [m], twist [rad])
+        self.tire_state = np.zeros((self.n_robots, self.n, len(TS)))
+        self.commands = np.zeros((self.n_robots, self.n, len(CMD)))
+        self.enabled = np.ones(self.n_robots, dtype=np.bool_)
+        self.acc = np.zeros((self.n_robots, self.n, len(ACC)))
+        #: (N, len(BODY)) body mass M [kg] and moment I [kg·m²] about the centre (modules at their axes)
+        self.body_inertia = np.tile(p.body_inertia(), (self.n_robots, 1))
+        #: (N, 2) chassis acceleration in R from the tire forces of the last substep [m/s²]
+        self.chassis_accel = np.zeros((self.n_robots, 2))
+        self.obstacles: tuple[Obstacle, ...] = ()
+        self.summary = np.zeros((self.n_robots, len(RS)))
+        self.wheel_summary = np.zeros((self.n_robots, self.n, len(WS)))
+        self._axis_xy = np.ascontiguousarray(self.params.geometry.axis_xy)
+        #: a dict that :meth:`step` adds its stage times to when set (``azimut bench-env``), or None
+        self.stage_times: dict[str, float] | None = None
+        self._build_space()
+
+    # ------------------------------------------------------------------ construction
+
+    def stability_figures(self) -> dict[str, tuple[float, float]]:
+        """The figures of the stability budget (:func:`azimut_env.physics.stability.stability_figures`) for
+        these parameters and this substep, each with its bound: ``{name: (value, bound)}``."""
+        return stability_figures(self.params, self.dt)
+
+    def _build_space(self) -> None:
+        p = self.params
+        space = pymunk.Space()
+        space.iterations = self.solver_iterations
+        space.gravity = (0.0, 0.0)
+        robot_filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
+        # Collision shapes only matter against obstacles; without obstacles the bodies carry their
+        # mass and inertia alone and pymunk is not stepped at all.
+        with_shapes = bool(self.obstacles)
+        self.chassis: list[pymunk.Body] = []
+        for i in range(self.n_robots):
+            mass, moment = self.body_inertia[i]
+            ch = pymunk.Body(float(mass), float(moment))
+            space.add(ch)
+            if with_shapes:
+                box = pymunk.Poly.create_box(ch, (p.chassis.length, p.chassis.width))
+                box.filter = robot_filter
+                box.friction = 0.5
+                space.add(box)
+            self.chassis.append(ch)
+        self.space = space
+        self._obstacle_shapes: list[pymunk.Shape] = []
+        for ob in self.obstacles:
+            self._add_obstacle(ob)
+        self._setup_buffers()
+
+    def _setup_buffers(self) -> None:
+        """(Re)create the batched body I/O for the current Space and read the bodies."""
+        self._io = BodyIO(self.space, self.chassis)
+        self._state = self._io.state
+        self._forces = self._io.forces
+        self._before = np.zeros((self.n_robots, len(CS)))
+        self._read_state()
+
+    def _summarize(self) -> None:
+        summary_kernel(self._state, self.joint_state, self.motor_state, self.acc, self.wheel_params, self._axis_xy,
+                        self.n, 1.0 / self.substeps, self.blowup.speed, self.blowup.yaw_rate,
+                        self.blowup.spin, self.blowup.position, self.summary, self.wheel_summary)
+
+    def _read_state(self) -> np.ndarray:
+        self._io.read()
+        self._summarize()
+        return self._state
+
+    def _read_robot_state(self, robot: int) -> None:
+        """Re-read one robot's body and recompute its summary row (after a reset or a kick), in
+        O(1) of the robot count."""
+        b = self.chassis[robot]
+        p, v = b.position, b.velocity
+        self._state[robot] = (p.x, p.y, b.angle, v.x, v.y, b.angular_velocity)
+        sl = slice(robot, robot + 1)
+        summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl],
+                        self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self.blowup.speed,
+                        self.blowup.yaw_rate, self.blowup.spin, self.blowup.position, self.summary[sl],
+                        self.wheel_summary[sl])
+
+    def _add_obstacle(self, ob: Obstacle) -> None:
+        body = self.space.static_body
+        if ob.vertices:
+            shape = pymunk.Poly(body, ob.vertices)
+        else:
+            shape = pymunk.Circle(body, ob.radius, (ob.x, ob.y))
+        shape.filter = pymunk.ShapeFilter(categories=_CAT_OBSTACLE, mask=_CAT_ROBOT)
+        shape.friction = 0.5
+        shape.elasticity = 0.2
+        self.space.add(shape)
+        self._obstacle_shapes.append(shape)
+
+    def _build_space_keep_state(self) -> None:
+        """Rebuild the Space and copy every robot body's state over."""
+        saved = [(b.position, b.angle, b.velocity, b.angular_velocity) for b in self.chassis]
+        self._build_space()
+        for body, (pos, ang, vel, w) in zip(self.chassis, saved):
+            body.angle = ang
+            body.position, body.velocity, body.angular_velocity = pos, vel, w
+        self._read_state()
+
+    def rebuild(self, obstacles: Sequence | None = None) -> None:
+        """Recreate the pymunk Space (same robots, bodies at the origin) with ``obstacles``
+        (Obstacle, (x, y, radius) or vertex lists; default: the current ones).
+
+        pymunk keeps contact caches between steps, so with obstacles two episodes reset to the
+        same state only replay bit-for-bit from a fresh Space. The single env rebuilds on every
+        reset; call :meth:`reset_robot` after."""
+        if obstacles is not None:
+            self.obstacles = tuple(Obstacle.coerce(o) for o in obstacles)
+        self._build_space()
+
+    def set_obstacles(self, obstacles: Sequence = ()) -> None:
+        """Replace the static obstacles (Obstacle, (x, y, radius) or vertex lists)."""
+        obs = tuple(Obstacle.coerce(o) for o in obstacles)
+        for shape in self._obstacle_shapes:
+            self.space.remove(shape)
+        self._obstacle_shapes = []
+        had_shapes = bool(self.obstacles)
+        self.obstacles = obs
+        if bool(obs) != had_shapes:  # robots need (or no longer need) collision shapes
+            self._build_space_keep_state()
+            return
+        for ob in obs:
+            self._add_obstacle(ob)
+        self._setup_buffers()
+
+    # ------------------------------------------------------------------ pickling
+
+    def __getstate__(self) -> dict:
+        d = self.__dict__.copy()
+        d.pop("_io", None)  # pymunk.batch buffers: rebuilt for the unpickled Space
+        return d
+
+    def __setstate__(self, d: dict) -> None:
+        self.__dict__.update(d)
+        state = self._state.copy()
+        self._setup_buffers()
+        self._state[:] = state
+
+    # ------------------------------------------------------------------ reset and commands
+
+    def _robot_index(self, robot) -> int:
+        """``robot`` as an index 0..N−1 (``ValueError`` otherwise)."""
+        if isinstance(robot, bool) or not isinstance(robot, (int, np.integer)) or not 0 <= robot < self.n_robots:
+            raise ValueError(f"robot index {robot!r} out of range 0..{self.n_robots - 1}")
+        return int(robot)
+
+    def set_wheel_params(self, wheel_params: np.ndarray, robot: int | None = None) -> None:
+        """Replace the per-wheel parameters (columns :class:`WP`), e.g. randomised: of every robot
+        (``wheel_params`` (N, n, len(WP))), or of robot ``robot`` alone ((n, len(WP)))."""
+        wp = np.asarray(wheel_params, dtype=np.float64)
+        shape = self.wheel_params.shape if robot is None else self.wheel_params.shape[1:]
+        if wp.shape != shape or not np.all(np.isfinite(wp)):
+            raise ValueError(f"wheel_params must be finite with shape {shape}")
+        if robot is None:
+            self.wheel_params = np.ascontiguousarray(wp)
+        else:
+            self.wheel_params[self._robot_index(robot)] = wp
+
+    def set_chassis_mass(self, robot: int, mass: float) -> None:
+        """Change robot ``robot``'s chassis mass [kg] (without the modules; the plate's inertia
+        scales with it). The body's mass and moment and the wheels' static normal loads follow."""
+        if not (math.isfinite(mass) and mass > 0):
+            raise ValueError(f"mass must be > 0, got {mass!r}")
+        robot = self._robot_index(robot)
+        check_load_scale(self.params, self.dt, mass)
+        m_tot, moment = self.params.body_inertia(mass)
+        self.body_inertia[robot] = (m_tot, moment)
+        ch = self.chassis[robot]
+        ch.moment = float(moment)
+        ch.mass = float(m_tot)
+        self.wheel_params[robot, :, WP.LOAD] = self.params.static_normal_loads(m_tot)
+
+    def normal_loads(self) -> np.ndarray:
+        """(N, n) normal loads N_k now [N]: the static share of each robot's current mass plus,
+        with ``com_height`` > 0, the load transfer of the last substep's acceleration."""
+        loads = self.wheel_params[..., WP.LOAD].copy()
+        h = self.params.chassis.com_height
+        if h > 0:
+            m = self.body_inertia[:, BODY.MASS, None]
+            a = self.chassis_accel
+            lt = self._load_transfer
+            loads -= h * m * (lt[None, :, 0] * a[:, 0:1] + lt[None, :, 1] * a[:, 1:2])
+            np.maximum(loads, 0.0, out=loads)
+        return loads
+
+    def reset_robot(self, robot: int, pose=(0.0, 0.0, 0.0), beta=None, twist=(0.0, 0.0, 0.0)) -> None:
+        """Place robot ``robot`` at pose (x, y, θ) [m, m, rad] in the world, wheels at steering
+        angles ``beta`` (n,) [rad] (default 0, clipped into the steering range), moving with the
+        chassis twist (ẋ, ẏ, θ̇) given in the chassis frame, wheels rolling without slip and motors
+        at rest on their set-points."""
+        robot = self._robot_index(robot)
+        g = self.params.geometry
+        pose = np.asarray(pose, dtype=np.float64)
+        twist = np.asarray(twist, dtype=np.float64)
+        beta = np.zeros(self.n) if beta is None else np.asarray(beta, dtype=np.float64)
+        if pose.shape != (3,) or twist.shape != (3,) or beta.shape != (self.n,):
+            raise ValueError("reset_robot needs pose (3,), twist (3,) and beta (n,)")
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist)) and np.all(np.isfinite(beta))):
+            raise ValueError("reset_robot: non-finite pose, twist or beta")
+        beta = np.clip(beta, g.steer_min + 1e-9, g.steer_max)
+        x, y, th = pose
+        c, s = math.cos(th), math.sin(th)
+        v_world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1]])
+        w = float(twist[2])
+        ch = self.chassis[robot]
+        ch.angle = float(th)  # the angle first: the position setter uses the (maybe non-finite) transform
+        ch.position = (float(x), float(y))
+        ch.velocity = tuple(v_world)
+        ch.angular_velocity = w
+        ch.force = (0.0, 0.0)
+        ch.torque = 0.0
+        self.joint_state[robot, :, JS.BETA] = beta
+        self.joint_state[robot, :, JS.OMEGA] = w
+        self.tire_state[robot] = 0.0  # unloaded patches: a rolling start builds its slip by distance
+        self.chassis_accel[robot] = 0.0
+        # wheel spins that roll without slip: r φ̇ = v(P)·d
+        gam = th + g.alpha + beta
+        px = x + c * g.axis_xy[:, 0] - s * g.axis_xy[:, 1] + g.b * np.cos(gam)
+        py = y + s * g.axis_xy[:, 0] + c * g.axis_xy[:, 1] + g.b * np.sin(gam)
+        vpx = v_world[0] - w * (py - y)
+        vpy = v_world[1] + w * (px - x)
+        phidot = (vpx * np.sin(gam) - vpy * np.cos(gam)) / g.r
+        ms = self.motor_state[robot]
+        ms[:, MS.THETA] = beta
+        ms[:, MS.OMEGA] = 0.0
+        ms[:, MS.PHIDOT_REF] = phidot
+        ms[:, MS.PHIDOT] = phidot
+        ms[:, MS.PHI] = 0.0
+        self.commands[robot, :, CMD.BETA] = beta
+        self.commands[robot, :, CMD.PHIDOT] = phidot
+        self.enabled[robot] = True
+        self.acc[robot] = 0.0
+        self._read_robot_state(robot)
+
+    def overlapping_obstacles(self, robot: int = 0) -> list[int]:
+        """Indices of the obstacles that overlap robot ``robot``'s chassis now."""
+        if not self.obstacles:
+            return []
+        hits = set()
+        for shape in self.chassis[robot].shapes:
+            for info in self.space.shape_query(shape):
+                if info.shape in self._obstacle_shapes:
+                    hits.add(self._obstacle_shapes.index(info.shape))
+        return sorted(hits)
+
+    def set_commands(self, beta_cmd, phidot_cmd) -> None:
+        """Set-points for all robots: β_cmd (N, n) [rad], φ̇_cmd (N, n) [rad/s] (clipped to limits)."""
+        lim = self.params.limits
+        beta_cmd = np.asarray(beta_cmd, dtype=np.float64).reshape(self.n_robots, self.n)
+        phidot_cmd = np.asarray(phidot_cmd, dtype=np.float64).reshape(self.n_robots, self.n)
+        if not (np.all(np.isfinite(beta_cmd)) and np.all(np.isfinite(phidot_cmd))):
+            raise ValueError("set_commands: set-points contain NaN or inf")
+        self.commands[..., CMD.BETA] = np.clip(beta_cmd, lim.steer_min, lim.steer_max)
+        self.commands[..., CMD.PHIDOT] = np.clip(phidot_cmd, -lim.wheel_speed_max, lim.wheel_speed_max)
+
+    def set_setpoints(self, setpoints: np.ndarray, rows: np.ndarray | None = None) -> None:
+        """Copy checked set-points (N, n, len(CMD)) into the motors' set-points, for every robot or
+        for those where ``rows`` (N,) is True (the others keep theirs). No clipping and no checks:
+        the fast path for a caller that has produced them finite and within the limits (the
+        task's compiled action map); :meth:`set_commands` checks and clips."""
+        if rows is None:
+            np.copyto(self.commands, setpoints)
+        else:
+            np.copyto(self.commands, setpoints, where=rows[:, None, None])
+
+    def set_motors_enabled(self, enabled) -> None:
+        """Motors on (True) or off (False) per robot: off means zero propulsion torque and the
+        steering motors braked at their current angle."""
+        self.enabled[:] = np.broadcast_to(np.asarray(enabled, dtype=np.bool_), (self.n_robots,))
+
+    def kick(self, robot: int, wheels: Sequence[int], impulse: float) -> None:
+        """An angular impulse [N·m·s] on the modules ``wheels`` of robot ``robot``, about their
+        steering axes (like a collision knocking the wheels to other angles)."""
+        robot = self._robot_index(robot)
+        if not math.isfinite(impulse):
+            raise ValueError(f"kick impulse must be finite, got {impulse!r}")
+        for k in wheels:
+            if not 0 <= int(k) < self.n:
+                raise ValueError(f"kick: wheel index {k} out of range 0..{self.n - 1}")
+        for k in wheels:
+            self.joint_state[robot, int(k), JS.OMEGA] += impulse / self.wheel_params[robot, int(k), WP.I_MOD]
+        self._read_robot_state(robot)
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self, times: dict[str, float] | None = None) -> None:
+        """Advance all robots by one control period (``substeps`` substeps).
+
+        Timing hook: with ``times`` given (else :attr:`stage_times`, when set), the seconds spent
+        in each stage are added to it under the keys ``read``, ``force`` (the compiled kernel),
+        ``write``, ``space_step`` and ``summary`` (``azimut bench-env``'s split)."""
+        self.acc[:] = 0.0
+        p = self.params
+        args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
+                self.acc, self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer, float(p.chassis.com_height),
+                float(p.steering.stop_restitution), bool(p.steer_motor.is_dc), self.n, self.dt)
+        tm = times if times is not None else self.stage_times
+        t = time.perf_counter() if tm is not None else 0.0
+        self._io.read()
+        if tm is not None:
+            t = _lap(tm, "read", t)
+        state = self._state
+        if not self.obstacles:  # the whole control period in one compiled call
+            step_kernel(state, *args, self.substeps, True)
+            if tm is not None:
+                t = _lap(tm, "force", t)
+            self._io.write()
+            if tm is not None:
+                t = _lap(tm, "write", t)
+        else:  # pymunk integrates the bodies (forces from the kernel's velocity change) and resolves contacts
+            space, dt, N = self.space, self.dt, self.n_robots
+            forces, before = self._forces, self._before
+            for j in range(self.substeps):
+                if j:
+                    self._io.read()
+                    if tm is not None:
+                        t = _lap(tm, "read", t)
+                before[:] = state[:N]
+                step_kernel(state, *args, 1, False)
+                # the same velocity change, as the force and torque pymunk applies in its step
+                mass, moment = self.body_inertia[:, BODY.MASS], self.body_inertia[:, BODY.MOMENT]
+                forces[:N, FT.FX] = (state[:N, CS.VX] - before[:, CS.VX]) * (mass / dt)
+                forces[:N, FT.FY] = (state[:N, CS.VY] - before[:, CS.VY]) * (mass / dt)
+                forces[:N, FT.TAU] = (state[:N, CS.W] - before[:, CS.W]) * (moment / dt)
+                self._io.write_forces()
+                if tm is not None:
+                    t = _lap(tm, "force", t)
+                space.step(dt)
+                if tm is not None:
+                    t = _lap(tm, "space_step", t)
+            self._io.read()
+            if tm is not None:
+                t = _lap(tm, "read", t)
+        self._summarize()
+        if tm is not None:
+            _lap(tm, "summary", t)
+
+    # ------------------------------------------------------------------ state
+
+    def chassis_pose(self) -> np.ndarray:
+        """(N, 3) chassis pose (x, y, θ) in the world [m, m, rad]."""
+        return self.summary[:, RS_POSE].copy()
+
+    def chassis_twist(self) -> np.ndarray:
+        """(N, 3) chassis twist ξ̇ = (ẋ, ẏ, θ̇) in the chassis frame R [m/s, m/s, rad/s]."""
+        return self.summary[:, RS_TWIST_BODY]
+
+    def steering_angles(self) -> np.ndarray:
+        """(N, n) true steering angles β (wheel side of the spring) [rad]."""
+        return self.wheel_summary[..., WS.BETA].copy()
+
+    def steering_rates(self) -> np.ndarray:
+        """(N, n) true steering rates β̇ [rad/s]."""
+        return self.wheel_summary[..., WS.BETA_DOT].copy()
+
+    def motor_angles(self) -> np.ndarray:
+        """(N, n) steering motor angles θ_m [rad]."""
+        return self.motor_state[..., MS.THETA].copy()
+
+    def wheel_speeds(self) -> np.ndarray:
+        """(N, n) true wheel spin rates φ̇ [rad/s]."""
+        return self.motor_state[..., MS.PHIDOT].copy()
+
+    def axis_points(self) -> np.ndarray:
+        """(N, n, 2) steering axes A_k in the world [m]."""
+        x, y, th = (self.summary[:, col, None] for col in (RS.X, RS.Y, RS.TH))
+        c, s = np.cos(th), np.sin(th)
+        a = self._axis_xy
+        return np.stack([x + c * a[:, 0] - s * a[:, 1], y + s * a[:, 0] + c * a[:, 1]], axis=-1)
+
+    def contact_points(self) -> np.ndarray:
+        """(N, n, 2) contact points P_k = A_k + b_k (cos γ, sin γ) in the world [m]."""
+        gam = self.summary[:, RS.TH, None] + self.wheel_params[..., WP.ALPHA] + self.joint_state[..., JS.BETA]
+        b = self.wheel_params[..., WP.B]
+        return self.axis_points() + b[..., None] * np.stack([np.cos(gam), np.sin(gam)], axis=-1)
+
+    def tire_forces_body(self) -> np.ndarray:
+        """(N, n, 2) tire forces in the chassis frame, averaged over the last step [N]."""
+        return self.wheel_summary[..., WS_FORCE].copy()
+
+    def slip_power(self) -> np.ndarray:
+        """(N,) power dissipated by tire slip Σ_k |F_k · v_slip,k|, averaged over the last step [W]."""
+        return self.summary[:, RS.SLIP].copy()
+
+    def internal_force(self) -> np.ndarray:
+        """(N,) norm of the internal (antagonistic) part of the tire forces, step mean [N].
+
+        The tire forces F (2n values, chassis frame) map to the net wrench W = G F on the chassis
+        (force and moment about the centre). The least-norm forces that give the same W are
+        F* = Gᵀ(G Gᵀ)⁻¹ W; F − F* lies in the null space of G: forces that cancel out.
+        """
+        return self.summary[:, RS.INTERNAL].copy()
+
+    def energy(self) -> np.ndarray:
+        """(N,) kinetic energy (chassis with the module masses, module rotations, wheel spins)
+        plus the elastic energy of the steering springs and the tires' contact patches [J]."""
+        st = self._state[: self.n_robots]
+        m, inertia = self.body_inertia[:, BODY.MASS], self.body_inertia[:, BODY.MOMENT]
+        e = 0.5 * m * (st[:, CS.VX] ** 2 + st[:, CS.VY] ** 2) + 0.5 * inertia * st[:, CS.W] ** 2
+        wp = self.wheel_params
+        e += 0.5 * np.sum(wp[..., WP.I_MOD] * self.joint_state[..., JS.OMEGA] ** 2, axis=1)
+        e += 0.5 * np.sum(wp[..., WP.I_W] * self.motor_state[..., MS.PHIDOT] ** 2, axis=1)
+        e += 0.5 * np.sum(wp[..., WP.K_S] * (self.motor_state[..., MS.THETA] - self.joint_state[..., JS.BETA]) ** 2,
+                          axis=1)
+        # the tire's contact springs: k_x = C_κ/σ_κ, k_y = C_α/σ_α, twist k_y a²/2 (tire module)
+        loads = self.normal_loads()
+        ts = self.tire_state
+        k_x = wp[..., WP.C_KAPPA] * loads / wp[..., WP.SIGMA_LONG]
+        k_y = wp[..., WP.C_ALPHA] * loads / wp[..., WP.SIGMA_LAT]
+        k_t = 0.5 * k_y * wp[..., WP.HALF_LEN] ** 2
+        e += 0.5 * np.sum(k_x * ts[..., TS.U_LONG] ** 2 + k_y * ts[..., TS.U_LAT] ** 2 + k_t * ts[..., TS.TWIST] ** 2,
+                          axis=1)
+        return e
+
+    def check(self) -> tuple[np.ndarray, list[str]]:
+        """Blow-up detection: (ok (N,) bool, reason per robot, '' where ok)."""
+        codes = self.summary[:, RS.CODE]
+        ok = codes == BlowUp.NONE.value  # a plain int: an array against the IntEnum member is slow
+        if ok.all():
+            return ok, [""] * self.n_robots
+        return ok, [BLOWUP_MESSAGES.get(int(c), "") if c else "" for c in codes]
+
+
+def _lap(times: dict[str, float], key: str, t0: float) -> float:
+    """Add the time since ``t0`` to ``times[key]``; return now."""
+    t = time.perf_counter()
+    times[key] = times.get(key, 0.0) + t - t0
+    return t

@@ -1,0 +1,1 @@
+"""azimut_env.task.core."""

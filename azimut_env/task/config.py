@@ -1,0 +1,175 @@
+"""The settings of the task, built once from the envs' keyword arguments.
+
+Both envs (:class:`~azimut_env.env.AzimutEnv`, :class:`~azimut_env.vector_env.AzimutVectorEnv`)
+take the same keyword arguments: a few that say *what* is simulated (``track``, ``params``,
+``sensors``, ``noise_scale``, ``obstacles``, ``render_mode``) and every field of
+:class:`TaskConfig` (step timing, reward weights and scales, termination, observation look-ahead,
+latency, pose source). :func:`task_settings` turns them into the validated pair
+(:class:`~azimut_env.params.RobotParams`, :class:`TaskConfig`); :func:`front_signature` gives each
+env constructor the full keyword list for ``help()`` and ``inspect.signature``, so the defaults
+live in one place: the fields of :class:`TaskConfig`.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field, fields, replace
+from typing import Any
+
+from azimut_env.params import RobotParams, SensorParams
+from azimut_env.task.localisation import LocalisationParams, check_pose_source
+from azimut_env.validation import check_int, check_nonnegative, check_positive, check_range
+
+__all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS"]
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Settings of the task (see :class:`~azimut_env.env.AzimutEnv`, "Arguments").
+
+    Attributes:
+        control_period: seconds per step [s]. substeps: physics substeps per step.
+        solver_iterations: pymunk solver iterations per substep (see ``AzimutPhysics``).
+        domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
+            damping, chassis mass (the loads follow), tire slip stiffness (with its relaxation
+            lengths) and contact patch size, drawn per reset.
+        progress_weight, lateral_weight, heading_weight, overspeed_weight, slip_weight [1/W],
+        internal_force_weight [1/N], action_rate_weight, off_track_penalty: reward weights (the
+            terms are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
+        lateral_scale [m], heading_scale [rad]: scales of the bounded tracking terms
+            w·(1 − exp(−|e|/scale)).
+        antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
+        stall_time: end the episode (terminated, with the off-track penalty) after this long [s]
+            without ``stall_distance`` [m] of new progress; 0: never.
+        time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the nominal lap of the
+            reference controller on the episode's track (:func:`~azimut_env.task.lap_time.reference_lap_time`:
+            the speed profile plus its stops to turn wheels in place; 1.5 by default); 0: no limit
+            of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
+        max_lateral_error: lateral error that ends the episode [m].
+        lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
+            [m of progress]. start_noise: uniform start pose noise [m, rad].
+        action_latency: command latency k [control periods] (default 0): the set-points of the
+            action given at step t drive the motors during step t + k (a per-robot FIFO, emptied
+            at each reset; for the first k steps of an episode the motors hold the reset
+            set-points). Models the transport delay of a real robot's command path for
+            sim-to-real work. The observation's ``prev_action`` is the action given, not the
+            one being applied.
+        pose_source: ``"true"`` (the observation's tracking errors and look-ahead come from the
+            true pose) or ``"odometry"`` (from dead reckoning corrected by localisation fixes;
+            :mod:`azimut_env.task.localisation`).
+        localisation: :class:`~azimut_env.task.localisation.LocalisationParams` (used with
+            ``pose_source="odometry"``).
+    """
+
+    control_period: float = 0.02
+    substeps: int = 8
+    solver_iterations: int = 20
+    domain_randomization: float = 0.0
+    progress_weight: float = 3.0
+    lateral_weight: float = 0.5
+    heading_weight: float = 0.3
+    overspeed_weight: float = 2.0
+    slip_weight: float = 0.02
+    internal_force_weight: float = 0.01
+    action_rate_weight: float = 0.05
+    off_track_penalty: float = 10.0
+    lateral_scale: float = 0.05
+    heading_scale: float = 0.1
+    antagonism_cap: float = 2.0
+    stall_time: float = 0.0
+    stall_distance: float = 0.05
+    time_limit_factor: float = 1.5
+    max_lateral_error: float = 0.5
+    lookahead_count: int = 5
+    lookahead_spacing: float = 0.3
+    start_noise: float = 0.02
+    action_latency: int = 0
+    pose_source: str = "true"
+    localisation: LocalisationParams = field(default_factory=LocalisationParams)
+
+    def __post_init__(self) -> None:
+        # every field checked (and stored as its canonical type) here, once, with the field's name
+        fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        # 0.1 ms .. 1 s: below, step counts of the time limit overflow and the render rate is absurd
+        fix("control_period", check_range("control_period", self.control_period, 1e-4, 1.0))
+        fix("substeps", check_int("substeps", self.substeps, min_value=1, max_value=10_000))
+        fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
+                                           max_value=10_000))
+        fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
+        for name in ("progress_weight", "lateral_weight", "heading_weight", "overspeed_weight", "slip_weight",
+                     "internal_force_weight", "action_rate_weight", "off_track_penalty", "start_noise", "stall_time",
+                     "time_limit_factor"):
+            fix(name, check_nonnegative(name, getattr(self, name)))
+        for name in ("lateral_scale", "heading_scale", "antagonism_cap", "stall_distance"):
+            fix(name, check_positive(name, getattr(self, name)))
+        fix("max_lateral_error", check_positive("max_lateral_error", self.max_lateral_error))
+        fix("lookahead_count", check_int("lookahead_count", self.lookahead_count, min_value=1, max_value=1000))
+        fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
+        fix("action_latency", check_int("action_latency", self.action_latency, min_value=0, max_value=1000))
+        check_pose_source(self.pose_source)
+        if not isinstance(self.localisation, LocalisationParams):
+            raise TypeError(f"localisation must be LocalisationParams, got {type(self.localisation).__name__}")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        """Reward weights by term name (``off_track`` is the penalty)."""
+        return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
+                    overspeed=self.overspeed_weight, slip=self.slip_weight, internal_force=self.internal_force_weight,
+                    action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+
+
+def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:
+    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied."""
+    params = params if params is not None else RobotParams()
+    if not isinstance(params, RobotParams):
+        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
+    if sensors is not None:
+        if isinstance(sensors, str):
+            if sensors != "ideal":
+                raise ValueError(f"sensors must be SensorParams or 'ideal', got {sensors!r}")
+            sensors = SensorParams.ideal()
+        if not isinstance(sensors, SensorParams):
+            raise TypeError(f"sensors must be SensorParams or 'ideal', got {type(sensors).__name__}")
+        params = replace(params, sensors=sensors)
+    noise_scale = check_nonnegative("noise_scale", noise_scale)
+    if noise_scale != 1.0:
+        sp = params.sensors
+        params = replace(params, sensors=replace(sp, steer_noise=sp.steer_noise * noise_scale,
+                                                 motor_noise=sp.motor_noise * noise_scale,
+                                                 wheel_speed_noise=sp.wheel_speed_noise * noise_scale))
+    return params
+
+
+#: the keyword arguments of the envs that are :class:`TaskConfig` fields
+TASK_CONFIG_FIELDS = tuple(f.name for f in fields(TaskConfig))
+
+
+def task_settings(params: RobotParams | None = None, sensors: SensorParams | str | None = None,
+                  noise_scale: float = 1.0, **config: Any) -> tuple[RobotParams, TaskConfig]:
+    """The robot parameters and the task settings of an env from its keyword arguments.
+
+    ``params``, ``sensors`` and ``noise_scale`` go through :func:`resolve_params`; every other
+    keyword must be a :class:`TaskConfig` field (``localisation=None`` means the default
+    :class:`~azimut_env.task.localisation.LocalisationParams`). Raises ``TypeError`` naming an unknown
+    keyword, and the field checks' ``ValueError``/``TypeError`` otherwise."""
+    params = resolve_params(params, sensors, noise_scale)
+    unknown = sorted(set(config) - set(TASK_CONFIG_FIELDS))
+    if unknown:
+        raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, params, sensors, "
+                        f"noise_scale, obstacles, render_mode and the TaskConfig fields {list(TASK_CONFIG_FIELDS)}")
+    config["localisation"] = config.get("localisation") or LocalisationParams()
+    return params, TaskConfig(**config)
+
+
+def front_signature(init: Callable) -> inspect.Signature:
+    """The signature of an env constructor ``init(self, ..., **config)`` with ``**config`` spelled
+    out as the keyword-only :class:`TaskConfig` fields and their defaults (``localisation``:
+    None), for ``help()``, ``inspect.signature`` and IDEs."""
+    sig = inspect.signature(init)
+    own = [p for p in sig.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+    extra = []
+    for f in fields(TaskConfig):
+        default = None if f.name == "localisation" else (f.default if f.default is not MISSING else f.default_factory())
+        extra.append(inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=f.type))
+    return sig.replace(parameters=own + extra)

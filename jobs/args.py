@@ -1,0 +1,170 @@
+"""The command line's checks: ``argparse`` ``type=`` converters and output-path checks.
+
+The ``arg_*`` functions are ``argparse`` ``type=`` converters: they raise
+``argparse.ArgumentTypeError``, which argparse reports as one line on stderr with exit status 2
+(``azimut X: error: argument --flag: ...``), before the command starts any work.
+:func:`check_output_path` checks a file the command will write (its directory exists and is
+writable, the path is not a directory and not under a file) for the same early refusal. The
+numeric checks they share with the constructors are :mod:`azimut_env.validation`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from collections.abc import Callable, Sequence
+
+from azimut_env.validation import check_range
+
+__all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "require_module"]
+
+
+def arg_int(min_value: int | None = None, max_value: int | None = None) -> Callable[[str], int]:
+    """``type=`` for an integer flag in [min_value, max_value]."""
+
+    def convert(text: str) -> int:
+        try:
+            v = int(text, 10)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if min_value is not None and v < min_value:
+            raise argparse.ArgumentTypeError(f"must be >= {min_value}, got {v}")
+        if max_value is not None and v > max_value:
+            raise argparse.ArgumentTypeError(f"must be <= {max_value}, got {v}")
+        return v
+
+    convert.__name__ = "integer"
+    return convert
+
+
+def arg_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+              hi_open: bool = False) -> Callable[[str], float]:
+    """``type=`` for a finite real flag in [lo, hi] (``lo_open``/``hi_open`` exclude the bound)."""
+
+    def convert(text: str) -> float:
+        try:
+            v = float(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        try:
+            return check_range("value", v, lo, hi, lo_open=lo_open, hi_open=hi_open)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e).removeprefix("value ")) from None
+
+    convert.__name__ = "number"
+    return convert
+
+
+def arg_choice_list(choices: Sequence[str], *, allow_empty: bool = False) -> Callable[[str], list[str]]:
+    """``type=`` for a comma-separated subset of ``choices`` (order kept, duplicates refused)."""
+
+    def convert(text: str) -> list[str]:
+        items = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [t for t in items if t not in choices]
+        if bad:
+            raise argparse.ArgumentTypeError(f"unknown {', '.join(map(repr, bad))}; choose from {', '.join(choices)}")
+        if len(set(items)) != len(items):
+            raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+        if not items and not allow_empty:
+            raise argparse.ArgumentTypeError(f"give at least one of {', '.join(choices)}")
+        return items
+
+    convert.__name__ = "list"
+    return convert
+
+
+def _writable_dir(path: str) -> bool:
+    """Whether a file can be created in the directory ``path``: tried for real (a temporary file,
+    removed at once), since permission bits say nothing for root or a read-only mount."""
+    import tempfile
+
+    if not os.access(path, os.W_OK | os.X_OK):
+        return False
+    try:
+        fd, name = tempfile.mkstemp(dir=path, prefix=".azimut-write-check-")
+    except OSError:
+        return False
+    os.close(fd)
+    try:
+        os.unlink(name)
+    except OSError:
+        pass
+    return True
+
+
+def _first_existing(path: str) -> str:
+    while not os.path.exists(path):
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    return path
+
+
+def check_output_path(path: str | os.PathLike, *, directory: bool = False) -> str:
+    """Check that ``path`` can be written before any work starts; return it as ``str``.
+
+    A file path must not be an existing directory, its parent must be an existing directory in
+    which a file can be created, and an existing file must be writable (it is overwritten). With
+    ``directory=True`` the path is a directory to create (with its parents) or fill: it must not
+    be a file, nothing on its way may be a file, and the directory (or its first existing
+    ancestor) must accept a new file. Raises ``ValueError`` with one line.
+    """
+    try:
+        text = os.fspath(path)
+    except TypeError:
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}") from None
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if not text or "\0" in text:
+        raise ValueError(f"invalid path {text!r}")
+    p = os.path.abspath(text)
+    if directory:
+        if os.path.exists(p) and not os.path.isdir(p):
+            raise ValueError(f"{text}: exists and is not a directory")
+        anc = _first_existing(p)
+        if not os.path.isdir(anc):
+            raise ValueError(f"{text}: {anc} is not a directory")
+        if not _writable_dir(anc):
+            raise ValueError(f"{text}: directory {anc} is not writable")
+        return text
+    if os.path.isdir(p):
+        raise ValueError(f"{text}: is a directory")
+    parent = os.path.dirname(p)
+    anc = _first_existing(parent)
+    if not os.path.isdir(anc):
+        raise ValueError(f"{text}: {anc} is not a directory")
+    if anc != parent:
+        raise ValueError(f"{text}: directory {parent} does not exist")
+    if not _writable_dir(parent):
+        raise ValueError(f"{text}: directory {parent} is not writable")
+    if os.path.exists(p) and not os.access(p, os.W_OK):
+        raise ValueError(f"{text}: file is not writable")
+    return text
+
+
+def require_module(module: str, why: str) -> None:
+    """``ValueError`` (one line) if ``module`` cannot be imported, e.g. an optional extra."""
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise ValueError(f"{why} needs {module}, which is not installed")
+
+
+def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
+    """``type=`` for an output file (or directory) flag, checked with :func:`check_output_path`."""
+
+    def convert(text: str) -> str:
+        try:
+            return check_output_path(text, directory=directory)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    convert.__name__ = "path"
+    return convert
+
+

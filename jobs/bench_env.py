@@ -1,0 +1,440 @@
+"""``azimut bench-env``: simulator throughput (env steps/s), single env and vector env, with time splits.
+
+* The single env (``AzimutEnv``, the "naive" one robot per Space and per Python call) is timed in a
+  plain ``env.step`` loop with small uniformly random actions (resets excluded), with its stages
+  timed inside the same loop (thin timing wrappers on the task's stage methods).
+* ``--num-envs 1,16,64,256`` also times ``AzimutVectorEnv`` at each N, in the same run: an
+  uninstrumented loop of ``vec.step`` gives the steps/s (robot-steps per second: N per call) and
+  the ratio against the single env; a second, instrumented loop splits the time per robot-step
+  into actions, read of the pymunk bodies, force model (the compiled substep kernel: actuators,
+  spring, tires, module and chassis integration), write back to pymunk, ``space.step`` (only
+  with obstacles), the summary, sensors (noise draws and encoder models), estimation (the
+  batched IT), track queries, reward + observation, and the rest (Python glue, info arrays). The
+  physics stages come from ``AzimutPhysics.step``'s own timing hook (``stage_times``), so the
+  split times the code that runs. Memory: resident-set growth of a 512-robot vector env per
+  robot, measured in a fresh process.
+
+Compare ratios measured within one run: the machine may be shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import time
+
+import numpy as np
+
+from azimut_env.tracks import TRACK_NAMES
+from jobs.args import arg_choice_list, arg_int
+
+__all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
+
+#: stages of the vector env's split, in print order
+VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "sensors", "estimation", "track",
+                 "reward_obs", "other")
+
+
+def _timed(acc: dict[str, float], fn, key: str):
+    """``fn`` wrapped so that each call adds its wall time [s] to ``acc[key]`` (the stage splits)."""
+    def wrapper(*args, **kwargs):
+        t = time.perf_counter()
+        out = fn(*args, **kwargs)
+        acc[key] += time.perf_counter() - t
+        return out
+    return wrapper
+
+
+def _rss_mb() -> float:
+    """Resident set size of this process [MB] (Linux /proc; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+        import os
+
+        return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, AttributeError):
+        return float("nan")
+
+
+#: ``--action`` names -> ``control.action_spaces.vector.VectorControllerAction`` kinds (None: raw set-points)
+ACTION_BENCH = {"raw": None, "residual": "residual", "icr-rate": "icr_rate", "icr-target": "icr_target",
+                "twist": "twist"}
+
+
+def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, track: str = "random",
+                            seed: int = 0) -> dict[str, float]:
+    """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
+    same-step autoresets), with the time per control step split into the policy-action ->
+    controller-target stage (path followers, target shaping), the batched ICR controller, the
+    vector env's step and the rest (wrapper glue)."""
+    from gymnasium.vector import AutoresetMode
+
+    from azimut_env.vector_env import AzimutVectorEnv
+
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP)
+    kind = ACTION_BENCH[action]
+    acc = {"targets": 0.0, "controller": 0.0, "env": 0.0}
+    clock = time.perf_counter
+    if kind is not None:
+        import control.action_spaces.vector as vw
+
+        wrapped = vw.VectorControllerAction(venv, action=kind)
+    else:
+        wrapped = venv
+    wrapped.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1, 1, size=(calls + 20,) + wrapped.action_space.shape).astype(np.float32)
+    for k in range(20):  # warm-up (numba kernels load or compile)
+        wrapped.step(actions[k])
+    t0 = clock()
+    for k in range(calls):
+        wrapped.step(actions[20 + k])
+    total = clock() - t0
+    if kind is not None:  # a second, instrumented loop for the split
+        saved = vw.icr_control_step_batch
+        vw.icr_control_step_batch = _timed(acc, saved, "controller")
+        wrapped._targets = _timed(acc, wrapped._targets, "targets")
+        venv_step = venv.step
+        venv.step = _timed(acc, venv_step, "env")
+        try:
+            t1 = clock()
+            for k in range(calls):
+                wrapped.step(actions[20 + k])
+            inst = clock() - t1
+        finally:
+            vw.icr_control_step_batch = saved
+            venv.step = venv_step
+    else:
+        acc["env"], inst = total, total
+    per = 1e6 / (calls * num_envs)
+    return {"action": action, "num_envs": num_envs, "steps_per_s": calls * num_envs / total,
+            "targets_us": acc["targets"] * per, "controller_us": acc["controller"] * per, "env_us": acc["env"] * per,
+            "other_us": (inst - sum(acc.values())) * per, "instrumented_us": inst * per}
+
+
+def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8) -> dict[str, float]:
+    """Single env: steps/s and per-stage microseconds per step. Returns a dict of figures.
+
+    The stages are timed inside the end-to-end loop itself (thin timing wrappers on the task's
+    stage methods), so the breakdown adds up to the measured total on a shared machine too."""
+    from azimut_env.env import AzimutEnv
+
+    env = AzimutEnv(track=track, substeps=substeps)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(-1, 1, size=(steps, env.action_space.shape[0])).astype(np.float32) * 0.2
+    for i in range(50):  # warm-up (numba kernels load from cache or compile)
+        env.step(actions[i])
+    acc = {"physics": 0.0, "estimation": 0.0, "sensors": 0.0, "track": 0.0, "observe": 0.0}
+    clock = time.perf_counter
+
+    task = env.task
+    task.physics.step = _timed(acc, task.physics.step, "physics")
+    task._measure = _timed(acc, task._measure, "sensors")
+    task._estimate = _timed(acc, task._estimate, "estimation")
+    task._query_tracks = _timed(acc, task._query_tracks, "track")
+    task.observe = _timed(acc, task.observe, "observe")  # includes sensors, estimation, track
+    task.info = _timed(acc, task.info, "observe")
+    env.reset(seed=seed)
+    for key in acc:
+        acc[key] = 0.0
+    done, resets, elapsed = 0, 0, 0.0
+    chunk_rates = []
+    chunk = max(1, steps // 5)
+    while done < steps:
+        t0 = clock()
+        n_chunk = 0
+        term = trunc = False
+        for _ in range(chunk):
+            _, _, term, trunc, _ = env.step(actions[done % steps])
+            done += 1
+            n_chunk += 1
+            if term or trunc:
+                break
+        dt = clock() - t0
+        elapsed += dt
+        chunk_rates.append(n_chunk / dt)
+        if term or trunc:  # resets are not timed, in the total or in the stages
+            saved = dict(acc)
+            env.reset()
+            acc.update(saved)
+            resets += 1
+    total = elapsed / done
+    per = {key: value / done for key, value in acc.items()}
+    obs_rest = max(0.0, per["observe"] - per["sensors"] - per["estimation"] - per["track"])
+    staged = per["physics"] + per["observe"]
+    return {
+        "steps_per_s": 1.0 / total,
+        "us_per_step": total * 1e6,
+        "physics_us": per["physics"] * 1e6,
+        "estimation_us": per["estimation"] * 1e6,
+        "observation_us": (per["sensors"] + per["track"] + obs_rest) * 1e6,
+        "sensors_us": per["sensors"] * 1e6,
+        "track_us": per["track"] * 1e6,
+        "obs_reward_info_us": obs_rest * 1e6,
+        "other_us": max(0.0, total - staged) * 1e6,
+        "substeps": float(substeps),
+        "steps": float(done),
+        "resets": float(resets),
+        "best_chunk_steps_per_s": max(chunk_rates),
+    }
+
+
+def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "paper", seed: int = 0,
+                     substeps: int = 8, split: bool = True, solver_iterations: int = 20,
+                     max_episode_steps: int | None = 6000) -> dict[str, float]:
+    """``AzimutVectorEnv`` with N = ``num_envs``: robot-steps/s over about ``robot_steps`` robot-steps
+    (uninstrumented), the per-robot-step time split (a second, instrumented loop) and the memory
+    per robot. ``max_episode_steps`` short enough puts autoresets (timed) in the loop. Returns a
+    dict of figures (times in µs per robot-step)."""
+    from azimut_env.vector_env import AzimutVectorEnv
+
+    gc.collect()
+    rss0 = _rss_mb()
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, substeps=substeps, solver_iterations=solver_iterations,
+                           max_episode_steps=max_episode_steps)
+    venv.reset(seed=seed)
+    N = num_envs
+    rng = np.random.default_rng(seed)
+    actions = (rng.uniform(-1, 1, size=(64, N, 2 * venv.n)) * 0.2).astype(np.float32)
+    for i in range(10):  # warm-up
+        venv.step(actions[i % 64])
+    calls = max(20, int(robot_steps // N))
+    clock = time.perf_counter
+    chunk = max(1, calls // 5)
+    rates = []
+    t_total = 0.0
+    done = 0
+    while done < calls:
+        t0 = clock()
+        m = min(chunk, calls - done)
+        for j in range(m):
+            venv.step(actions[(done + j) % 64])
+        dt = clock() - t0
+        t_total += dt
+        rates.append(m * N / dt)
+        done += m
+    rss1 = _rss_mb()
+    out: dict[str, float] = {
+        "num_envs": float(N),
+        "steps_per_s": calls * N / t_total,
+        "best_chunk_steps_per_s": max(rates),
+        "us_per_robot_step": t_total / (calls * N) * 1e6,
+        "rss_growth_mb_per_robot": (rss1 - rss0) / N,
+        "calls": float(calls),
+    }
+    if split:
+        out.update(_vector_split(venv, actions, calls))
+    venv.close()
+    return out
+
+
+def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
+    """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
+    acc = {k: 0.0 for k in VECTOR_STAGES}
+    clock = time.perf_counter
+    task, phys = venv.task, venv.physics
+    original = (task._outputs, task.sensors.draw_noise)
+    task.apply_actions = _timed(acc, task.apply_actions, "actions")
+    phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
+    task._measure = _timed(acc, task._measure, "sensors")
+    task._estimate = _timed(acc, task._estimate, "estimation")
+    task._query_tracks = _timed(acc, task._query_tracks, "track")
+    task._outputs = _timed(acc, original[0], "reward_obs")  # termination, reward, observation
+    task.sensors.draw_noise = _timed(acc, original[1], "sensors")
+    N = venv.num_envs
+    try:
+        t0 = clock()
+        for i in range(calls):
+            venv.step(actions[i % 64])
+        total = clock() - t0
+    finally:
+        for name in ("apply_actions", "_measure", "_estimate", "_query_tracks", "_outputs"):
+            task.__dict__.pop(name, None)
+        phys.stage_times = None
+        task.sensors.__dict__.pop("draw_noise", None)
+    acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
+    scale = 1e6 / (calls * N)
+    out = {f"{k}_us": v * scale for k, v in acc.items()}
+    out["instrumented_us_per_robot_step"] = total * scale
+    return out
+
+
+def memory_per_robot(num_envs: int = 512, track: str = "paper", substeps: int = 8) -> float:
+    """MB per robot of the vector env: the resident-set growth from building and running a
+    ``num_envs``-robot vector env after a 16-robot one (imports, compiled kernels and one-time
+    allocations paid), divided by ``num_envs``, in a fresh Python process."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gc, numpy as np\n"
+        "from jobs.bench_env import _rss_mb\n"
+        "from azimut_env.vector_env import AzimutVectorEnv\n"
+        "def run(n):\n"
+        f"    v = AzimutVectorEnv(num_envs=n, track={track!r}, substeps={int(substeps)})\n"
+        "    v.reset(seed=0)\n"
+        "    for _ in range(5): v.step(np.zeros((n, 8), dtype=np.float32))\n"
+        "    return v\n"
+        "keep = run(16); gc.collect(); r0 = _rss_mb()\n"
+        f"big = run({int(num_envs)}); gc.collect(); print((_rss_mb() - r0) / {int(num_envs)})\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: int = 0) -> float:
+    """Steps/s of a Gymnasium reference env measured in the same run (a yardstick for the
+    machine's speed at that moment: compare ratios, not absolute figures, on a shared machine)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id).unwrapped
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    t0 = time.perf_counter()
+    for a in actions:
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    return steps / (time.perf_counter() - t0)
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of integers, got {text!r}") from None
+    if not values or any(v < 1 for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
+    return values
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--action", default=None, metavar="NAME[,NAME...]",
+                        type=arg_choice_list(tuple(ACTION_BENCH)),
+                        help="only time the vector env behind these action spaces (raw, residual, icr-rate, "
+                             "icr-target, twist) with a controller in the loop, at --action-envs robots")
+    parser.add_argument("--action-envs", type=arg_int(1, 4096), default=16,
+                        help="robots for --action (default 16)")
+    parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,
+                        help="single-env steps in the end-to-end loop")
+    parser.add_argument("--track", default="paper", choices=TRACK_NAMES,
+                        help=f"built-in track among {', '.join(TRACK_NAMES)}")
+    parser.add_argument("--substeps", type=arg_int(1, 10_000), default=8, help="physics substeps per control step")
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0)
+    parser.add_argument("--num-envs", type=_int_list, default=None, metavar="N[,N...]",
+                        help="also time the vector env at these N (e.g. 1,16,64,256)")
+    parser.add_argument("--vector-steps", type=arg_int(1, 100_000_000), default=20000,
+                        help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
+    parser.add_argument("--episode-steps", type=arg_int(1, 100_000_000), default=6000,
+                        help="vector env time limit; short values put (timed) autoresets in the loop")
+    parser.add_argument("--solver-iterations", type=arg_int(1, 10_000), default=20,
+                        help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
+    parser.add_argument("--reference", default="Pendulum-v1",
+                        help="a Gymnasium env timed in the same run as a yardstick ('' to skip)")
+    parser.add_argument("--convergence", action="store_true",
+                        help="instead of timing, measure the physics' convergence in the substep count (30 s open-loop "
+                             "replay, 4..128 substeps against 256)")
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The reference env must exist and the substeps be inside the physics' stability budget
+    before minutes of timing are spent (``--convergence`` sweeps its own substep counts)."""
+    if not args.convergence:
+        from azimut_env.physics.stability import check_substeps
+
+        check_substeps(args.substeps)
+    if args.reference:
+        import gymnasium as gym
+
+        if args.reference not in gym.registry:
+            raise ValueError(f"argument --reference: unknown Gymnasium env {args.reference!r} ('' to skip)")
+
+
+def run_action_bench(args: argparse.Namespace) -> int:
+    """``--action``: robot-steps/s with a controller in the loop, and where the time goes."""
+    track = args.track if args.track != "paper" else "random"
+    print(f"AzimutVectorEnv behind controller action spaces: {args.action_envs} robots, track {track} (random: a "
+          f"new track per episode), uniform random actions, same-step autoresets; us per robot-step "
+          f"(instrumented loop) and robot-steps/s (uninstrumented loop). The machine may be shared: compare ratios "
+          f"within one run.")
+    print(f"{'action':<12}{'steps/s':>9}{'targets':>9}{'ctl':>9}{'env':>9}{'other':>9}{'total':>9}")
+    for action in args.action:
+        r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed)
+        print(f"{action:<12}{r['steps_per_s']:>9.0f}{r['targets_us']:>9.1f}{r['controller_us']:>9.1f}"
+              f"{r['env_us']:>9.1f}{r['other_us']:>9.1f}{r['instrumented_us']:>9.1f}", flush=True)
+    print("(targets: the policy action -> ICR target stage, i.e. the residual's per-robot path followers or the "
+          "target shaping; ctl: the batched ICR controller; env: AzimutVectorEnv.step; goal 5000 robot-steps/s "
+          "for residual and icr-rate at 16 robots)")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action:
+        return run_action_bench(args)
+    if args.convergence:
+        print("substep convergence: 30 s open-loop replay of smooth kinematic set-points, against 256 substeps")
+        print(f"{'substeps':>9}{'max pos mm':>12}{'final mm':>10}{'heading deg':>12}{'beta deg':>10}{'order':>7}")
+        from azimut_env.physics.convergence import substep_convergence
+
+        for row in substep_convergence():
+            if row["refused"]:
+                print(f"{int(row['substeps']):>9}  refused by the stability check")
+                continue
+            print(f"{int(row['substeps']):>9}{row['max_position_error'] * 1e3:>12.3f}{row['final_position_error'] * 1e3:>10.3f}"
+                  f"{np.degrees(row['final_heading_error']):>12.4f}{np.degrees(row['max_beta_error']):>10.4f}"
+                  f"{row['order']:>7.2f}")
+        return 0
+    r = bench_env(args.steps, args.track, args.seed, args.substeps)
+    per = r["us_per_step"]
+    print(f"Azimut-v1 single env, track {args.track}, {int(r['substeps'])} substeps, {int(r['steps'])} steps")
+    print(f"{'stage':<16}{'us/step':>10}{'share':>8}")
+    for key, label in (("physics_us", "physics"), ("estimation_us", "estimation"), ("observation_us", "observation"),
+                       ("sensors_us", "  sensors"), ("track_us", "  track"), ("obs_reward_info_us", "  obs+rew+info"),
+                       ("other_us", "other")):
+        print(f"{label:<16}{r[key]:>10.1f}{r[key] / per:>8.0%}")
+    print(f"{'total':<16}{per:>10.1f}")
+    print(f"steps/s: {r['steps_per_s']:.0f} overall, {r['best_chunk_steps_per_s']:.0f} in the best chunk "
+          f"({int(r['resets'])} resets, not timed)  (bar 1500, goal 5000)")
+    if args.num_envs:
+        single = r["steps_per_s"]
+        print()
+        print(f"AzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
+              f"{args.solver_iterations} solver iterations, IT estimation included; ~{args.vector_steps} robot-steps per N, "
+              f"episodes of at most {args.episode_steps} steps (autoresets timed)")
+        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}")
+        rows = []
+        for N in args.num_envs:
+            v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
+                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps)
+            rows.append(v)
+            print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
+                  f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
+                  flush=True)
+        print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
+              "env above, same run; bar 40000, goal 80000 at N = 64)")
+        mb = memory_per_robot(512, args.track, args.substeps)
+        print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env, fresh process)")
+        print()
+        print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
+              "control step, all substeps; without obstacles pymunk is read and written once per step and not "
+              "stepped)")
+        labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
+        head = "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES)
+        print(f"{'N':>5}{head}{'total':>9}")
+        for v in rows:
+            cells = "".join(f"{v[k + '_us']:>11.2f}" for k in VECTOR_STAGES)
+            print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
+    if args.reference:
+        ref = reference_steps_per_s(args.reference)
+        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v1 single env at "
+              f"{r['steps_per_s'] / ref:.2f}x of it)")
+    return 0
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(p)
+    raise SystemExit(run(p.parse_args()))

@@ -1,0 +1,94 @@
+"""The ``azimut`` command line: one subcommand per job, each implemented next to what it runs.
+
+A subcommand lives in a module that defines ``add_arguments(parser)`` and ``run(args) -> int``,
+and optionally ``check_args(args)``, which raises ``ValueError`` for argument combinations that
+``type=`` converters cannot see. Modules are imported only when their subcommand runs, so
+``azimut bench-estimators`` does not pay for pymunk or torch.
+
+Every argument and output path is checked before a command starts work (``type=`` converters of
+:mod:`azimut_env.validation`, then ``check_args``): a mistake is one line on stderr,
+``azimut CMD: error: ...``, and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+
+#: name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "eval": ("jobs.eval.command", "run controllers on tracks and write a report (the main job)"),
+    "bench-campaign": ("jobs.bench_campaign", "time an eval campaign serially and on N workers (same metrics?)"),
+    "bench-estimators": ("jobs.bench_estimators", "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
+    "bench-env": ("jobs.bench_env", "measure simulator throughput (steps/s) with a time breakdown"),
+    "sim-paper": ("jobs.sim_paper", "the paper's phenomenon: qua while moving under the ICR controller at three "
+                  "speeds, split into motor lag and compliance, with a stiff-steering counterfactual"),
+    "record-d2": ("jobs.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
+    "train": ("jobs.training.command", "train an RL baseline (needs the [rl] extra)"),
+}
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line on stderr and exit status 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        # one line even when an argument holds a line break or another control character
+        message = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, help_) in COMMANDS.items():
+        if importlib.util.find_spec(module.split(".")[0]) is None:
+            continue
+        try:
+            if importlib.util.find_spec(module) is None:
+                continue
+        except ModuleNotFoundError:
+            continue
+        out[name] = (module, help_)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    commands = _available()
+    parser = argparse.ArgumentParser(prog="azimut", description="AZIMUT-3 simulator, ICR estimation and control.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_, help_) in commands.items():
+        sub.add_parser(name, help=help_, add_help=False)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in commands:
+        if argv and argv[0] not in ("-h", "--help"):
+            print(f"azimut: error: unknown command {argv[0]!r} (choose from {', '.join(commands)})", file=sys.stderr)
+            return 2
+        parser.print_help()
+        return 0
+    name = argv[0]
+    module = importlib.import_module(commands[name][0])
+    cmd_parser = CommandParser(prog=f"azimut {name}", description=commands[name][1])
+    module.add_arguments(cmd_parser)
+    try:
+        args = cmd_parser.parse_args(argv[1:])
+        check = getattr(module, "check_args", None)
+        if check is not None:
+            try:
+                check(args)
+            except (ValueError, TypeError) as exc:
+                cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    try:
+        return int(module.run(args) or 0)
+    except ConnectionError as exc:
+        from jobs.campaign.engine import ClusterUnreachable
+        if not isinstance(exc, ClusterUnreachable):
+            raise
+        print(f"azimut {name}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

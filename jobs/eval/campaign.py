@@ -1,0 +1,404 @@
+"""``azimut eval`` as a campaign: every (controller, track, seed) episode as a task of
+:mod:`jobs.campaign.engine`, statistics over seeds, and one report to open.
+
+An episode is defined by its key, ``(controller, track, seed, speed_scale, domain_randomization,
+kicks, max_time)``: the env is reset with ``seed`` (sensor and start noise, the ``random``
+track, domain randomisation) and the kick, if any, is drawn from ``seed`` too, so an episode's
+metrics are the same whichever executor, worker or position in the queue runs it.
+
+The report folder holds ``report.md`` (the summary table, mean and 95% bootstrap interval over
+seeds per controller × track × metric; then per track the plots that overlay the controllers,
+and per controller × track its row with its plots embedded; then the per-seed rows),
+``metrics.json`` (``campaign``, ``summary``, ``episodes``: the per-seed rows), ``plots/`` and
+``episodes/`` (one record per finished episode, what ``--resume`` reads).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from azimut_env.task.core import nominal_duration
+from azimut_env.tracks import make_track
+from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
+from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
+from jobs.eval.plots import comparison_plots, write_plots
+
+__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",
+           "comparison_plots"]
+
+#: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
+DEFAULT_DT = 0.02
+#: the metrics of the summary table, in order: (key, header, format, scale)
+SUMMARY_COLUMNS = [
+    ("completed", "done share", "{:.2f}", 1.0),
+    ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100.0),
+    ("max_lateral_m", "max lat [cm]", "{:.2f}", 100.0),
+    ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180.0 / math.pi),
+    ("completion_time_s", "time [s]", "{:.1f}", 1.0),
+    ("slip_energy_J", "slip energy [J]", "{:.2f}", 1.0),
+    ("mean_internal_force_N", "mean int. force [N]", "{:.2f}", 1.0),
+    ("mean_qua", "mean qua (all)", "{:.4f}", 1.0),
+    ("mean_qua_moving", "mean qua moving", "{:.4f}", 1.0),
+    ("min_qua_moving", "min qua moving", "{:.4f}", 1.0),
+    ("standstill_share", "standstill share", "{:.2f}", 1.0),
+    ("limit_violation_steps", "limit-exceeded steps", "{:.1f}", 1.0),
+    ("reconfigure_events", "stop+reconfig", "{:.1f}", 1.0),
+    ("return", "return", "{:.1f}", 1.0),
+]
+
+
+def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
+              dt: float = DEFAULT_DT) -> dict:
+    """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
+
+    1–4 random wheels, an angular impulse of ±(0.2–1.0) N·m·s (as in
+    :func:`jobs.eval.robustness.kick_trial`), at a random step between 20% and 60% of the nominal
+    duration (or of ``max_time``, whichever is shorter).
+    """
+    rng = np.random.default_rng([int(seed), 0x6B1C])  # a stream of its own: not the env's
+    horizon = nominal_duration(make_track(track, rng=np.random.default_rng(seed)), speed_scale)
+    if max_time is not None:
+        horizon = min(horizon, float(max_time))
+    step = int(rng.uniform(0.2, 0.6) * horizon / dt)
+    wheels = [int(w) for w in np.sort(rng.choice(4, size=int(rng.integers(1, 5)), replace=False))]
+    impulse = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
+    return {"step": max(step, 1), "wheels": wheels, "impulse": impulse}
+
+
+@functools.lru_cache(maxsize=8)
+def _load_policy(algo: str, path: str):
+    """A trained policy, loaded once per process (``train.policy.load_policy``)."""
+    from train.policy import load_policy
+
+    return load_policy(path, algo=algo)
+
+
+def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
+                 domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
+                 return_log: bool = False) -> dict:
+    """One campaign episode: ``{"metrics": row}`` (plus ``artifacts.log``, the
+    :class:`~control.episode.EpisodeLog`, with ``return_log``)."""
+    from control.episode import episode_metrics, run_episode
+    from jobs.eval.command import is_policy
+
+    kick = draw_kick(seed, track, speed_scale, max_time) if kicks else None
+    env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
+    if is_policy(controller):  # a trained policy (train.rollout; the rl extra)
+        from train.rollout import run_policy_episode
+
+        algo, path = controller.split(":", 1)
+        log, _ = run_policy_episode(_load_policy(algo, path), track, seed=int(seed), label=controller, kick=kick,
+                                    max_time=max_time, env_kwargs=env_kwargs)
+    else:
+        log = run_episode(controller, track, seed=int(seed), speed_scale=speed_scale, kick=kick, max_time=max_time,
+                          env_kwargs=env_kwargs)
+    row = episode_metrics(log)
+    row["track"] = track  # the name asked for (a random track's Track may carry another)
+    row["seed"] = int(seed)
+    if kick is not None:
+        row["kick"] = kick
+    out: dict[str, Any] = {"metrics": row}
+    if return_log:
+        out["artifacts"] = {"log": log}
+    return out
+
+
+def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
+                  speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
+                  max_time: float | None = None, plot_seed: int | None = None) -> list[Task]:
+    """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes return
+    their logs for the plots."""
+    tasks = []
+    for track in tracks:
+        nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
+        for controller in controllers:
+            for seed in seeds:
+                key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),
+                       "domain_randomization": float(domain_randomization), "kicks": bool(kicks),
+                       "max_time": None if max_time is None else float(max_time)}
+                cost = min(nominal, max_time) if max_time else nominal
+                cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
+                tasks.append(Task("jobs.eval.campaign:episode_task", key,
+                                  extra={"return_log": plot_seed is not None and seed == plot_seed},
+                                  label=f"{controller}-{track}-s{seed}", cost=cost))
+    return tasks
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The campaign flags of ``azimut eval`` (seeds, options, executors; ``--max-time`` is
+    ``azimut eval``'s own)."""
+    from jobs.args import arg_float, arg_int
+
+    parser.add_argument("--seeds", type=arg_seeds, default=None, metavar="SEEDS",
+                        help="run every (controller, track) episode for each seed: a range 0-9, a list 0,3,5 or both "
+                             "(default: --seed alone); the report gives mean and 95%% bootstrap intervals over them")
+    parser.add_argument("--domain-randomization", type=arg_float(0.0, 0.5), default=0.0, metavar="D",
+                        help="relative spread of friction, steering stiffness and mass drawn at each episode's "
+                             "reset from its seed (the env's domain_randomization, 0..0.5; default 0)")
+    parser.add_argument("--kicks", action="store_true",
+                        help="kick 1-4 random wheels (±0.2-1 N·m·s) once per episode at 20-60%% of its duration, "
+                             "drawn from the episode's seed")
+    parser.add_argument("--bootstrap", type=arg_int(100, 1_000_000), default=10_000, metavar="N",
+                        help="bootstrap resamples for the intervals (default 10000)")
+    add_executor_arguments(parser, "episodes")
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """The campaign flags together (``ValueError``, one line): --seed with --seeds, the executor,
+    the output folder."""
+    from jobs.args import check_output_path
+
+    if args.seeds is not None and args.seed not in (None, 0) and args.seeds != [args.seed]:
+        raise ValueError("give --seed or --seeds, not both")
+    if args.seed is not None and args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    check_executor_args(args)
+    check_output_path(args.out, directory=True)
+
+
+def run_kwargs(args: argparse.Namespace) -> dict:
+    """The executor flags as keyword arguments of :func:`jobs.campaign.engine.run_tasks`."""
+    return {"executor": resolve_executor(args.executor, args.workers, args.ray_address), "workers": args.workers,
+            "threads": args.threads_per_task, "ray_address": args.ray_address, "retries": args.retries,
+            "resume": args.resume}
+
+
+def seeds_of(args: argparse.Namespace) -> list[int]:
+    """The campaign's seeds: ``--seeds``, else ``[--seed]``."""
+    return list(args.seeds) if args.seeds is not None else [int(args.seed or 0)]
+
+
+# ------------------------------------------------------------------------------------ plots
+
+
+def _save_trace(path: Path, log) -> None:
+    np.savez_compressed(path, t=log.t, pose=log.pose, slip_power=log.slip_power,
+                        internal_force=log.internal_force, lateral=log.lateral, track_xy=log.track.xy)
+
+
+def _cell(stats: dict, fmt: str, scale: float) -> str:
+    if not stats or stats.get("n", 0) == 0 or not math.isfinite(stats["mean"]):
+        return "-"
+    m, lo, hi = (scale * stats[k] for k in ("mean", "lo", "hi"))
+    if stats["n"] == 1 or lo == hi:
+        return fmt.format(m)
+    return f"{fmt.format(m)} [{fmt.format(lo)}, {fmt.format(hi)}]"
+
+
+def _summary_table(cells: list[dict]) -> list[str]:
+    lines = ["| controller | track | episodes ok/failed | " + " | ".join(c[1] for c in SUMMARY_COLUMNS) + " |",
+             "|---|---|---|" + "---|" * len(SUMMARY_COLUMNS)]
+    for cell in cells:
+        stats = cell["metrics"]
+        lines.append(f"| {cell['controller']} | {cell['track']} | {cell['ok']}/{cell['failed']} | "
+                     + " | ".join(_cell(stats.get(k, {}), fmt, scale) for k, _, fmt, scale in SUMMARY_COLUMNS) + " |")
+    return lines
+
+
+def _seed_table(rows: list[dict]) -> list[str]:
+    cols = [c for c in SUMMARY_COLUMNS if c[0] != "completed"]
+    lines = ["| controller | track | seed | status | done | " + " | ".join(c[1] for c in cols) + " |",
+             "|---|---|---|---|---|" + "---|" * len(cols)]
+    for r in rows:
+        if r.get("status") != "ok":
+            lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | failed: {r.get('error', '')[:80]} | - | "
+                         + " | ".join("-" for _ in cols) + " |")
+            continue
+        vals = []
+        for k, _, fmt, scale in cols:
+            v = r.get(k)
+            vals.append("-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(scale * v))
+        lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | ok | {r.get('completed')} | "
+                     + " | ".join(vals) + " |")
+    return lines
+
+
+def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
+                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]]) -> None:
+    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``)."""
+    (out / "metrics.json").write_text(json.dumps({"campaign": campaign, "summary": cells, "episodes": rows},
+                                                 indent=1, allow_nan=True))
+    seeds = campaign["seeds"]
+    lines = ["# azimut eval", "",
+             f"Controllers {', '.join(campaign['controllers'])}; tracks {', '.join(campaign['tracks'])}; "
+             f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
+             f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
+             + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
+             f"Control period {campaign['control_period']} s; limits {campaign['limits']}.",
+             f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
+             f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.", "",
+             "## Summary", "",
+             f"Mean over seeds and, in brackets, the {100 * campaign['level']:.0f}% percentile-bootstrap interval "
+             f"of the mean ({campaign['n_resamples']} resamples, seeded); failed episodes are left out of the "
+             "statistics and counted in 'episodes ok/failed'.", ""]
+    lines += _summary_table(cells)
+    failed = [r for r in rows if r.get("status") != "ok"]
+    if failed:
+        lines += ["", "Failed episodes (after a retry):", ""]
+        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')}" for r in failed]
+    by_cell = {(c["controller"], c["track"]): c for c in cells}
+    if plots or compare:
+        lines += ["", "## Plots", "",
+                  f"Plots are of seed {campaign['plot_seed']}; the comparison plots overlay the controllers on "
+                  "the same track."]
+        for track in campaign["tracks"]:
+            lines += ["", f"### {track}", ""]
+            for f in compare.get(track, []):
+                lines.append(f"![{Path(f).stem}]({f})")
+            for controller in campaign["controllers"]:
+                cell = by_cell.get((controller, track))
+                lines += ["", f"#### {controller} on {track}", ""]
+                if cell is not None:
+                    lines += _summary_table([cell])
+                lines.append("")
+                for f in plots.get((controller, track), []):
+                    lines.append(f"![{Path(f).stem}]({f})")
+    if campaign.get("videos"):
+        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
+                  "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
+        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
+    lines += ["", "## Per-seed rows", ""] + _seed_table(rows) + [""]
+    (out / "report.md").write_text("\n".join(lines))
+
+
+def _seed_text(seeds: Sequence[int]) -> str:
+    seeds = list(seeds)
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
+
+
+# ------------------------------------------------------------------------------------- run
+
+
+def _row_of(record: dict) -> dict:
+    key = record["key"]
+    if record["status"] == "ok":
+        row = dict(record["result"]["metrics"])
+        row["status"] = "ok"
+    else:
+        row = {"controller": key["controller"], "track": key["track"], "seed": key["seed"], "status": "failed",
+               "error": record.get("error")}
+    row["attempts"] = record.get("attempts", 1)
+    return row
+
+
+def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], tracks: Sequence[str],
+                      seeds: Sequence[int], stream=None) -> int:
+    """Run the campaign ``args`` describes (``azimut eval``'s flags) and write the report.
+
+    Returns 0, or 1 when an episode failed (after its retries; the report lists it)."""
+    stream = stream if stream is not None else sys.stdout
+    from azimut_env.env import AzimutEnv
+
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plot_dir = out / "plots"
+    store = TaskStore(out / "episodes")
+    plot_seed = None if args.no_plots else seeds[0]
+    video = getattr(args, "video", None)
+    video_dir = out / "videos"
+    tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
+                          domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
+                          plot_seed=seeds[0] if (plot_seed is not None or video) else None)
+    executor = run_kwargs(args)["executor"]
+    env0 = AzimutEnv()
+    geom, limits = env0.geometry, env0.limits
+    if not args.resume and plot_dir.is_dir():
+        for p in plot_dir.glob("*.png"):
+            p.unlink()
+
+    def on_result(task: Task, rec: dict) -> None:
+        art = (rec.get("result") or {}).get("artifacts")
+        if art and "log" in art and video:
+            from jobs.eval.video import write_video
+
+            name = re.sub(r"[^A-Za-z0-9_.-]+", "_", task.label)
+            rec["result"]["video"] = f"videos/{write_video(art['log'], video_dir / f'{name}.{video}', fmt=video).name}"
+        if art and "log" in art and plot_seed is not None:
+            plot_dir.mkdir(exist_ok=True)
+            store.folder.mkdir(parents=True, exist_ok=True)
+            _save_trace(store.folder / f"{task.id}.npz", art["log"])
+            rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(art["log"], plot_dir, geom, limits)]
+
+    def progress(done: int, total: int, task: Task, rec: dict) -> None:
+        k = task.key
+        if rec["status"] == "ok":
+            m = rec["result"]["metrics"]
+            msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
+                   f"int. force {m['mean_internal_force_N']:.2f} N, qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
+                   f"limit-exceeded steps {m['limit_violation_steps']}, stop+reconfig {m['reconfigure_events']}, "
+                   f"{rec['elapsed_s']:.1f} s")
+        else:
+            msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
+        print(f"[{done}/{total}] {k['controller']:>6} {k['track']:<8} seed {k['seed']:<3} {msg}", file=stream, flush=True)
+
+    start = time.perf_counter()
+    n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")
+    try:
+        records = run_tasks(tasks, store, **run_kwargs(args), on_result=on_result, progress=progress)
+    except CampaignInterrupted as exc:
+        print(f"azimut eval: {exc}; run the same command with --resume", file=sys.stderr)
+        return 130
+    wall = time.perf_counter() - start
+    rows = [_row_of(r) for r in records]
+    ok_rows = [r for r in rows if r["status"] == "ok"]
+    metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
+                                                 if k not in {c[0] for c in SUMMARY_COLUMNS}
+                                                 and k not in ("controller", "track", "seed", "status", "error",
+                                                               "attempts", "kick")
+                                                 and isinstance(ok_rows[0][k], (int, float))]
+    cells = summarize(ok_rows, ("controller", "track"), metrics, n_resamples=args.bootstrap)
+    by = {(c["controller"], c["track"]): c for c in cells}
+    full = []
+    for track in tracks:
+        for controller in controllers:
+            n_failed = sum(1 for r in rows if r["controller"] == controller and r["track"] == track
+                           and r["status"] != "ok")
+            cell = by.get((controller, track), {"controller": controller, "track": track, "n": 0, "metrics": {}})
+            cell["ok"], cell["failed"] = cell["n"], n_failed
+            full.append(cell)
+    plots: dict[tuple[str, str], list[str]] = {}
+    compare: dict[str, list[str]] = {}
+    videos = {f"{rec['key']['controller']} on {rec['key']['track']}": rec["result"]["video"] for rec in records
+              if rec["status"] == "ok" and (rec.get("result") or {}).get("video")}
+    if plot_seed is not None:
+        for rec in records:
+            if rec["status"] == "ok" and rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
+                plots[(rec["key"]["controller"], rec["key"]["track"])] = rec["result"]["plots"]
+        for track in tracks:
+            traces = {}
+            for task in tasks:
+                npz = store.folder / f"{task.id}.npz"
+                if task.key["track"] == track and task.key["seed"] == plot_seed and npz.is_file():
+                    traces[task.key["controller"]] = dict(np.load(npz))
+            if traces:
+                plot_dir.mkdir(exist_ok=True)
+                compare[track] = [f"plots/{f}" for f in comparison_plots(track, traces, plot_dir)]
+    campaign = {"controllers": list(controllers), "tracks": list(tracks), "seeds": list(seeds),
+                "speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
+                "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
+                "limits": str(limits), "executor": executor, "workers": args.workers, "level": 0.95,
+                "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
+                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos}
+    write_campaign_report(out, rows, full, campaign, plots, compare)
+    n_failed = len(rows) - len(ok_rows)
+    print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")
+          + f" in {wall:.1f} s ({executor}, {args.workers} worker(s)); report written to {out}/report.md",
+          file=stream, flush=True)
+    return 0 if n_failed == 0 else 1

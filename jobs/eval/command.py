@@ -1,0 +1,226 @@
+"""``azimut eval``: run controllers on tracks in the simulator and write a report folder.
+
+Controllers (all fed by the same :class:`~control.follow.path_follower.PathFollower`, with the same
+actuator limits and control period):
+
+* ``icr``: :class:`~control.icr.controller.ICRController` on the IT-estimated (λ̂, μ̂);
+* ``twist``: :class:`~control.twist.wpilib.SwerveController`, the WPILib-style baseline.
+
+Per controller and track (and seed: ``azimut eval`` runs a campaign of (controller, track, seed)
+episodes, see :mod:`jobs.eval.campaign`, whose ``report.md`` and ``metrics.json`` give the
+mean and a bootstrap interval over seeds of each metric) the report has: RMS and max lateral
+error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean internal force, mean
+and min qua of the measured steering configuration (eq. 28–29) over all steps and **while moving**
+(see :func:`moving_mask`: the controller in its RUNNING mode and the true |μ| above
+:data:`MOVING_MU`; stops and in-place reconfigurations, where the wheels turn with the chassis at
+rest, are left out), the standstill share (the other steps), the number of steps where a
+commanded limit was exceeded, and the number of stop-and-reconfigure events; and PNG plots: the
+trajectory over the track (the paper's Fig. 9), pairwise β projections against the constraining
+surface (Fig. 10), qua over time (Fig. 11), the ICR's path on the sphere, and the wheel commands
+against their limits. ``--video`` adds a video (GIF, or MP4 with ffmpeg) of each (controller,
+track) episode of the first seed, the env's top-down view redrawn from the episode's log
+(:mod:`jobs.eval.video`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import zipfile
+from pathlib import Path
+
+from azimut_env.tracks import TRACK_NAMES
+
+# the episode runner lives in control.episode; its names stay importable from here
+from control.episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
+from jobs.args import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
+from jobs.eval.plots import write_plots  # re-exported
+from jobs.eval.video import VIDEO_FORMATS, check_video_format
+
+__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots", "write_report",
+           "add_arguments", "run"]
+
+#: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
+#: ``azimut train`` wrote, its VecNormalize statistics beside it; needs the ``rl`` extra)
+POLICY_PREFIXES = ("ppo", "sac")
+
+
+def is_policy(controller: str) -> bool:
+    """Whether a ``--controllers`` entry names a trained policy (``ppo:PATH`` or ``sac:PATH``)."""
+    return controller.split(":", 1)[0] in POLICY_PREFIXES and ":" in controller
+
+
+def arg_controllers(text: str) -> list[str]:
+    """``type=`` of ``--controllers``: built-in controllers and ``ppo:PATH`` / ``sac:PATH``
+    (the model file must exist)."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"give at least one of {', '.join(CONTROLLERS)}, ppo:PATH, sac:PATH")
+    if len(set(items)) != len(items):
+        raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+    for item in items:
+        if is_policy(item):
+            path = Path(item.split(":", 1)[1])
+            if not (path.is_file() or (path / "model.zip").is_file()):
+                raise argparse.ArgumentTypeError(f"{item}: no model file {path}")
+            model = path if path.is_file() else path / "model.zip"
+            if not zipfile.is_zipfile(model):  # SB3 saves zip archives
+                raise argparse.ArgumentTypeError(f"{item}: {model} is not a saved model (not a zip archive)")
+        elif item not in CONTROLLERS:
+            raise argparse.ArgumentTypeError(f"unknown {item!r}; choose from {', '.join(CONTROLLERS)}, ppo:PATH, "
+                                             "sac:PATH")
+    return items
+#: Default evaluation order: the paper track first.
+DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
+
+
+_COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
+            ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100), ("max_lateral_m", "max lat [cm]", "{:.2f}", 100),
+            ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180 / math.pi),
+            ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
+            ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
+            ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
+            ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"),
+            ("limit_violation_steps", "limit-exceeded steps", "{}"),
+            ("reconfigure_events", "stop+reconfig", "{}"), ("return", "return", "{:.1f}")]
+
+
+def metrics_markdown(rows: list[dict]) -> str:
+    """The metrics table in Markdown."""
+    head = "| " + " | ".join(c[1] for c in _COLUMNS) + " |"
+    sep = "|" + "|".join("---" for _ in _COLUMNS) + "|"
+    lines = [head, sep]
+    for row in rows:
+        cells = []
+        for col in _COLUMNS:
+            v = row[col[0]]
+            if len(col) > 3 and isinstance(v, float):
+                v = v * col[3]
+            cells.append(col[2].format(v) if v is not None else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(rows: list[dict], out: Path, header: str = "") -> None:
+    """metrics.md and metrics.json in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(rows, indent=2, allow_nan=True))
+    (out / "metrics.md").write_text(f"# azimut eval\n\n{header}\n\n" + metrics_markdown(rows))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--controllers", default="icr,twist", type=arg_controllers,
+                        help=f"comma-separated controllers among {', '.join(CONTROLLERS)}, and trained policies "
+                             "ppo:PATH or sac:PATH (the model.zip azimut train wrote) (default: icr,twist)")
+    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_choice_list(TRACK_NAMES),
+                        help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
+    parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
+                        help="env seed (noise, start, random track); default 0")
+    parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
+                        help="multiply every track's speed profile (default 1: the track's nominal speed)")
+    parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
+                        help="end each episode after this simulated time (default: 3 x the track's nominal "
+                             "duration + 10 s); a short value gives a quick smoke run")
+    parser.add_argument("--out", default="reports/eval", type=arg_output_path(directory=True),
+                        help="report folder (default reports/eval)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--video", nargs="?", const="gif", default=None, choices=VIDEO_FORMATS, metavar="FORMAT",
+                        help="also write a video of each (controller, track) episode of the first seed to "
+                             "OUT/videos/ (gif, the default, or mp4 with an ffmpeg executable; needs pygame, the "
+                             "render extra), listed in report.md")
+    parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
+                        help="also run the robustness study: N trials per controller on 'paper' with random "
+                             "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
+    from jobs.eval.campaign import add_arguments as add_campaign_arguments
+
+    add_campaign_arguments(parser)  # --seeds, --workers, --executor, --ray-address, --resume, ...
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra); the campaign flags
+    together (see :func:`jobs.eval.campaign.check_args`)."""
+    from jobs.eval.campaign import check_args as check_campaign_args
+
+    if not args.no_plots:
+        require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
+    if getattr(args, "video", None):
+        check_video_format(args.video)
+    for item in args.controllers:  # load each trained policy once now, not after the other episodes
+        if is_policy(item):
+            require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
+            from train.policy import load_policy
+
+            algo, path = item.split(":", 1)
+            try:
+                load_policy(path, algo)
+            except Exception as exc:  # noqa: BLE001 (any failure to load is the user's file: say it in one line)
+                raise ValueError(f"argument --controllers: {item}: cannot load the model "
+                                 f"({type(exc).__name__}: {exc})") from None
+    if any(is_policy(c) for c in args.controllers):
+        require_module("stable_baselines3", "evaluating a trained policy (the rl extra)")
+    check_campaign_args(args)
+
+
+def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
+    items = list(text) if isinstance(text, list) else [x.strip() for x in text.split(",") if x.strip()]
+    bad = [x for x in items if x not in allowed]
+    if not items or bad:
+        raise ValueError(f"unknown {what} {bad or text!r}; choose from {', '.join(allowed)}")
+    return items
+
+
+def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run_kwargs: dict | None = None) -> str:
+    """Run the robustness study per controller (on the campaign's executor, ``run_kwargs`` of
+    :func:`jobs.campaign.engine.run_tasks`; trials saved under ``out/kicks/``); write
+    kicks_<controller>.json; return Markdown."""
+    from jobs.eval.robustness import kick_study_campaign, summarize_kicks
+
+    lines = ["## Robustness: random wheels kicked to random angles mid-track (paper track)", "",
+             "| controller | runs | recovered | failed | limit-exceeded steps | recovery time p50/p90/max [s] "
+             "| wheels settled p50/p90/max [s] | max lateral after kick p50/p90/max [cm] "
+             "| peak β error p50/max [deg] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for controller in [c for c in controllers if c in CONTROLLERS]:  # trained policies: not in this study yet
+        start = time.time()
+        trials = kick_study_campaign(n_runs, controller, seed0=1000 + 1000 * seed,
+                                     store=out / "kicks" / controller, **(run_kwargs or {}),
+                                     progress=lambda i, n, *_: progress_bar(f"kicks/{controller}", i / n, start))
+        if sys.stderr.isatty():
+            sys.stderr.write("\n")
+        summ = summarize_kicks(trials)
+        (out / f"kicks_{controller}.json").write_text(json.dumps(summ, indent=2, allow_nan=True))
+        rt, lat, pb = summ["recovery_time_s"], summ["max_lateral_after_m"], summ["peak_beta_error_rad"]
+        st = summ["settle_time_s"]
+        lines.append(f"| {controller} | {summ['runs']} | {summ['recovered']} | {summ['failed_runs']} | "
+                     f"{summ['limit_violation_steps']} | {rt.get('p50', float('nan')):.2f}/{rt.get('p90', float('nan')):.2f}/"
+                     f"{rt.get('p100', float('nan')):.2f} | {st.get('p50', float('nan')):.2f}/"
+                     f"{st.get('p90', float('nan')):.2f}/{st.get('p100', float('nan')):.2f} | "
+                     f"{100 * lat['p50']:.2f}/{100 * lat['p90']:.2f}/"
+                     f"{100 * lat['p100']:.2f} | {math.degrees(pb['p50']):.0f}/{math.degrees(pb['p100']):.0f} |")
+        print(f"kicks {controller}: {summ['recovered']}/{summ['runs']} recovered", flush=True)
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        controllers = list(args.controllers) if isinstance(args.controllers, list) else arg_controllers(args.controllers)
+        tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
+        if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
+            raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
+        if args.kick_runs < 0:
+            raise ValueError(f"--kick-runs must be >= 0, got {args.kick_runs}")
+    except ValueError as exc:
+        print(f"azimut eval: error: {exc}", file=sys.stderr)
+        return 2
+    from jobs.eval.campaign import run_eval_campaign, run_kwargs, seeds_of
+
+    out = Path(args.out)
+    rc = run_eval_campaign(args, controllers, tracks, seeds_of(args))
+    if rc in (0, 1) and args.kick_runs > 0:
+        with open(out / "report.md", "a") as fh:
+            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds_of(args)[0], out,
+                                           run_kwargs(args)) + "\n")
+    return rc

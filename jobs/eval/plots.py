@@ -1,0 +1,151 @@
+"""The PNG plots of ``azimut eval``: each run's five plots (:func:`write_plots`) and the
+per-track overlays of the controllers (:func:`comparison_plots`). Needs matplotlib (the ``plot``
+extra); imported only when plots are written.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from control.episode import EpisodeLog
+from control.icr.config import Mode
+
+__all__ = ["write_plots", "comparison_plots"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, out: Path, name: str, files: list[str], dpi: int) -> None:
+    """Save ``fig`` as ``out/name``, close it, and append ``name`` to ``files``."""
+    files.append(name)
+    fig.savefig(out / name, dpi=dpi, bbox_inches="tight")
+    _pyplot().close(fig)
+
+
+def _trajectory_axes(ax, track_xy: np.ndarray) -> None:
+    """The dashed track on ``ax`` (x/y in metres, equal aspect)."""
+    ax.plot(track_xy[:, 0], track_xy[:, 1], "k--", lw=1, label="track")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
+
+def _surface_samples(geom, n: int = 4000, seed: int = 0) -> np.ndarray:
+    from estimation.kinematics import steering_from_lambda
+
+    lam = np.random.default_rng(seed).normal(size=(n, 3))
+    return steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), geom)
+
+
+def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
+    """The five PNG plots of one run; returns their file names."""
+    plt = _pyplot()
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # ppo:PATH -> a file name
+    files = []
+    # 1. trajectory over the track (Fig. 9)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    _trajectory_axes(ax, log.track.xy)
+    if log.pose.size:
+        ax.plot(log.pose[:, 0], log.pose[:, 1], "C0", lw=1.2, label=f"{log.controller}")
+        ev = np.flatnonzero(np.diff(log.mode) != 0) + 1 if log.mode.size else []
+        ev = [i for i in ev if log.mode[i] == int(Mode.RECONFIGURING)]
+        if len(ev):
+            ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"trajectory: {stem}")
+    _save(fig, out, f"{stem}_trajectory.png", files, 110)
+    # 2. pairwise β projections against the constraining surface (Fig. 10)
+    surf = _surface_samples(geom)
+    pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
+    fig, axes = plt.subplots(2, 3, figsize=(11, 7))
+    for ax, (i, j) in zip(axes.ravel(), pairs):
+        ax.plot(np.degrees(surf[:, i]), np.degrees(surf[:, j]), ".", color="0.75", ms=1, label="surface S(λ)")
+        if log.beta_meas.size:
+            ax.plot(np.degrees(log.beta_meas[:, i]), np.degrees(log.beta_meas[:, j]), ".", ms=1.5, color="C3",
+                    label="measured β")
+        ax.set_xlabel(f"β{i + 1} [deg]")
+        ax.set_ylabel(f"β{j + 1} [deg]")
+    axes[0, 0].legend(fontsize=7, markerscale=5)
+    fig.suptitle(f"measured steering vs constraining surface: {stem}")
+    fig.tight_layout()
+    _save(fig, out, f"{stem}_beta_pairs.png", files, 110)
+    # 3. qua over time (Fig. 11)
+    fig, ax = plt.subplots(figsize=(8, 3))
+    ax.plot(log.t, log.qua, lw=0.8)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("qua")
+    ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
+    ax.set_title(f"quality of the measured steering configuration: {stem}")
+    _save(fig, out, f"{stem}_qua.png", files, 110)
+    # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    th = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(th), np.sin(th), "k", lw=0.8)
+    ax.plot(*geom.s_unit[:, :2].T, "k^", label="steering axes ŝ_k")
+    if log.lam_hat.size:
+        lam = log.lam_hat * np.where(log.lam_hat[:, 2:3] < 0, -1.0, 1.0)
+        ax.scatter(lam[:, 0], lam[:, 1], c=log.t, s=2, cmap="viridis", label="λ̂ (colour: time)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("u")
+    ax.set_ylabel("v")
+    ax.legend(fontsize=7, loc="lower left")
+    ax.set_title(f"ICR on the sphere (w ≥ 0): {stem}")
+    _save(fig, out, f"{stem}_icr_sphere.png", files, 110)
+    # 5. wheel commands against their limits
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "β̇_c [rad/s]"),
+                                (axes[1], log.phidot_cmd, limits.wheel_speed_max, "φ̇_c [rad/s]"),
+                                (axes[2], log.phiddot, limits.wheel_accel_max, "φ̈_c [rad/s²]")):
+        if data.size:
+            ax.plot(log.t, data, lw=0.6)
+        ax.axhline(lim, color="r", ls="--", lw=0.8)
+        ax.axhline(-lim, color="r", ls="--", lw=0.8)
+        ax.set_ylim(-2 * lim, 2 * lim)
+        ax.set_ylabel(name)
+    axes[-1].set_xlabel("t [s]")
+    axes[0].set_title(f"wheel commands and limits (dashed): {stem}")
+    _save(fig, out, f"{stem}_commands.png", files, 110)
+    return files
+
+
+def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]:
+    """Overlay the controllers on one track: trajectories; slip power and internal force over
+    time. ``traces``: controller -> npz (t, pose, slip_power, internal_force, track_xy).
+    Returns the file names (relative to ``out``)."""
+    plt = _pyplot()
+    files: list[str] = []
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    _trajectory_axes(ax, next(iter(traces.values()))["track_xy"])
+    for i, (controller, tr) in enumerate(traces.items()):
+        if tr["pose"].size:
+            ax.plot(tr["pose"][:, 0], tr["pose"][:, 1], color=f"C{i}", lw=1.2, label=controller)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"trajectories on {track}")
+    _save(fig, out, f"compare_{track}_trajectory.png", files, 100)
+
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    for i, (controller, tr) in enumerate(traces.items()):
+        axes[0].plot(tr["t"], tr["slip_power"], color=f"C{i}", lw=0.7, label=controller)
+        axes[1].plot(tr["t"], tr["internal_force"], color=f"C{i}", lw=0.7, label=controller)
+    axes[0].set_ylabel("slip power Σ|F·v_slip| [W]")
+    axes[1].set_ylabel("internal force [N]")
+    axes[1].set_xlabel("t [s]")
+    axes[0].legend(fontsize=8, loc="upper right")
+    axes[0].set_title(f"slip and internal force over time on {track}")
+    fig.tight_layout()
+    _save(fig, out, f"compare_{track}_slip_force.png", files, 100)
+    return files
+
+
+# ----------------------------------------------------------------------------------- report

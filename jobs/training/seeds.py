@@ -1,0 +1,199 @@
+"""``azimut train --seeds 0,1,2``: one agent per seed, run as tasks of :mod:`jobs.campaign.engine`
+(serially, on local processes or on Ray), and learning curves as mean ± interval over seeds.
+
+Each seed trains into ``OUT/seed_<n>/`` exactly as ``azimut train --seed n --out OUT/seed_<n>``
+would (the task's key holds every argument that changes the result; SB3 and the env are seeded
+from it). ``OUT/seeds.json`` holds the per-seed run records and the aggregates, ``OUT/report.md``
+the final held-out metrics (mean and 95% bootstrap interval over seeds per track) and
+``OUT/learning_curves.png`` the held-out mean return against environment steps, mean over seeds
+with its interval (the practice of Agarwal et al., *Deep Reinforcement Learning at the Edge of
+the Statistical Precipice*, NeurIPS 2021).
+
+With ``--ray-address`` the seeds run on the cluster's nodes and write their run folders there:
+``OUT`` must be a path every node can write (a shared file system).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["train_seed_task", "seed_tasks", "learning_curve_stats", "check_seed_args", "run_seeds"]
+
+#: metrics of the final held-out evaluation summarised over seeds: (key, header, format, scale)
+FINAL_COLUMNS = [("return", "return", "{:.1f}", 1.0), ("completed", "done share", "{:.2f}", 1.0),
+                 ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100.0),
+                 ("mean_internal_force_N", "mean int. force [N]", "{:.2f}", 1.0),
+                 ("slip_energy_J", "slip energy [J]", "{:.2f}", 1.0)]
+
+
+def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, num_robots: int,
+                    eval_tracks: list[str], eval_every: int, checkpoint_every: int, overrides: dict | None,
+                    time_limit_min: float, out: str, env_kwargs: dict | None = None, torch_threads: int = 1,
+                    resume: bool = False, quiet: bool = True) -> dict:
+    """Train one seed into ``out`` (with ``resume``, from its newest checkpoint when it has one
+    and no final model); returns ``{"run": run.json, "evaluations": [...]}``."""
+    import torch
+
+    from jobs.training.command import _latest_checkpoint, train
+
+    torch.set_num_threads(int(torch_threads))
+    folder = Path(out)
+    resume = bool(resume) and _latest_checkpoint(folder) is not None and not (folder / "model.zip").exists()
+    record = train(algo, action, track, int(seed), int(steps), folder, int(num_robots), tuple(eval_tracks),
+                   int(eval_every), int(checkpoint_every), resume, overrides, False, quiet,
+                   env_kwargs=env_kwargs, time_limit_min=float(time_limit_min))
+    evaluations = json.loads((folder / "evaluations.json").read_text())
+    return {"run": record, "evaluations": evaluations}
+
+
+def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kwargs: dict | None = None) -> list:
+    """One campaign task per seed; the key holds what changes the result, ``out`` does not."""
+    from jobs.campaign.engine import Task
+
+    overrides = json.loads(Path(args.hyperparams).read_text()) if args.hyperparams else None
+    tasks = []
+    for seed in seeds:
+        key = {"algo": args.algo, "action": args.action, "track": args.track, "seed": int(seed), "steps": args.steps,
+               "num_robots": args.num_robots, "eval_tracks": list(args.eval_tracks), "eval_every": args.eval_every,
+               "checkpoint_every": args.checkpoint_every, "overrides": overrides,
+               "time_limit_min": float(args.time_limit), "env_kwargs": env_kwargs}
+        tasks.append(Task("jobs.training.seeds:train_seed_task", key,
+                          extra={"out": str(out / f"seed_{seed}"), "torch_threads": args.torch_threads,
+                                 "resume": bool(args.resume)},
+                          label=f"{args.algo}-{args.action}-seed{seed}", cost=float(args.steps)))
+    return tasks
+
+
+def learning_curve_stats(histories: Sequence[Sequence[dict]], n_resamples: int = 10_000) -> list[dict]:
+    """Per evaluation step held by every seed: mean and bootstrap interval of the held-out mean
+    return over seeds (``histories``: each seed's ``evaluations.json``)."""
+    from jobs.campaign.engine import bootstrap_ci
+
+    per_seed = [{int(e["timesteps"]): float(e["mean_return"]) for e in h} for h in histories if h]
+    if not per_seed:
+        return []
+    common = sorted(set.intersection(*(set(d) for d in per_seed)))
+    return [{"timesteps": t, **bootstrap_ci([d[t] for d in per_seed], n_resamples=n_resamples, seed=t)}
+            for t in common]
+
+
+def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict]], seeds: Sequence[int]) -> str | None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for seed, h in zip(seeds, histories):
+        if h:
+            ax.plot([e["timesteps"] for e in h], [e["mean_return"] for e in h], color="0.7", lw=0.8)
+    if curve:
+        t = [c["timesteps"] for c in curve]
+        ax.plot(t, [c["mean"] for c in curve], "C0o-", label=f"mean over {len(histories)} seeds")
+        ax.fill_between(t, [c["lo"] for c in curve], [c["hi"] for c in curve], color="C0", alpha=0.25,
+                        label="95% bootstrap interval")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("held-out mean episode return")
+    ax.legend(fontsize=8)
+    ax.set_title(f"learning curves ({len(histories)} seeds; grey: each seed)")
+    fig.savefig(out / "learning_curves.png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return "learning_curves.png"
+
+
+def check_seed_args(args: argparse.Namespace) -> None:
+    """``--seeds`` with the other flags (``ValueError``, one line)."""
+    from jobs.campaign.args import check_executor_args
+
+    if args.seed not in (None, 0) and args.seeds != [args.seed]:
+        raise ValueError("give --seed or --seeds, not both")
+    check_executor_args(args)
+    if not args.resume:
+        for seed in args.seeds:
+            if (Path(args.out) / f"seed_{seed}" / "model.zip").exists():
+                raise ValueError(f"--out {args.out}/seed_{seed} already holds a trained model (use --resume, which "
+                                 "keeps the finished seeds, or another folder)")
+
+
+def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict | None = None) -> int:
+    """Train every seed (see the module docstring) and write the aggregate report."""
+    from jobs.campaign.engine import CampaignInterrupted, resolve_executor, run_tasks, summarize
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = seed_tasks(args, seeds, out, env_kwargs)
+    executor = resolve_executor(args.executor, args.workers, args.ray_address)
+
+    def progress(done: int, total: int, task, rec: dict) -> None:
+        if rec["status"] == "ok":
+            run = rec["result"]["run"]
+            msg = (f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, held-out mean return "
+                   f"{rec['result']['evaluations'][-1]['mean_return']:.1f}")
+        else:
+            msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
+        print(f"[{done}/{total}] seed {task.key['seed']}: {msg}", flush=True)
+
+    start = time.perf_counter()
+    try:
+        records = run_tasks(tasks, out / "seeds", executor=executor, workers=args.workers,
+                            threads=args.torch_threads, ray_address=args.ray_address, retries=args.retries,
+                            resume=args.resume, progress=progress)
+    except CampaignInterrupted as exc:
+        print(f"azimut train: {exc}; run the same command with --resume", flush=True)
+        return 130
+    wall = time.perf_counter() - start
+    ok = [r for r in records if r["status"] == "ok"]
+    histories = [r["result"]["evaluations"] for r in ok]
+    curve = learning_curve_stats(histories)
+    final_rows: list[dict[str, Any]] = []
+    for r in ok:
+        for row in r["result"]["run"]["final_eval"]:
+            final_rows.append({**row, "seed": r["key"]["seed"]})
+    cells = summarize(final_rows, ("track",), [c[0] for c in FINAL_COLUMNS])
+    plot = _plot_curves(out, curve, histories, [r["key"]["seed"] for r in ok])
+    (out / "seeds.json").write_text(json.dumps(
+        {"seeds": list(seeds), "executor": executor, "workers": args.workers, "wall_s": wall, "learning_curve": curve,
+         "final_summary": cells, "runs": [{"seed": r["key"]["seed"], "status": r["status"], "error": r.get("error"),
+                                           "run": (r.get("result") or {}).get("run")} for r in records]},
+        indent=1, allow_nan=True, default=str))
+    lines = [f"# azimut train: {args.algo}, action {args.action}, track {args.track}, seeds "
+             f"{','.join(map(str, seeds))}", "",
+             f"{len(ok)} of {len(records)} seeds trained ({executor}, {args.workers} worker(s)); {args.steps} steps each; "
+             f"wall time {wall:.0f} s.",
+             "", "## Final held-out evaluation (mean [95% bootstrap interval] over seeds)", "",
+             "| track | seeds | " + " | ".join(c[1] for c in FINAL_COLUMNS) + " |",
+             "|---|---|" + "---|" * len(FINAL_COLUMNS)]
+    for cell in cells:
+        vals = []
+        for k, _, fmt, scale in FINAL_COLUMNS:
+            s = cell["metrics"][k]
+            if s["n"] == 0 or not math.isfinite(s["mean"]):
+                vals.append("-")
+            elif s["lo"] == s["hi"]:
+                vals.append(fmt.format(scale * s["mean"]))
+            else:
+                vals.append(f"{fmt.format(scale * s['mean'])} [{fmt.format(scale * s['lo'])}, "
+                            f"{fmt.format(scale * s['hi'])}]")
+        lines.append(f"| {cell['track']} | {cell['n']} | " + " | ".join(vals) + " |")
+    lines += ["", "## Learning curves", ""]
+    if plot:
+        lines.append(f"![learning curves]({plot})")
+    if len(ok) < 5:
+        lines += ["", f"With {len(ok)} seed(s) the bootstrap interval is only indicative (with 2 it is the range of "
+                  "the two); use 5 or more seeds for a claim."]
+    lines += ["", "| steps | seeds | mean return | 95% interval |", "|---|---|---|---|"]
+    lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} | [{c['lo']:.1f}, {c['hi']:.1f}] |" for c in curve]
+    failed = [r for r in records if r["status"] != "ok"]
+    if failed:
+        lines += ["", "Failed seeds:", ""] + [f"- seed {r['key']['seed']}: {r.get('error')}" for r in failed]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    print(f"{len(ok)} of {len(records)} seeds trained; report written to {out}/report.md", flush=True)
+    return 0 if not failed else 1
