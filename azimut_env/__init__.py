@@ -30,5 +30,6 @@ if ENV_ID not in registry:
     # before any state changes) left the checker without data and the next good step raised a
     # TypeError inside the checker. The env passes gymnasium's and SB3's full ``check_env`` in the
     # tests (tests/azimut_env/test_env_api.py), which is the stronger check.
-    register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv", vector_entry_point="azimut_env.vector_env:AzimutVectorEnv",
+    register(id=ENV_ID, entry_point="azimut_env.env:AzimutEnv",
+             vector_entry_point="azimut_env.vector_env:AzimutVectorEnv",
              max_episode_steps=None, disable_env_checker=True)

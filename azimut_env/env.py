@@ -223,9 +223,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       slip power and internal force priced (a raw-action agent fighting its wheels with 150× the
       reference controller's internal force lost only 2% of its return), backward projection
       jumps clipped, optional stall termination, a per-track time limit (1.5 × the reference
-      controller's nominal lap, ``time_limit_factor``) instead of 6000 steps; ``info["stalled"]``. The same release changes the
-      simulated vehicle dynamics (see the README). ``gymnasium.make("Azimut-v0")`` raises
-      ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
+      controller's nominal lap, ``time_limit_factor``) instead of 6000 steps; ``info["stalled"]``.
+      The same release changes the simulated vehicle dynamics (see the README).
+      ``gymnasium.make("Azimut-v0")`` raises ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
     * v0: initial version.
     """
 

@@ -77,7 +77,8 @@ class ActuatorLimits:
     def __post_init__(self) -> None:
         _check_positive(self, "steer_rate_max", "steer_accel_max", "steer_torque_max", "wheel_speed_max",
                         "wheel_accel_max", "wheel_torque_max")
-        if not (math.isfinite(self.steer_min) and math.isfinite(self.steer_max) and self.steer_min < 0 < self.steer_max):
+        if not (math.isfinite(self.steer_min) and math.isfinite(self.steer_max)
+                and self.steer_min < 0 < self.steer_max):
             raise ValueError(f"ActuatorLimits steering range must satisfy steer_min < 0 < steer_max, got "
                              f"]{self.steer_min}, {self.steer_max}]")
 

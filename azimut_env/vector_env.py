@@ -66,7 +66,8 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     that robot (terminated, reward ``−off_track_penalty``, the last finite observation, and
     ``info["error"][i]``; the other robots go on), a stall (``stall_time``, terminated), and the
     step limits (truncated): the per-track limit of ``time_limit_factor`` (1.5 × the reference
-    controller's nominal lap on the track by default, see the single env) and ``max_episode_steps`` if given (default ``None``).
+    controller's nominal lap on the track by default, see the single env) and ``max_episode_steps``
+    if given (default ``None``).
 
     ## Info
     ``step`` and ``reset`` return a dict of arrays with a leading ``num_envs`` axis and, per key,
@@ -208,7 +209,8 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
             checked = task.check_reset_options(options)
             per = [checked] * N
         elif isinstance(options, (str, bytes)) or not hasattr(options, "__iter__"):
-            raise TypeError(f"options must be a dict or a sequence of {N} dicts (or None), got {type(options).__name__}")
+            raise TypeError(f"options must be a dict or a sequence of {N} dicts (or None), "
+                            f"got {type(options).__name__}")
         else:
             per = list(options)
             if len(per) != N or not all(o is None or isinstance(o, dict) for o in per):
@@ -220,7 +222,8 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
                              "(the first reset, and the one after a failed reset, must include them)")
         return [dict(o) for o in per], mask
 
-    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict | Sequence[dict | None] | None = None):
+    def reset(self, *, seed: int | Sequence[int | None] | None = None,
+              options: dict | Sequence[dict | None] | None = None):
         """Reset all sub-envs (or those of ``options["reset_mask"]``); see the class docstring.
 
         Seeds and every sub-env's options are validated before any sub-env is touched. If a

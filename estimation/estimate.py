@@ -26,6 +26,9 @@ IT_PAPER = ITParams()
 #: The improved IT: every kept start run to convergence, the closest result kept.
 IT_BEST = ITParams(n_starts=6, race_iter=2, accept_rms=0.25)
 
+#: ORACLE's default search density (OracleParams is frozen, so one shared instance is safe).
+ORACLE_DEFAULT = OracleParams()
+
 
 def _real_array(x, name: str) -> np.ndarray:
     """x as a float64 array; complex, object and string inputs raise ``TypeError`` (NumPy would
@@ -147,7 +150,7 @@ def _check_method(method: str) -> None:
 
 
 def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
-                 oracle_params: OracleParams = OracleParams()) -> np.ndarray:
+                 oracle_params: OracleParams = ORACLE_DEFAULT) -> np.ndarray:
     """Estimate the ICR λ̂ ∈ Λ from measured steering angles q.
 
     Args:
@@ -169,7 +172,7 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
 
 
 def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
-                 mu_tol: float = 1e-3, oracle_params: OracleParams = OracleParams()
+                 mu_tol: float = 1e-3, oracle_params: OracleParams = ORACLE_DEFAULT
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The H state η̂ = (λ̂, μ̂) from the sensors: steering angles q and wheel speeds φ̇.
 

@@ -157,7 +157,8 @@ def run(args: argparse.Namespace) -> int:
               f"{cpu[name]:>13.1f} {cpu[name] / wall[name]:>11.2f} {sum(load[name]) / len(load[name]):>9.1f}  "
               f"{'yes' if same else 'NO'}")
     print(f"ideal on {args.workers} workers from the serial task times (longest task or work / workers, per round): "
-          f"{ideal:.1f} s, {wall['serial'] / ideal:.2f}x; longest episode {max(r.get('elapsed_s', 0) for r in records['serial']):.1f} s")
+          f"{ideal:.1f} s, {wall['serial'] / ideal:.2f}x; longest episode "
+          f"{max(r.get('elapsed_s', 0) for r in records['serial']):.1f} s")
     print(f"machine headroom ({args.workers} pure-Python loops against 1, same moment): {headroom[0]:.2f}x before, "
           f"{headroom[1]:.2f}x after the campaign")
     print(f"(speed-up: serial wall time / wall time, same run; task CPU: the episodes' CPU time summed; cores used: "

@@ -28,7 +28,8 @@ import numpy as np
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import arg_choice_list, arg_int
 
-__all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s", "add_arguments", "run"]
+__all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
+           "add_arguments", "run"]
 
 #: stages of the vector env's split, in print order
 VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "sensors", "estimation", "track",
@@ -383,7 +384,8 @@ def run(args: argparse.Namespace) -> int:
             if row["refused"]:
                 print(f"{int(row['substeps']):>9}  refused by the stability check")
                 continue
-            print(f"{int(row['substeps']):>9}{row['max_position_error'] * 1e3:>12.3f}{row['final_position_error'] * 1e3:>10.3f}"
+            print(f"{int(row['substeps']):>9}{row['max_position_error'] * 1e3:>12.3f}"
+                  f"{row['final_position_error'] * 1e3:>10.3f}"
                   f"{np.degrees(row['final_heading_error']):>12.4f}{np.degrees(row['max_beta_error']):>10.4f}"
                   f"{row['order']:>7.2f}")
         return 0
@@ -402,7 +404,8 @@ def run(args: argparse.Namespace) -> int:
         single = r["steps_per_s"]
         print()
         print(f"AzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
-              f"{args.solver_iterations} solver iterations, IT estimation included; ~{args.vector_steps} robot-steps per N, "
+              f"{args.solver_iterations} solver iterations, IT estimation included; "
+              f"~{args.vector_steps} robot-steps per N, "
               f"episodes of at most {args.episode_steps} steps (autoresets timed)")
         print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}")
         rows = []

@@ -148,7 +148,7 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
             row["_qua"] = qua
             table[m] = row
         ne_b, ne_s = table["NE"]["batched_us"], table["NE"]["single_us"]
-        for m, row in table.items():
+        for row in table.values():
             row["batched_vs_NE"] = row["batched_us"] / ne_b
             row["single_vs_NE"] = row["single_us"] / ne_s
             row["points_per_s"] = 1e6 / row["batched_us"]
@@ -192,7 +192,8 @@ def format_report(res: dict) -> str:
         lines.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
         for m, r in ds["methods"].items():
             gap = r.get("gap_to_oracle_mean", float("nan"))
-            lines.append(f"| {m} | {r['qua_min']:.2f} | {r['qua_mean']:.2f} | {gap:.3f} | {100 * r['valid_unit']:.2f}% | "
+            lines.append(f"| {m} | {r['qua_min']:.2f} | {r['qua_mean']:.2f} | {gap:.3f} | "
+                         f"{100 * r['valid_unit']:.2f}% | "
                          f"{r['batched_us']:.2f} | {r['points_per_s']:,.0f} | {r['batched_vs_NE']:.1f} | "
                          f"{r['single_us']:.1f} | {r['single_vs_NE']:.2f} |")
         extra = []
@@ -232,11 +233,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from jobs.args import arg_choice_list, arg_int, arg_output_path
 
     parser.add_argument("--json", metavar="PATH", type=arg_output_path(), help="also write the results as JSON")
-    parser.add_argument("--points", type=arg_int(10, 10_000_000), default=15000, help="points in D1 and D3 (paper: 15000)")
+    parser.add_argument("--points", type=arg_int(10, 10_000_000), default=15000,
+                        help="points in D1 and D3 (paper: 15000)")
     parser.add_argument("--random", type=arg_int(2, 100_000_000), default=1_000_000,
                         help="random inputs of the robustness sweep")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0, help="dataset seed offset")
-    parser.add_argument("--single-calls", type=arg_int(1, 10_000_000), default=2000, help="single calls timed per method")
+    parser.add_argument("--single-calls", type=arg_int(1, 10_000_000), default=2000,
+                        help="single calls timed per method")
     parser.add_argument("--d2", choices=["auto", "recorded", "standin"], default="auto", help="D2 source")
     parser.add_argument("--methods", default=",".join(METHOD_ORDER), type=arg_choice_list(METHOD_ORDER),
                         help=f"comma-separated subset of {','.join(METHOD_ORDER)} (NE is required: the timing "
@@ -245,7 +248,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def check_args(args: argparse.Namespace) -> None:
     if "NE" not in args.methods:
-        raise ValueError(f"argument --methods: must include NE (the timing ratios are against it), got {','.join(args.methods)}")
+        raise ValueError(f"argument --methods: must include NE (the timing ratios are against it), "
+                         f"got {','.join(args.methods)}")
     if args.d2 == "recorded" and load_d2_recorded(RobotGeometry.azimut3()) is None:
         raise ValueError("argument --d2: no recorded D2 in this install (run azimut record-d2, or use auto/standin)")
 

@@ -21,7 +21,8 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("jobs.eval.command", "run controllers on tracks and write a report (the main job)"),
     "bench-campaign": ("jobs.bench_campaign", "time an eval campaign serially and on N workers (same metrics?)"),
-    "bench-estimators": ("jobs.bench_estimators", "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
+    "bench-estimators": ("jobs.bench_estimators",
+                         "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
     "bench-env": ("jobs.bench_env", "measure simulator throughput (steps/s) with a time breakdown"),
     "sim-paper": ("jobs.sim_paper", "the paper's phenomenon: qua while moving under the ICR controller at three "
                   "speeds, split into motor lag and compliance, with a stiff-steering counterfactual"),

@@ -55,7 +55,8 @@ def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_S
     follower.reset(info["progress"])
     kept = []
     steps = 0
-    for steps in range(1, int(max_time / env.control_period) + 1):
+    for _ in range(int(max_time / env.control_period)):
+        steps += 1
         lam_hat, mu_hat = env.estimated_eta
         target = follower.step(info["pose"])
         cmd = ctl.step(lam_hat, mu_hat, env.measured_beta, env.measured_phidot, target.lam, target.mu)

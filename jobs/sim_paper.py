@@ -151,7 +151,8 @@ def run_phenomenon(driver: str = "icr", track: str = "paper", speeds=DEFAULT_SPE
     stiff_sub = stable_substeps(stiff, start=substeps)
     rows, logs = [], {}
     for speed in speeds:
-        for steering, params, sub in (("compliant", None, substeps), (f"stiff x{stiffness_factor:g}", stiff, stiff_sub)):
+        for steering, params, sub in (("compliant", None, substeps),
+                                      (f"stiff x{stiffness_factor:g}", stiff, stiff_sub)):
             log = _drive(driver, track, seed, float(speed), params, sub, sensors)
             row = {"driver": driver, "track": track, "speed_scale": float(speed), "steering": steering,
                    "substeps": sub, **attribute(log, geom)}

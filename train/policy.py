@@ -91,5 +91,5 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
             stats = pickle.load(fh)
         if getattr(stats, "norm_obs", True):
             obs_rms, clip_obs, eps = stats.obs_rms, float(stats.clip_obs), float(stats.epsilon)
-    return TrainedPolicy(model=model, algo=algo, action=meta.get("action", "raw"), env_kwargs=meta.get("env_kwargs", {}),
-                         obs_rms=obs_rms, clip_obs=clip_obs, epsilon=eps)
+    return TrainedPolicy(model=model, algo=algo, action=meta.get("action", "raw"),
+                         env_kwargs=meta.get("env_kwargs", {}), obs_rms=obs_rms, clip_obs=clip_obs, epsilon=eps)

@@ -15,8 +15,9 @@ static obstacles. The pieces:
 
 Without obstacles the whole control period (all substeps, all robots) is one compiled call
 (:func:`~azimut_env.physics.kernels.step_kernel`) that integrates the chassis too; pymunk's
-bodies are read before it and written after it. With obstacles pymunk integrates the chassis: each substep the kernel's velocity
-change is handed to pymunk as a force and torque, and ``space.step`` integrates them and resolves
+bodies are read before it and written after it. With obstacles pymunk integrates the chassis: each
+substep the kernel's velocity change is handed to pymunk as a force and torque, and ``space.step``
+integrates them and resolves
 the contacts (Chipmunk moves the position with the velocity of the start of the substep, then
 updates the velocity: explicit Euler for the chassis pose while in the presence of obstacles).
 Robots have collision shapes (the chassis box; the wheels lie within its footprint up to 2 cm)
@@ -422,8 +423,9 @@ class AzimutPhysics:
         self.acc[:] = 0.0
         p = self.params
         args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
-                self.acc, self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer, float(p.chassis.com_height),
-                float(p.steering.stop_restitution), bool(p.steer_motor.is_dc), self.n, self.dt)
+                self.acc, self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer,
+                float(p.chassis.com_height), float(p.steering.stop_restitution), bool(p.steer_motor.is_dc),
+                self.n, self.dt)
         tm = times if times is not None else self.stage_times
         t = time.perf_counter() if tm is not None else 0.0
         self._io.read()

@@ -286,7 +286,8 @@ class AzimutTask:
         self.sensors.draw_noise_robot(i, rng)
         self._measure(sl)
         self._estimate(sl)
-        s_, look = track.query_batch(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count, cfg.lookahead_spacing)
+        s_, look = track.query_batch(phys.summary[sl, RS_POSE], np.array([s0]), cfg.lookahead_count,
+                                     cfg.lookahead_spacing)
         self.track_out[i] = s_[0]
         self.look[i] = look[0]
         self._unpack_track(sl)

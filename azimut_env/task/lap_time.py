@@ -44,7 +44,8 @@ def steering_wraps(track: Track, geometry: RobotGeometry) -> np.ndarray:
     return swing[swing > 0.5 * np.pi]
 
 
-def reference_lap_time(track: Track, geometry: RobotGeometry, limits: ActuatorLimits, speed_scale: float = 1.0) -> float:
+def reference_lap_time(track: Track, geometry: RobotGeometry, limits: ActuatorLimits,
+                       speed_scale: float = 1.0) -> float:
     """The nominal lap [s] of the ICR reference controller on ``track``: the time of the speed
     profile (:func:`nominal_duration`) plus, for each wheel that wraps across its steering stops
     along the reference ICR path (:func:`steering_wraps`), the time to turn it in place by its

@@ -32,7 +32,8 @@ from estimation.geometry import RobotGeometry
 from estimation.hrep import exp_map, nearer_representative, sphere_angle
 from estimation.kinematics import steering_from_lambda
 
-__all__ = ["shape_target", "advance_target", "step_toward", "exp_step", "transport_frame", "initial_frame", "SHAPED_TARGET_CONFIG"]
+__all__ = ["shape_target", "advance_target", "step_toward", "exp_step", "transport_frame", "initial_frame",
+           "SHAPED_TARGET_CONFIG"]
 
 #: The ICR controller's tuning behind shaped absolute targets when none is given: μ gets its own
 #: time scaling (``mu_own_scale``) and ramps at 0.95 of the wheel acceleration limit (instead of

@@ -20,8 +20,9 @@ Through the ICR controller the target is *shaped* (:mod:`control.action_spaces.s
 ``shape_targets=False`` turns it off): λ_d is one step of at most ``target_rate`` [rad/s] from the
 controller's reference λ toward the commanded direction (unsigned μ: toward λ_d itself, so the
 motion turns continuously instead of decelerating through zero each time a random target lands in
-the other hemisphere; signed: toward the nearer of ±λ_d, μ_d's sign following), and crosses a steering stop only when the command keeps pushing past it for
-``cross_push`` [rad] of arc, so a target that changes every step (an exploring policy) still drives
+the other hemisphere; signed: toward the nearer of ±λ_d, μ_d's sign following), and crosses a
+steering stop only when the command keeps pushing past it for ``cross_push`` [rad] of arc, so a
+target that changes every step (an exploring policy) still drives
 instead of keeping the controller in RECONFIGURING; without an ``icr_config`` the controller then
 runs :data:`~control.action_spaces.shaping.SHAPED_TARGET_CONFIG` (μ follows μ_d at the wheels'
 acceleration limit while λ turns).

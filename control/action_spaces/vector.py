@@ -22,8 +22,9 @@ one batched ``step`` of the vector env with all set-points):
   (:mod:`control.action_spaces.shaping`), so a stop-and-reconfigure happens only when λ really crosses
   a steering limit.
 * ``"icr_target"`` ((N, 4)) and ``"twist"`` ((N, 3)): absolute targets, as
-  :class:`~control.action_spaces.single.ICRTargetAction` and :class:`~control.action_spaces.single.TwistAction` (sub-env i
-  behaves as that single-env wrapper seeded with ``seed + i``). Through the ICR controller, the
+  :class:`~control.action_spaces.single.ICRTargetAction` and
+  :class:`~control.action_spaces.single.TwistAction` (sub-env i behaves as that single-env wrapper
+  seeded with ``seed + i``). Through the ICR controller, the
   target is shaped (:mod:`control.action_spaces.shaping`): λ_d is one step of at most ``target_rate``
   [rad/s] from the controller's reference λ toward the commanded direction (so the controller's
   own arc is short and checked by the shaping) and crosses a steering stop or axis only when the
@@ -112,15 +113,16 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         super().__init__(env)
         if not isinstance(action, str) or action not in ACTION_KINDS:
             raise ValueError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
-        if not isinstance(controller, str) or controller not in ("icr", "swerve") or (action != "twist" and controller != "icr"):
+        if (not isinstance(controller, str) or controller not in ("icr", "swerve")
+                or (action != "twist" and controller != "icr")):
             raise ValueError(f"controller must be 'icr' (or 'swerve' for twists), got {controller!r}")
         base = env.unwrapped
         missing = missing_members(base, VectorControllerInterface)
         if missing:
             raise ValueError(f"the wrapped env must be AzimutVectorEnv (missing {', '.join(map(repr, missing))})")
-        for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max, residual_angle=residual_angle, residual_mu=residual_mu,
-                                lambda_rate_max=lambda_rate_max, mu_accel=mu_accel, target_rate=target_rate,
-                                cross_push=cross_push).items():
+        for name, value in dict(mu_max=mu_max, v_max=v_max, w_max=w_max, residual_angle=residual_angle,
+                                residual_mu=residual_mu, lambda_rate_max=lambda_rate_max, mu_accel=mu_accel,
+                                target_rate=target_rate, cross_push=cross_push).items():
             check_positive(name, value)
         min_norm = check_range("min_norm", min_norm, 0.0, 1.0, lo_open=True, hi_open=True)
         check_bool("shape_targets", shape_targets)

@@ -8,8 +8,8 @@ Per step, with the pose (x, y, θ) in the world:
 1. progress s = the nearest reference pose (``Track.project``, windowed around the last s, so it
    is continuous and waits for the robot when it stops);
 2. feed-forward: the reference world twist at s + max(v_ref·τ, d_min), the preview shrinking
-   to d_min before a sharp corner, and the speed capped so the robot can slow down for it (``Track.reference_twist``; τ is a
-   short preview that compensates the controllers' lag);
+   to d_min before a sharp corner, and the speed capped so the robot can slow down for it
+   (``Track.reference_twist``; τ is a short preview that compensates the controllers' lag);
 3. feedback on the pose error, position and heading separately (the robot is omnidirectional, so
    the heading follows its own profile, independent of the path direction):
    v = v_ref + k_p (p_ref − p) + k_i n ∫ e_n dt and ω = θ̇_ref + k_θ wrap(θ_ref − θ), with the

@@ -139,7 +139,8 @@ def arc_check_batch(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: f
     pts = slerp(lam, lam_d, angles)  # (N, M, 3)
     sin_to_axis = np.linalg.norm(np.cross(pts[:, :, None, :], geom.s_unit[None, None, :, :]), axis=-1)
     # the endpoints may sit on a cap rim (projected target, or λ itself): only the interior counts
-    near = np.any(sin_to_axis < np.sin(0.5 * axis_margin), axis=-1) & (j[None, :] >= 1) & (j[None, :] < (m - 1)[:, None])
+    near = (np.any(sin_to_axis < np.sin(0.5 * axis_margin), axis=-1)
+            & (j[None, :] >= 1) & (j[None, :] < (m - 1)[:, None]))
     beta = steering_from_lambda(pts.reshape(-1, 3), geom).reshape(nrows, big, geom.n)
     wraps = np.any(np.abs(np.diff(beta, axis=1)) > np.pi / 2, axis=-1) & (j[None, :-1] < (m - 1)[:, None])
     first_axis = np.where(near.any(axis=1), np.argmax(near, axis=1), m)

@@ -124,7 +124,8 @@ def initial_state_batch(lam_hat, beta, phidot, geom: RobotGeometry,
         has_beta_meas=np.ones(nrows, dtype=np.bool_), held_time=np.zeros(nrows))
 
 
-def initial_state(lam_hat, beta, phidot, geom: RobotGeometry, config: ICRControllerConfig | None = None) -> ICRControllerState:
+def initial_state(lam_hat, beta, phidot, geom: RobotGeometry,
+                  config: ICRControllerConfig | None = None) -> ICRControllerState:
     """Start from the measurements, at rest (μ = 0).
 
     The reference λ is the estimate λ̂. If the measured wheels are not at F(λ̂) within

@@ -361,7 +361,8 @@ def _ray(todo, workers, threads, retries, ray_address):
                 try:
                     rec = ray.get(ref)
                 except ray.exceptions.RayError as exc:  # worker crashed, node lost, object lost
-                    rec = {"status": "failed", "error": f"worker lost: {type(exc).__name__}: {str(exc).splitlines()[0]}"}
+                    rec = {"status": "failed",
+                           "error": f"worker lost: {type(exc).__name__}: {str(exc).splitlines()[0]}"}
                 if rec["status"] != "ok" and attempt <= retries:
                     pending.appendleft((task, attempt + 1))
                 else:

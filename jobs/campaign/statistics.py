@@ -72,7 +72,8 @@ def summarize(rows: Sequence[Mapping[str, Any]], group_by: Sequence[str], metric
         for m in metrics:
             vals = [r.get(m) for r in grows]
             vals = [math.nan if v is None else float(v) for v in vals]
-            seed = zlib.crc32(json.dumps([list(gkey), m], sort_keys=True, separators=(",", ":"), allow_nan=True).encode())
+            seed = zlib.crc32(json.dumps([list(gkey), m], sort_keys=True, separators=(",", ":"),
+                                         allow_nan=True).encode())
             stats[m] = bootstrap_ci(vals, level=level, n_resamples=n_resamples, seed=seed)
         cell["metrics"] = stats
         out.append(cell)

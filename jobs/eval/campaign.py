@@ -34,8 +34,8 @@ from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
 from jobs.eval.plots import comparison_plots, write_plots
 
-__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick", "episode_tasks", "run_eval_campaign", "write_campaign_report",
-           "comparison_plots"]
+__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick",
+           "episode_tasks", "run_eval_campaign", "write_campaign_report", "comparison_plots"]
 
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
 DEFAULT_DT = 0.02
@@ -341,12 +341,14 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         if rec["status"] == "ok":
             m = rec["result"]["metrics"]
             msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
-                   f"int. force {m['mean_internal_force_N']:.2f} N, qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
+                   f"int. force {m['mean_internal_force_N']:.2f} N, "
+                   f"qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
                    f"limit-exceeded steps {m['limit_violation_steps']}, stop+reconfig {m['reconfigure_events']}, "
                    f"{rec['elapsed_s']:.1f} s")
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
-        print(f"[{done}/{total}] {k['controller']:>6} {k['track']:<8} seed {k['seed']:<3} {msg}", file=stream, flush=True)
+        print(f"[{done}/{total}] {k['controller']:>6} {k['track']:<8} seed {k['seed']:<3} {msg}",
+              file=stream, flush=True)
 
     start = time.perf_counter()
     n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")

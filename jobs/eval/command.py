@@ -40,8 +40,8 @@ from jobs.args import arg_choice_list, arg_float, arg_int, arg_output_path, requ
 from jobs.eval.plots import write_plots  # re-exported
 from jobs.eval.video import VIDEO_FORMATS, check_video_format
 
-__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots", "write_report",
-           "add_arguments", "run"]
+__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots",
+           "write_report", "add_arguments", "run"]
 
 #: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
 #: ``azimut train`` wrote, its VecNormalize statistics beside it; needs the ``rl`` extra)
@@ -185,9 +185,12 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
              "|---|---|---|---|---|---|---|---|---|"]
     for controller in [c for c in controllers if c in CONTROLLERS]:  # trained policies: not in this study yet
         start = time.time()
+
+        def progress(i, n, *_, label=f"kicks/{controller}", t0=start):  # this iteration's label and start
+            return progress_bar(label, i / n, t0)
+
         trials = kick_study_campaign(n_runs, controller, seed0=1000 + 1000 * seed,
-                                     store=out / "kicks" / controller, **(run_kwargs or {}),
-                                     progress=lambda i, n, *_: progress_bar(f"kicks/{controller}", i / n, start))
+                                     store=out / "kicks" / controller, **(run_kwargs or {}), progress=progress)
         if sys.stderr.isatty():
             sys.stderr.write("\n")
         summ = summarize_kicks(trials)
@@ -195,7 +198,8 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
         rt, lat, pb = summ["recovery_time_s"], summ["max_lateral_after_m"], summ["peak_beta_error_rad"]
         st = summ["settle_time_s"]
         lines.append(f"| {controller} | {summ['runs']} | {summ['recovered']} | {summ['failed_runs']} | "
-                     f"{summ['limit_violation_steps']} | {rt.get('p50', float('nan')):.2f}/{rt.get('p90', float('nan')):.2f}/"
+                     f"{summ['limit_violation_steps']} | {rt.get('p50', float('nan')):.2f}/"
+                     f"{rt.get('p90', float('nan')):.2f}/"
                      f"{rt.get('p100', float('nan')):.2f} | {st.get('p50', float('nan')):.2f}/"
                      f"{st.get('p90', float('nan')):.2f}/{st.get('p100', float('nan')):.2f} | "
                      f"{100 * lat['p50']:.2f}/{100 * lat['p90']:.2f}/"
@@ -206,7 +210,8 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
 
 def run(args: argparse.Namespace) -> int:
     try:
-        controllers = list(args.controllers) if isinstance(args.controllers, list) else arg_controllers(args.controllers)
+        controllers = (list(args.controllers) if isinstance(args.controllers, list)
+                       else arg_controllers(args.controllers))
         tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")

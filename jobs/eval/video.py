@@ -55,7 +55,8 @@ def check_video_format(fmt: str) -> None:
     if fmt == "gif":
         require_module("PIL", "--video gif")
     elif ffmpeg_executable() is None:
-        raise ValueError("--video mp4 needs an ffmpeg executable (none on the PATH, no imageio-ffmpeg); use --video gif")
+        raise ValueError("--video mp4 needs an ffmpeg executable (none on the PATH, no imageio-ffmpeg); "
+                         "use --video gif")
 
 
 def _body_twists(pose: np.ndarray, dt: float) -> np.ndarray:

@@ -85,8 +85,10 @@ def check_args(args: argparse.Namespace) -> None:
         if not isinstance(data, dict):
             raise ValueError(f"--hyperparams {args.hyperparams}: expected a JSON object")
     if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
-        given = [flag for flag, value, default in (("--workers", args.workers, 1), ("--executor", args.executor, "auto"),
-                                                   ("--ray-address", args.ray_address, None), ("--retries", args.retries, 1))
+        given = [flag for flag, value, default in (("--workers", args.workers, 1),
+                                                   ("--executor", args.executor, "auto"),
+                                                   ("--ray-address", args.ray_address, None),
+                                                   ("--retries", args.retries, 1))
                  if value != default]
         if given:
             raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
@@ -177,8 +179,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     final["final"] = True
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
-    record = {"time_limit_min": time_limit_min, "algo": algo, "action": action, "track": track, "seed": seed, "steps": steps,
-              "num_timesteps": int(model.num_timesteps), "num_robots": num_robots, "eval_tracks": list(eval_tracks),
+    record = {"time_limit_min": time_limit_min, "algo": algo, "action": action, "track": track, "seed": seed,
+              "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
+              "eval_tracks": list(eval_tracks),
               "hyperparams": hp, "hyperparams_version": hp_version, "env_id": "Azimut-v1", "env_kwargs": env_kwargs,
               "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
               "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
@@ -232,9 +235,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"trained {record['num_timesteps']} steps in {record['learn_wall_s']:.0f} s "
           f"({record['steps_per_s_in_learn']:.0f} steps/s inside learn); model: {args.out}/model.zip", flush=True)
     for r in record["final_eval"]:
+        lap = ("lap " + format(r["completion_time_s"], ".1f") + " s" if r["completed"]
+               else (r["error"] or "lap not finished in the evaluation time"))
         print(f"  {r['track']:<8} return {r['return']:.1f}, RMS lat {100 * r['rms_lateral_m']:.2f} cm, "
               f"internal force {r['mean_internal_force_N']:.2f} N, slip {r['slip_energy_J']:.2f} J, "
-              f"{'lap ' + format(r['completion_time_s'], '.1f') + ' s' if r['completed'] else (r['error'] or 'lap not finished in the evaluation time')}")
+              f"{lap}")
     return 0
 
 

@@ -92,7 +92,7 @@ def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict
     except ImportError:
         return None
     fig, ax = plt.subplots(figsize=(7, 4))
-    for seed, h in zip(seeds, histories):
+    for _seed, h in zip(seeds, histories):
         if h:
             ax.plot([e["timesteps"] for e in h], [e["mean_return"] for e in h], color="0.7", lw=0.8)
     if curve:
@@ -166,8 +166,8 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
         indent=1, allow_nan=True, default=str))
     lines = [f"# azimut train: {args.algo}, action {args.action}, track {args.track}, seeds "
              f"{','.join(map(str, seeds))}", "",
-             f"{len(ok)} of {len(records)} seeds trained ({executor}, {args.workers} worker(s)); {args.steps} steps each; "
-             f"wall time {wall:.0f} s.",
+             f"{len(ok)} of {len(records)} seeds trained ({executor}, {args.workers} worker(s)); "
+             f"{args.steps} steps each; wall time {wall:.0f} s.",
              "", "## Final held-out evaluation (mean [95% bootstrap interval] over seeds)", "",
              "| track | seeds | " + " | ".join(c[1] for c in FINAL_COLUMNS) + " |",
              "|---|---|" + "---|" * len(FINAL_COLUMNS)]

@@ -29,7 +29,8 @@ def _angular_momentum(phys, i=0):
     (centre of mass at the chassis origin) plus the modules' own spins."""
     m, inertia = phys.body_inertia[i]
     x, y, vx, vy, w = (phys.summary[i, col] for col in (RS.X, RS.Y, RS.VX, RS.VY, RS.W))
-    return m * (x * vy - y * vx) + inertia * w + np.sum(phys.wheel_params[i, :, WP.I_MOD] * phys.joint_state[i, :, JS.OMEGA])
+    return (m * (x * vy - y * vx) + inertia * w
+            + np.sum(phys.wheel_params[i, :, WP.I_MOD] * phys.joint_state[i, :, JS.OMEGA]))
 
 
 def _bang_bang(phys, steps, rng, kick_every=0):
@@ -109,7 +110,8 @@ def test_chassis_carries_the_module_masses_and_loads_follow_the_mass():
     phys = AzimutPhysics(p, n_robots=2)
     m_tot = p.chassis.mass + 4 * p.steering.module_mass
     assert phys.chassis[0].mass == pytest.approx(m_tot)
-    assert phys.chassis[0].moment == pytest.approx(p.chassis.inertia + p.steering.module_mass * np.sum(p.geometry.l ** 2))
+    assert phys.chassis[0].moment == pytest.approx(p.chassis.inertia
+                                                   + p.steering.module_mass * np.sum(p.geometry.l ** 2))
     assert np.allclose(phys.normal_loads(), m_tot * p.gravity / 4)
     phys.set_chassis_mass(1, 40.0)
     assert np.allclose(phys.normal_loads()[1], (40.0 + 8.0) * p.gravity / 4)

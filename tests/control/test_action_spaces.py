@@ -81,7 +81,8 @@ def test_residual_zero_action_matches_azimut_eval_reference():
     from control.episode import run_episode
 
     log = run_episode("icr", "circle", seed=5, max_time=2.0)
-    venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None), action="residual")
+    venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None),
+                                  action="residual")
     venv.reset(seed=5)
     poses = []
     for _ in range(len(log.t)):

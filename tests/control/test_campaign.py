@@ -206,8 +206,8 @@ def test_cli_eval_plots_are_embedded_under_their_row(tmp_path):
 
 @pytest.mark.parametrize("flags", [["--seeds", "3-1"], ["--seeds", "x"], ["--workers", "0"], ["--max-time", "0"],
                                    ["--domain-randomization", "0.9"], ["--retries", "-1"],
-                                   ["--ray-address", "auto", "--executor", "process"], ["--seed", "2", "--seeds", "0-1"],
-                                   ["--executor", "dask"], ["--bootstrap", "5"]])
+                                   ["--ray-address", "auto", "--executor", "process"],
+                                   ["--seed", "2", "--seeds", "0-1"], ["--executor", "dask"], ["--bootstrap", "5"]])
 def test_cli_eval_refuses_bad_campaign_flags(flags, tmp_path, capsys):
     assert main(["eval", "--out", str(tmp_path / "x")] + flags) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -337,7 +337,8 @@ def test_time_scaled_wheel_acceleration_includes_the_coupling_terms():
     def rphi(t, h=1e-6):
         s = s_of_t(t)
         sdot = 0.3 + 0.8 * t
-        bp = (steering_from_lambda(_path(lam0, axis, s + h), GEOM) - steering_from_lambda(_path(lam0, axis, s - h), GEOM)) / (2 * h)
+        bp = (steering_from_lambda(_path(lam0, axis, s + h), GEOM)
+              - steering_from_lambda(_path(lam0, axis, s - h), GEOM)) / (2 * h)
         return GEOM.r * wheel_speeds(_path(lam0, axis, s), mu0 + dmu * s, GEOM, beta_rate=bp * sdot)
 
     t, h = 0.5, 1e-4

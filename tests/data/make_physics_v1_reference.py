@@ -27,16 +27,22 @@ for name, tw in (("straight", (0.6, 0, 0)), ("rotate", (0, 0, 1.2)), ("combined"
     poses, twists, betas = [], [], []
     for _ in range(150):
         ph.step()
-        poses.append(ph.chassis_pose()[0]); twists.append(ph.chassis_twist()[0]); betas.append(ph.steering_angles()[0])
-    out[name + "_pose"] = np.array(poses); out[name + "_twist"] = np.array(twists); out[name + "_beta"] = np.array(betas)
+        poses.append(ph.chassis_pose()[0])
+        twists.append(ph.chassis_twist()[0])
+        betas.append(ph.steering_angles()[0])
+    out[name + "_pose"] = np.array(poses)
+    out[name + "_twist"] = np.array(twists)
+    out[name + "_beta"] = np.array(betas)
 # 3: tight circle, stiff spring (x100): steady beta vs motor angles
 stiff = dataclasses.replace(p, steering=dataclasses.replace(p.steering, stiffness=6000.0, damping=6.0))
 ph = AzimutPhysics(stiff, substeps=40)
 b, w = sp(g, (0.0, 1.2, 1.5))
-ph.reset_robot(0, (0, 0, 0), b); ph.set_commands(b[None], w[None])
+ph.reset_robot(0, (0, 0, 0), b)
+ph.set_commands(b[None], w[None])
 for _ in range(100):
     ph.step()
-out["stiff_circle_beta"] = ph.steering_angles()[0]; out["stiff_circle_motor"] = ph.motor_angles()[0]
+out["stiff_circle_beta"] = ph.steering_angles()[0]
+out["stiff_circle_motor"] = ph.motor_angles()[0]
 out["stiff_circle_twist"] = ph.chassis_twist()[0]
 # 4: slow motion, sinusoidal steering commands at 0.1 m/s
 ph = AzimutPhysics(p)
@@ -46,9 +52,14 @@ betas, motors, cmds = [], [], []
 for j in range(200):
     t = j * 0.02
     bc = b0 + 0.4 * np.sin(2 * np.pi * 0.5 * t + np.arange(4))
-    ph.set_commands(bc[None], w0[None]); ph.step()
-    betas.append(ph.steering_angles()[0]); motors.append(ph.motor_angles()[0]); cmds.append(bc)
-out["slow_beta"] = np.array(betas); out["slow_motor"] = np.array(motors); out["slow_cmd"] = np.array(cmds)
+    ph.set_commands(bc[None], w0[None])
+    ph.step()
+    betas.append(ph.steering_angles()[0])
+    motors.append(ph.motor_angles()[0])
+    cmds.append(bc)
+out["slow_beta"] = np.array(betas)
+out["slow_motor"] = np.array(motors)
+out["slow_cmd"] = np.array(cmds)
 np.savez_compressed("tests/data/physics_v1_reference.npz", **out)
 print({k: v.shape for k, v in out.items()})
 print(out["straight_twist"][-1], out["rotate_twist"][-1], out["combined_pose"][-1])

@@ -1,5 +1,7 @@
 """RobotGeometry validation and the H representation (§2): closed forms, round trips, properties."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
@@ -60,7 +62,7 @@ def test_geometry_rejects_impossible(kwargs, match):
 
 def test_geometry_is_frozen():
     g = RobotGeometry.azimut3()
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         g.l = np.ones(4)
     with pytest.raises(ValueError):
         g.alpha[0] = 1.0  # read-only arrays

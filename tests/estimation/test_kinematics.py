@@ -25,7 +25,8 @@ from estimation.hrep import chart_params, lambda_from_chart
 
 G = RobotGeometry.azimut3()
 GEOMS = [G, RobotGeometry.regular(3, b=0.05), RobotGeometry.regular(6, l=0.5, b=-0.03),
-         RobotGeometry(alpha=[0.1, 2.0, 3.5, 4.4, 5.5], l=[0.3, 0.5, 0.4, 0.35, 0.6], b=0.02, r=[0.1, 0.1, 0.12, 0.1, 0.1])]
+         RobotGeometry(alpha=[0.1, 2.0, 3.5, 4.4, 5.5], l=[0.3, 0.5, 0.4, 0.35, 0.6], b=0.02,
+                       r=[0.1, 0.1, 0.12, 0.1, 0.1])]
 unit = arrays(np.float64, 3, elements=st.floats(-1, 1)).filter(lambda v: np.linalg.norm(v) > 1e-2).map(normalize)
 
 
@@ -178,12 +179,14 @@ def test_path_derivatives_match_finite_differences():
     dlam = (lam_at(s0 + h) - lam_at(s0 - h)) / (2 * h)
     ddlam = (lam_at(s0 + h) - 2 * lam + lam_at(s0 - h)) / h**2
     d1, d2 = steering_path_derivatives(lam, dlam, ddlam, G)
-    b = lambda s: np.unwrap(np.stack([steering_from_lambda(lam_at(x), G) for x in s]), period=np.pi, axis=0)
+    def b(s):
+        return np.unwrap(np.stack([steering_from_lambda(lam_at(x), G) for x in s]), period=np.pi, axis=0)
     bb = b([s0 - h, s0, s0 + h])
     np.testing.assert_allclose(d1, (bb[2] - bb[0]) / (2 * h), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(d2, (bb[2] - 2 * bb[1] + bb[0]) / h**2, rtol=1e-3, atol=1e-3)
     # φ̇ along the path with μ(s) = 1 + s: r φ̇(s) = μ c(λ(s)) − b β′(s); its derivative
-    mu = lambda s: 1 + s
+    def mu(s):
+        return 1 + s
     def rphi(s):
         l = lam_at(s)
         dl = (lam_at(s + 1e-6) - lam_at(s - 1e-6)) / 2e-6

@@ -23,9 +23,11 @@ def test_learning_curve_stats_over_seeds():
     assert learning_curve_stats([]) == []
 
 
-@pytest.mark.parametrize("flags", [["--seeds", "0,0"], ["--seeds", "0-1", "--seed", "3"], ["--seeds", "1", "--workers", "0"],
+@pytest.mark.parametrize("flags", [["--seeds", "0,0"], ["--seeds", "0-1", "--seed", "3"],
+                                   ["--seeds", "1", "--workers", "0"],
                                    ["--seeds", "0-1", "--ray-address", "auto", "--executor", "process"],
-                                   ["--workers", "2"], ["--executor", "ray"], ["--ray-address", "auto"], ["--retries", "3"]])
+                                   ["--workers", "2"], ["--executor", "ray"], ["--ray-address", "auto"],
+                                   ["--retries", "3"]])
 def test_train_refuses_bad_seed_flags(flags, tmp_path, capsys):
     assert main(["train", "--out", str(tmp_path / "o")] + flags) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -29,7 +29,8 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
         {"learning_starts": 64, "batch_size": 32, "gradient_steps": 1, "buffer_size": 2000}
     out = tmp_path / f"{algo}_{action}"
     record = train(algo, action, "random", seed=0, steps=256, out=out, num_robots=4, eval_tracks=("crab",),
-                   eval_every=128, checkpoint_every=128, overrides=overrides, quiet=True, env_kwargs=SHORT, eval_max_time=1.0)
+                   eval_every=128, checkpoint_every=128, overrides=overrides, quiet=True, env_kwargs=SHORT,
+                   eval_max_time=1.0)
     assert record["num_timesteps"] >= 256 and record["steps_per_s_in_learn"] > 0
     for name in ("model.zip", "vecnormalize.pkl", "run.json", "evaluations.json"):
         assert (out / name).is_file(), name
@@ -133,7 +134,8 @@ def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
 
     out = tmp_path / "run"
     train("ppo", "raw", "crab", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,
-          checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, quiet=True, env_kwargs=SHORT, eval_max_time=1.0)
+          checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1}, quiet=True,
+          env_kwargs=SHORT, eval_max_time=1.0)
     report = tmp_path / "eval"
     rc = main(["eval", "--controllers", f"icr,ppo:{out / 'model.zip'}", "--tracks", "crab", "--max-time", "0.5",
                "--no-plots", "--out", str(report)])

@@ -76,7 +76,8 @@ def check_hyperparams(algo: str, action_key: str, overrides: dict[str, Any]) -> 
             if key in _RANGES:
                 lo, hi, lo_inc = _RANGES[key]
                 if (value < lo if lo_inc else value <= lo) or (hi is not None and value > hi):
-                    span = f"{'[' if lo_inc else '('}{lo}, {hi if hi is not None else 'inf'}{']' if hi is not None else ')'}"
+                    span = (f"{'[' if lo_inc else '('}{lo}, "
+                            f"{hi if hi is not None else 'inf'}{']' if hi is not None else ')'}")
                     raise ValueError(f"hyperparameter {key!r} must be in {span}, got {value!r}")
         elif isinstance(default, bool) and not isinstance(value, bool):
             raise ValueError(f"hyperparameter {key!r} must be true or false, got {value!r}")
