@@ -62,7 +62,8 @@ class ActuatorLimits:
         wheel_accel_max: propulsion set-point acceleration limit |φ̈_ref| [rad/s²].
         wheel_torque_max: propulsion motor torque limit [N·m].
         steer_min, steer_max: steering range ]β_min, β_max] [rad] (hard stops); β_max scales the
-            steering action.
+            steering action. ``−inf``, ``+inf``: unlimited steering (no stops; the steering action
+            then scales by π, :attr:`steer_action_scale`).
     """
 
     steer_rate_max: float = 4.0
@@ -77,10 +78,25 @@ class ActuatorLimits:
     def __post_init__(self) -> None:
         _check_positive(self, "steer_rate_max", "steer_accel_max", "steer_torque_max", "wheel_speed_max",
                         "wheel_accel_max", "wheel_torque_max")
+        if self.unlimited_steering:
+            return
         if not (math.isfinite(self.steer_min) and math.isfinite(self.steer_max)
                 and self.steer_min < 0 < self.steer_max):
-            raise ValueError(f"ActuatorLimits steering range must satisfy steer_min < 0 < steer_max, got "
-                             f"]{self.steer_min}, {self.steer_max}]")
+            raise ValueError(f"ActuatorLimits steering range must satisfy steer_min < 0 < steer_max (or be −inf, "
+                             f"+inf: unlimited), got ]{self.steer_min}, {self.steer_max}]")
+
+    @property
+    def unlimited_steering(self) -> bool:
+        """No steering stops (``steer_min = −inf``, ``steer_max = +inf``)."""
+        return self.steer_min == -math.inf and self.steer_max == math.inf
+
+    @property
+    def steer_action_range(self) -> tuple[float, float]:
+        """(β_lo, β_hi) [rad] of the steering action: β_cmd = max(a · β_hi, β_lo), a ∈ [−1, 1]; the
+        steering range, or (−π, π) for unlimited steering (every angle once, ±π the same)."""
+        if self.unlimited_steering:
+            return -math.pi, math.pi
+        return float(self.steer_min), float(self.steer_max)
 
 
 @njit(cache=True)
@@ -112,7 +128,8 @@ def setpoints_from_action(action, limits: ActuatorLimits, n: int) -> tuple[np.nd
         raise ValueError(f"action contains NaN or inf: {a}")
     flat = np.ascontiguousarray(np.clip(a, -1.0, 1.0).reshape(-1, 2 * n))
     cmd = np.empty((flat.shape[0], n, 2))
-    _setpoints_batch(flat, n, float(limits.steer_min), float(limits.steer_max), float(limits.wheel_speed_max), cmd)
+    lo, hi = limits.steer_action_range
+    _setpoints_batch(flat, n, lo, hi, float(limits.wheel_speed_max), cmd)
     batch = a.shape[:-1]
     return cmd[..., 0].reshape(batch + (n,)), cmd[..., 1].reshape(batch + (n,))
 
@@ -121,7 +138,9 @@ def action_from_setpoints(beta_cmd, phidot_cmd, limits: ActuatorLimits) -> np.nd
     """(β_cmd [rad], φ̇_cmd [rad/s]), each (..., n) -> normalised float32 action (..., 2n).
 
     The inverse of :func:`setpoints_from_action`; set-points beyond the limits are clipped to
-    [−1, 1]. Steering angles are used as given (wrap them into the steering range first).
+    [−1, 1]. Steering angles are used as given (wrap them into the steering range first); with
+    unlimited steering they are taken modulo 2π into ]−π, π] (the module turns the short way to
+    its set-point).
     """
     beta = np.asarray(beta_cmd, dtype=np.float64)
     phidot = np.asarray(phidot_cmd, dtype=np.float64)
@@ -129,7 +148,9 @@ def action_from_setpoints(beta_cmd, phidot_cmd, limits: ActuatorLimits) -> np.nd
         raise ValueError(f"beta_cmd and phidot_cmd must have the same shape, got {beta.shape} and {phidot.shape}")
     if not (np.all(np.isfinite(beta)) and np.all(np.isfinite(phidot))):
         raise ValueError("set-points contain NaN or inf")
-    a = np.concatenate([beta / limits.steer_max, phidot / limits.wheel_speed_max], axis=-1)
+    if limits.unlimited_steering:
+        beta = math.pi - np.mod(math.pi - beta, 2 * math.pi)
+    a = np.concatenate([beta / limits.steer_action_range[1], phidot / limits.wheel_speed_max], axis=-1)
     return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
@@ -373,8 +394,31 @@ class RobotParams:
                            ("limits", ActuatorLimits), ("sensors", SensorParams)):
             if not isinstance(getattr(self, name), kind):
                 raise TypeError(f"RobotParams.{name} must be {kind.__name__}, got {type(getattr(self, name)).__name__}")
-        if not (np.isclose(g.steer_max, self.limits.steer_max) and np.isclose(g.steer_min, self.limits.steer_min)):
+        if g.unlimited_steering:
+            if not self.limits.unlimited_steering:
+                raise ValueError("RobotParams: the geometry has unlimited steering: limits.steer_min/steer_max must "
+                                 "be -inf/+inf (ActuatorLimits(steer_min=-math.inf, steer_max=math.inf))")
+        elif not (np.isclose(g.steer_max, self.limits.steer_max) and np.isclose(g.steer_min, self.limits.steer_min)):
             raise ValueError("RobotParams: limits.steer_min/steer_max must equal the geometry's steering range")
+
+    @classmethod
+    def from_file(cls, path) -> RobotParams:
+        """The robot of a description file (TOML, schema in ``docs/robots.md``): the ``[geometry]``
+        table and the parameter groups it gives; the groups and keys it leaves out keep their
+        defaults. Raises :class:`estimation.robot_file.RobotFileError` (a ``ValueError``) naming
+        the file, the key and the value."""
+        from azimut_env.robot_file import params_from_file
+
+        return params_from_file(path, cls)
+
+    @classmethod
+    def preset(cls, name: str) -> RobotParams:
+        """A robot shipped with the package, by name (``azimut_env.robot_file.PRESET_NAMES``:
+        ``azimut3`` = ``RobotParams()``, ``swerve``, ``tri``, ``hex``); each is a description file
+        in ``azimut_env/robots/``, read like a user's. ``ValueError`` for an unknown name."""
+        from azimut_env.robot_file import preset_params
+
+        return preset_params(name, cls)
 
     @property
     def n(self) -> int:

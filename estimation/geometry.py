@@ -6,6 +6,14 @@ the propulsion axis (the AZIMUT "sidewise" wheel), whose direction makes ``γ_k 
 X_R. The steering angle β_k is limited to the half-open range ``]β_min, β_max]`` of width π, which
 makes the map ICR -> steering configuration a bijection (§3.1).
 
+**Unlimited steering** (``unlimited_steering=True``, most swerve modules): the module has no stop
+and turns any number of times. β and β + π put the propulsion axis on the same line (the wheel
+then rolls the other way), so a module always takes the one of the two nearer to where it is and
+never has to cross a stop. ``]β_min, β_max]`` is then only the *representative* range in which
+F(λ) is written (the estimators' canonical chart); measured angles may be any real, and the
+distance between a measured angle q and a surface angle β is the difference modulo π,
+:meth:`RobotGeometry.steering_difference`.
+
 Per-wheel vectors used everywhere, eq. (7):
 
 * ``a_k  = (cos α_k, sin α_k, 0)``
@@ -62,6 +70,8 @@ class RobotGeometry:
         r: (n,) wheel radius r_k [m], > 0.
         steer_min: lower steering stop β_min [rad] (excluded from the range).
         steer_max: upper steering stop β_max [rad] (included); β_max − β_min must equal π.
+        unlimited_steering: no steering stops (see the module docstring); ``steer_min``/``steer_max``
+            are then the representative range of F(λ) only.
 
     Scalars for ``l``, ``b``, ``r`` are broadcast to every wheel. Raises ``ValueError`` for n < 3,
     all steering axes on one line, non-finite values, or a steering range not of width π.
@@ -73,6 +83,7 @@ class RobotGeometry:
     r: np.ndarray = 0.08  # type: ignore[assignment]
     steer_min: float = -np.pi / 2
     steer_max: float = np.pi / 2
+    unlimited_steering: bool = False
     # Derived per-wheel vectors (n, 3); filled in __post_init__.
     a: np.ndarray = field(init=False, repr=False)
     a_perp: np.ndarray = field(init=False, repr=False)
@@ -93,6 +104,8 @@ class RobotGeometry:
             raise ValueError(f"RobotGeometry.l must be > 0 (steering axis off the chassis centre), got {l}")
         if np.any(r <= 0):
             raise ValueError(f"RobotGeometry.r must be > 0, got {r}")
+        if not isinstance(self.unlimited_steering, (bool, np.bool_)):
+            raise ValueError(f"RobotGeometry.unlimited_steering must be a bool, got {self.unlimited_steering!r}")
         smin, smax = float(self.steer_min), float(self.steer_max)
         if not (np.isfinite(smin) and np.isfinite(smax)):
             raise ValueError("RobotGeometry steering range must be finite")
@@ -119,7 +132,8 @@ class RobotGeometry:
         derived = dict(a=a, a_perp=a_perp, a_minus_l=a_minus_l, s=s, s_unit=s_unit, axis_xy=axis_xy)
         for arr in derived.values():
             arr.setflags(write=False)
-        for name, value in dict(alpha=alpha, l=l, b=b, r=r, steer_min=smin, steer_max=smax, **derived).items():
+        for name, value in dict(alpha=alpha, l=l, b=b, r=r, steer_min=smin, steer_max=smax,
+                                unlimited_steering=bool(self.unlimited_steering), **derived).items():
             object.__setattr__(self, name, value)
 
     @property
@@ -139,14 +153,60 @@ class RobotGeometry:
         )
 
     @classmethod
-    def regular(cls, n: int, l: float = 0.3, b: float = 0.0, r: float = 0.08) -> RobotGeometry:
+    def regular(cls, n: int, l: float = 0.3, b: float = 0.0, r: float = 0.08,
+                unlimited_steering: bool = False) -> RobotGeometry:
         """n wheels evenly spaced on a circle of radius ``l`` [m], the first at α = 0."""
-        return cls(alpha=2 * np.pi * np.arange(n) / n, l=l, b=b, r=r)
+        return cls(alpha=2 * np.pi * np.arange(n) / n, l=l, b=b, r=r, unlimited_steering=unlimited_steering)
+
+    @classmethod
+    def from_file(cls, path) -> RobotGeometry:
+        """The geometry of a robot description file (TOML; the schema is in ``docs/robots.md`` and
+        :mod:`estimation.robot_file`). Only the ``[geometry]`` table is read into the result; the
+        rest of the file is checked for its structure (unknown tables refused) and left to
+        ``azimut_env.params.RobotParams.from_file``. Raises :class:`~estimation.robot_file.RobotFileError`
+        (a ``ValueError``) naming the file, the key and the value."""
+        from estimation.robot_file import read_robot_file
+
+        return cls.from_description(read_robot_file(path))
+
+    @classmethod
+    def from_description(cls, data: dict) -> RobotGeometry:
+        """The geometry of a parsed robot description (:func:`estimation.robot_file.read_robot_file`)."""
+        from estimation.robot_file import RobotFileError, geometry_kwargs
+
+        kwargs = geometry_kwargs(data)
+        try:
+            return cls(**kwargs)
+        except ValueError as exc:
+            raise RobotFileError(f"robot file {data.get('_source', '<description>')}: [geometry]: {exc}") from None
 
     def wrap_steering(self, beta: np.ndarray) -> np.ndarray:
         """Wrap angles modulo π into the steering range ]β_min, β_max] (β and β+π: same axis)."""
         beta = np.asarray(beta, dtype=np.float64)
         return self.steer_max - np.mod(self.steer_max - beta, np.pi)
+
+    def steering_difference(self, q, beta) -> np.ndarray:
+        """q − β [rad], the joint-space difference the quality metric and the estimators use.
+
+        Limited steering: the plain difference (both angles in the steering range; the wheel
+        cannot cross its stops). Unlimited steering: the difference modulo π, in [−π/2, π/2[
+        (β and β + π are the same propulsion axis, and the module takes the nearer one)."""
+        d = np.asarray(q, dtype=np.float64) - np.asarray(beta, dtype=np.float64)
+        if not self.unlimited_steering:
+            return d
+        return np.mod(d + np.pi / 2, np.pi) - np.pi / 2
+
+    def nearest_steering(self, beta, reference) -> np.ndarray:
+        """The angle of β's propulsion axis that a module at ``reference`` takes [rad].
+
+        Limited steering: β itself (the one representative inside the stops). Unlimited steering:
+        the one of β + kπ nearest to ``reference`` (so a module never turns more than π/2 to
+        reach an axis; the wheel speed changes sign with each π)."""
+        beta = np.asarray(beta, dtype=np.float64)
+        if not self.unlimited_steering:
+            return beta.copy()
+        reference = np.asarray(reference, dtype=np.float64)
+        return reference + (np.mod(beta - reference + np.pi / 2, np.pi) - np.pi / 2)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, RobotGeometry):
@@ -158,8 +218,9 @@ class RobotGeometry:
             and np.array_equal(self.r, other.r)
             and self.steer_min == other.steer_min
             and self.steer_max == other.steer_max
+            and self.unlimited_steering == other.unlimited_steering
         )
 
     def __hash__(self) -> int:
         return hash((self.alpha.tobytes(), self.l.tobytes(), self.b.tobytes(), self.r.tobytes(),
-                     self.steer_min, self.steer_max))
+                     self.steer_min, self.steer_max, self.unlimited_steering))

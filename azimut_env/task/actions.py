@@ -67,7 +67,7 @@ class CommandPath:
 
     def __init__(self, limits: ActuatorLimits, n_robots: int, n: int, latency: int) -> None:
         self.n_robots, self.n = n_robots, n
-        self._lim = (float(limits.steer_min), float(limits.steer_max), float(limits.wheel_speed_max))
+        self._lim = (*limits.steer_action_range, float(limits.wheel_speed_max))
         # command latency: set-points waiting to be applied, oldest first (N, k, n, len(CMD))
         self.fifo = np.zeros((n_robots, latency, n, len(CMD)))
         self._new = np.zeros((n_robots, n, len(CMD)))

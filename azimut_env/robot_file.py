@@ -1,0 +1,166 @@
+"""Robots for the simulator: a description file (:func:`params_from_file`) or a preset by name
+(:func:`preset_params`, :data:`PRESET_NAMES`), both as :class:`~azimut_env.params.RobotParams`.
+
+A preset *is* a description file: ``azimut_env/robots/NAME.toml``, shipped in the package and
+read by the same reader as a user's file. The file format (schema 1) is described in
+``docs/robots.md`` and :mod:`estimation.robot_file`, which reads the ``[geometry]`` table; this
+module reads the parameter tables, one per group of ``RobotParams`` (``[chassis]``,
+``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``, ``[sensors]``), whose
+keys are the fields of the group's dataclass in its units (SI; angles in radians), and the
+top-level ``gravity`` [m/s²]. A group or key the file leaves out keeps the default of
+``RobotParams`` (the AZIMUT-3 stand-in). The steering range of ``[limits]`` is not a key: it
+comes from ``[geometry]`` (``steering``, ``steer_range_deg``); unlimited steering sets
+``steer_min = −inf``, ``steer_max = +inf``.
+
+This module does not import :mod:`azimut_env.params` (which calls it from
+``RobotParams.from_file`` and ``RobotParams.preset``): it reads the groups' classes from the
+fields of the ``RobotParams`` class it is given.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import MISSING, Field, fields, is_dataclass
+from importlib import resources
+from typing import Any
+
+from estimation.geometry import RobotGeometry
+from estimation.robot_file import (
+    PARAMETER_TABLES,
+    RobotFileError,
+    number,
+    parse_robot_text,
+    read_robot_file,
+    where,
+)
+
+__all__ = ["PRESET_NAMES", "DEFAULT_PRESET", "RobotFileError", "params_from_file", "params_from_description",
+           "preset_params", "preset_source", "check_preset_name", "resolve_robot"]
+
+#: the robots shipped with the package (``azimut_env/robots/NAME.toml``)
+PRESET_NAMES = ("azimut3", "swerve", "tri", "hex")
+#: the preset equal to ``RobotParams()``
+DEFAULT_PRESET = "azimut3"
+#: keys of ``[limits]`` that the file may not set (the steering range comes from ``[geometry]``)
+_FROM_GEOMETRY = {"steer_min", "steer_max"}
+
+
+def _default(f: Field) -> Any:
+    return f.default if f.default is not MISSING else (f.default_factory() if f.default_factory is not MISSING
+                                                       else MISSING)
+
+
+def _value(default: Any, value: Any, source: str, key: str) -> Any:
+    """A TOML value converted to the type of the field's default, or :class:`RobotFileError`."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise RobotFileError(f"{where(source, key)} = {value!r}: must be true or false")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise RobotFileError(f"{where(source, key)} = {value!r}: must be an integer")
+        return value
+    if isinstance(default, float):
+        return number(value, source, key)
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise RobotFileError(f"{where(source, key)} = {value!r}: must be a string")
+        return value
+    if isinstance(default, tuple):
+        if not isinstance(value, list):
+            raise RobotFileError(f"{where(source, key)} = {value!r}: must be a list")
+        return tuple(_value(default[0] if default else 0.0, v, source, f"{key}[{j}]") for j, v in enumerate(value))
+    raise RobotFileError(f"{where(source, key)}: this parameter cannot be set from a file")
+
+
+def _group(cls: type, table: Any, source: str, section: str, extra: dict | None = None) -> Any:
+    """An instance of the dataclass ``cls`` from its table (missing keys: the class's defaults)."""
+    if not isinstance(table, dict):
+        raise RobotFileError(f"{where(source, f'[{section}]')} = {table!r}: must be a table")
+    known = {f.name: f for f in fields(cls) if f.init}
+    kwargs: dict[str, Any] = {}
+    for key, value in table.items():
+        if key in _FROM_GEOMETRY and section == "limits":
+            raise RobotFileError(f"{where(source, f'[{section}].{key}')}: the steering range is set in [geometry] "
+                                 "(steering = 'limited' with steer_range_deg, or 'unlimited')")
+        if key not in known:
+            names = ", ".join(k for k in known if not (section == "limits" and k in _FROM_GEOMETRY))
+            raise RobotFileError(f"{where(source, f'[{section}]')}: unknown key {key!r} (known: {names})")
+        default = _default(known[key])
+        if is_dataclass(default):
+            kwargs[key] = _group(type(default), value, source, f"{section}.{key}")
+        else:
+            kwargs[key] = _value(default, value, source, f"[{section}].{key}")
+    kwargs.update(extra or {})
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise RobotFileError(f"{where(source, f'[{section}]')}: {exc}") from None
+
+
+def params_from_description(data: dict, params_cls: type) -> Any:
+    """The ``params_cls`` (``RobotParams``) of a parsed description
+    (:func:`estimation.robot_file.read_robot_file`)."""
+    source = data.get("_source", "<description>")
+    geometry = RobotGeometry.from_description(data)
+    groups = {f.name: f for f in fields(params_cls) if f.name not in ("geometry", "gravity")}
+    missing = sorted(set(groups) - set(PARAMETER_TABLES))
+    if missing:  # a group added to RobotParams without its table in estimation.robot_file
+        raise RuntimeError(f"RobotParams groups {missing} are not tables of the robot file format "
+                           "(add them to estimation.robot_file.PARAMETER_TABLES)")
+    steer = (-math.inf, math.inf) if geometry.unlimited_steering else (geometry.steer_min, geometry.steer_max)
+    kwargs: dict[str, Any] = {"geometry": geometry}
+    for name, f in groups.items():
+        extra = dict(steer_min=steer[0], steer_max=steer[1]) if name == "limits" else None
+        if name in data or extra:
+            kwargs[name] = _group(type(_default(f)), data.get(name, {}), source, name, extra)
+    if "gravity" in data:
+        kwargs["gravity"] = number(data["gravity"], source, "gravity")
+    try:
+        return params_cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise RobotFileError(f"robot file {source}: {exc}") from None
+
+
+def params_from_file(path, params_cls: type) -> Any:
+    """:func:`estimation.robot_file.read_robot_file` then :func:`params_from_description`."""
+    return params_from_description(read_robot_file(path), params_cls)
+
+
+def check_preset_name(name: Any) -> str:
+    """``name`` if it is a preset's, else ``ValueError`` listing the presets."""
+    if not isinstance(name, str) or name not in PRESET_NAMES:
+        raise ValueError(f"unknown robot {name!r}; choose from {', '.join(PRESET_NAMES)} (or give a robot file)")
+    return name
+
+
+def preset_source(name: str) -> str:
+    """The text of preset ``name``'s description file."""
+    check_preset_name(name)
+    return resources.files("azimut_env").joinpath("robots", f"{name}.toml").read_text(encoding="utf-8")
+
+
+@functools.cache
+def _preset(name: str, params_cls: type) -> Any:
+    data = parse_robot_text(preset_source(name), f"preset {name!r} (azimut_env/robots/{name}.toml)")
+    return params_from_description(data, params_cls)
+
+
+def preset_params(name: str, params_cls: type) -> Any:
+    """The ``params_cls`` (``RobotParams``) of preset ``name`` (read once, then cached: the
+    parameters are frozen)."""
+    return _preset(check_preset_name(name), params_cls)
+
+
+def resolve_robot(robot: str | None, params: Any, params_cls: type) -> Any:
+    """The robot of an entry point that takes both ``robot`` (a preset name) and ``params``:
+    one of them (``ValueError`` if both are given: a preset with parameters of its own is two
+    robots), or None when neither is."""
+    if robot is None:
+        return params
+    check_preset_name(robot)
+    if params is not None:
+        raise ValueError(f"robot={robot!r} and params= both given: choose one (the preset's parameters are "
+                         f"RobotParams.preset({robot!r}); change them with dataclasses.replace)")
+    return preset_params(robot, params_cls)

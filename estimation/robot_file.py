@@ -1,0 +1,242 @@
+"""Robot description files: a robot's geometry (and, for the simulator, its physical parameters)
+in one TOML file.
+
+The schema (``docs/robots.md`` shows it whole, with examples)::
+
+    schema = 1                       # the file format's version (required)
+    name = "swerve"                  # a label (optional)
+    description = "..."              # free text (optional)
+    sources = ["...", "..."]         # where the values come from (optional)
+
+    [geometry]                       # required
+    steering = "unlimited"           # "limited" (hard stops, the default) or "unlimited"
+    steer_range_deg = [-90.0, 90.0]  # limited only: ]β_min, β_max] [deg], width 180 (default ±90)
+    b_m = 0.0                        # sidewise offset b of every module [m] (default 0)
+    r_m = 0.0502                     # wheel radius r of every module [m] (required here or per module)
+
+    [[geometry.modules]]             # one table per module, n >= 3
+    name = "front_left"              # optional, unique (log readers map joint names to it)
+    x_m = 0.308                      # steering axis A_k in the chassis frame [m] ...
+    y_m = 0.308
+    # ... or alpha_deg = 45.0 and l_m = 0.30 (the paper's α_k [deg] and l_k [m])
+    # b_m, r_m: this module's own values (override the [geometry] ones)
+
+Further tables hold the simulator's parameter groups (``azimut_env.params``: the table names in
+:data:`PARAMETER_TABLES`, their keys the fields of the group's dataclass in SI units) and a
+top-level ``gravity`` [m/s²]; :func:`read_robot_file` checks that no other key is present, and
+``azimut_env.params.RobotParams.from_file`` reads them. This module reads the geometry
+(:func:`geometry_kwargs`, which ``RobotGeometry.from_file`` and ``RobotGeometry.from_description``
+call; this module does not import the geometry, so that the geometry can import it).
+
+Every refusal is a :class:`RobotFileError` (a ``ValueError``) whose message names the file, the
+key (``[geometry.modules][2].x_m``) and the value.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10: the tomli backport (a core dependency there)
+    import tomli as tomllib
+
+__all__ = ["SCHEMA_VERSION", "PARAMETER_TABLES", "TOP_LEVEL_KEYS", "RobotFileError", "read_robot_file",
+           "check_description", "parse_robot_text", "geometry_kwargs", "module_names", "number", "where"]
+
+#: the version of the file format this code reads (the ``schema`` key)
+SCHEMA_VERSION = 1
+#: the tables of the simulator's parameter groups (the fields of ``azimut_env.params.RobotParams``
+#: other than ``geometry`` and ``gravity``); a test checks the two lists agree
+PARAMETER_TABLES = ("chassis", "steering", "steer_motor", "wheel", "tire", "limits", "sensors")
+#: the top-level keys that are not tables
+TOP_LEVEL_KEYS = ("schema", "name", "description", "sources", "gravity")
+
+_GEOMETRY_KEYS = ("steering", "steer_range_deg", "b_m", "r_m", "modules")
+_MODULE_KEYS = ("name", "x_m", "y_m", "alpha_deg", "l_m", "b_m", "r_m")
+
+
+class RobotFileError(ValueError):
+    """A robot description file that cannot be used; the message names the file, key and value."""
+
+
+def where(source: str, key: str) -> str:
+    """``"robot file SOURCE: KEY"``, the prefix of every message about a key of a file."""
+    return f"robot file {source}: {key}"
+
+
+def number(value: Any, source: str, key: str) -> float:
+    """A finite TOML number (int or float, not bool) as a float, else :class:`RobotFileError`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RobotFileError(f"{where(source, key)} = {value!r}: must be a number")
+    if not math.isfinite(value):
+        raise RobotFileError(f"{where(source, key)} = {value!r}: must be finite")
+    return float(value)
+
+
+def _check_keys(table: Any, allowed: tuple[str, ...], source: str, key: str) -> dict:
+    if not isinstance(table, dict):
+        raise RobotFileError(f"{where(source, key)} = {table!r}: must be a table")
+    unknown = [k for k in table if k not in allowed]
+    if unknown:
+        raise RobotFileError(f"{where(source, key)}: unknown key {unknown[0]!r} (known: {', '.join(allowed)})")
+    return table
+
+
+def read_robot_file(path) -> dict:
+    """Parse and check the structure of a robot description file: TOML, ``schema`` =
+    :data:`SCHEMA_VERSION`, only the known top-level keys and tables (:data:`TOP_LEVEL_KEYS`,
+    ``geometry``, :data:`PARAMETER_TABLES`), a ``[geometry]`` table. Returns the parsed dict with
+    the file's path as a string under ``"_source"``. The tables' contents are checked by the
+    readers of each part (:func:`geometry_from_description`, ``RobotParams.from_file``)."""
+    p = Path(path)
+    source = str(path)
+    try:
+        with p.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise RobotFileError(f"robot file {source}: no such file") from None
+    except IsADirectoryError:
+        raise RobotFileError(f"robot file {source}: is a directory, not a file") from None
+    except OSError as exc:
+        raise RobotFileError(f"robot file {source}: cannot be read ({exc.strerror or exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotFileError(f"robot file {source}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise RobotFileError(f"robot file {source}: not UTF-8 text ({exc.reason})") from None
+    return check_description(data, source)
+
+
+def parse_robot_text(text: str, source: str) -> dict:
+    """:func:`read_robot_file` on the text of a description (``source`` names it in messages)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotFileError(f"robot file {source}: not valid TOML ({exc})") from None
+    return check_description(data, source)
+
+
+def check_description(data: dict, source: str) -> dict:
+    """The structural checks of :func:`read_robot_file` on an already parsed dict."""
+    allowed = TOP_LEVEL_KEYS + ("geometry",) + PARAMETER_TABLES
+    unknown = [k for k in data if k not in allowed]
+    if unknown:
+        raise RobotFileError(f"robot file {source}: unknown key {unknown[0]!r} (known: {', '.join(allowed)})")
+    if "schema" not in data:
+        raise RobotFileError(f"robot file {source}: missing key 'schema' (this reader reads schema = {SCHEMA_VERSION})")
+    if isinstance(data["schema"], bool) or data["schema"] != SCHEMA_VERSION:
+        raise RobotFileError(f"{where(source, 'schema')} = {data['schema']!r}: this reader reads schema = "
+                             f"{SCHEMA_VERSION}")
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise RobotFileError(f"{where(source, key)} = {data[key]!r}: must be a string")
+    sources = data.get("sources", [])
+    if not (isinstance(sources, list) and all(isinstance(x, str) for x in sources)):
+        raise RobotFileError(f"{where(source, 'sources')} = {data['sources']!r}: must be a list of strings")
+    if "gravity" in data and not number(data["gravity"], source, "gravity") > 0:
+        raise RobotFileError(f"{where(source, 'gravity')} = {data['gravity']!r}: must be > 0 [m/s²]")
+    if "geometry" not in data:
+        raise RobotFileError(f"robot file {source}: missing table [geometry]")
+    for key in ("geometry",) + PARAMETER_TABLES:
+        if key in data and not isinstance(data[key], dict):
+            raise RobotFileError(f"{where(source, key)} = {data[key]!r}: must be a table ([{key}])")
+    out = dict(data)
+    out["_source"] = source
+    return out
+
+
+def _module_axis(mod: dict, source: str, key: str) -> tuple[float, float]:
+    """(α [rad], l [m]) of one module table: from (x_m, y_m) or (alpha_deg, l_m)."""
+    cart = [k for k in ("x_m", "y_m") if k in mod]
+    polar = [k for k in ("alpha_deg", "l_m") if k in mod]
+    if cart and polar:
+        raise RobotFileError(f"{where(source, key)}: give the steering axis as x_m, y_m or as alpha_deg, l_m, "
+                             f"not both (got {', '.join(cart + polar)})")
+    if len(cart) == 2:
+        x, y = number(mod["x_m"], source, f"{key}.x_m"), number(mod["y_m"], source, f"{key}.y_m")
+        if x == 0.0 and y == 0.0:
+            raise RobotFileError(f"{where(source, key)}: x_m = 0, y_m = 0: a steering axis at the chassis centre "
+                                 "(l = 0) is not supported")
+        return math.atan2(y, x), math.hypot(x, y)
+    if len(polar) == 2:
+        alpha = number(mod["alpha_deg"], source, f"{key}.alpha_deg")
+        l = number(mod["l_m"], source, f"{key}.l_m")
+        if l <= 0:
+            raise RobotFileError(f"{where(source, key + '.l_m')} = {mod['l_m']!r}: must be > 0 [m]")
+        return float(np.deg2rad(alpha)), l
+    have = cart + polar
+    raise RobotFileError(f"{where(source, key)}: the steering axis needs x_m and y_m, or alpha_deg and l_m"
+                         + (f" (got only {have[0]})" if have else ""))
+
+
+def geometry_kwargs(data: dict, source: str | None = None) -> dict:
+    """The ``RobotGeometry`` keyword arguments of a parsed description (:func:`read_robot_file`):
+    alpha, l, b, r (n,) arrays, steer_min, steer_max [rad] and unlimited_steering."""
+    source = source if source is not None else data.get("_source", "<description>")
+    geo = _check_keys(data.get("geometry"), _GEOMETRY_KEYS, source, "[geometry]")
+    steering = geo.get("steering", "limited")
+    if steering not in ("limited", "unlimited"):
+        raise RobotFileError(f"{where(source, '[geometry].steering')} = {steering!r}: must be 'limited' or 'unlimited'")
+    unlimited = steering == "unlimited"
+    smin, smax = -np.pi / 2, np.pi / 2
+    if "steer_range_deg" in geo:
+        rng = geo["steer_range_deg"]
+        key = "[geometry].steer_range_deg"
+        if unlimited:
+            raise RobotFileError(f"{where(source, key)} = {rng!r}: unlimited steering has no range (remove the key, "
+                                 "or set steering = 'limited')")
+        if not (isinstance(rng, list) and len(rng) == 2):
+            raise RobotFileError(f"{where(source, key)} = {rng!r}: must be [min, max] in degrees")
+        lo, hi = (number(v, source, f"{key}[{j}]") for j, v in enumerate(rng))
+        if not (lo < 0 < hi) or not math.isclose(hi - lo, 180.0, rel_tol=0, abs_tol=1e-9):
+            raise RobotFileError(f"{where(source, key)} = {rng!r}: must hold 0 inside and span 180 degrees "
+                                 "(]β_min, β_max] of width π, the range where the ICR -> steering map is a bijection)")
+        smin, smax = float(np.deg2rad(lo)), float(np.deg2rad(hi))
+    b_default = number(geo["b_m"], source, "[geometry].b_m") if "b_m" in geo else 0.0
+    r_default = number(geo["r_m"], source, "[geometry].r_m") if "r_m" in geo else None
+    if r_default is not None and r_default <= 0:
+        raise RobotFileError(f"{where(source, '[geometry].r_m')} = {geo['r_m']!r}: must be > 0 [m]")
+    mods = geo.get("modules")
+    if not isinstance(mods, list) or not mods:
+        raise RobotFileError(f"robot file {source}: [geometry] needs its modules ([[geometry.modules]] tables, "
+                             "one per module)")
+    if len(mods) < 3:
+        raise RobotFileError(f"{where(source, '[[geometry.modules]]')}: {len(mods)} module(s); a robot needs n >= 3 "
+                             "steerable wheels")
+    alpha, l, b, r, names = [], [], [], [], []
+    for k, mod in enumerate(mods):
+        key = f"[geometry.modules][{k}]"
+        _check_keys(mod, _MODULE_KEYS, source, key)
+        a_k, l_k = _module_axis(mod, source, key)
+        b_k = number(mod["b_m"], source, f"{key}.b_m") if "b_m" in mod else b_default
+        if "r_m" in mod:
+            r_k = number(mod["r_m"], source, f"{key}.r_m")
+            if r_k <= 0:
+                raise RobotFileError(f"{where(source, key + '.r_m')} = {mod['r_m']!r}: must be > 0 [m]")
+        elif r_default is not None:
+            r_k = r_default
+        else:
+            raise RobotFileError(f"{where(source, key)}: no wheel radius (r_m here or in [geometry])")
+        if "name" in mod:
+            if not isinstance(mod["name"], str) or not mod["name"]:
+                raise RobotFileError(f"{where(source, key + '.name')} = {mod['name']!r}: must be a non-empty string")
+            if mod["name"] in names:
+                raise RobotFileError(f"{where(source, key + '.name')} = {mod['name']!r}: two modules have this name")
+            names.append(mod["name"])
+        alpha.append(a_k)
+        l.append(l_k)
+        b.append(b_k)
+        r.append(r_k)
+    return dict(alpha=np.array(alpha), l=np.array(l), b=np.array(b), r=np.array(r), steer_min=smin, steer_max=smax,
+                unlimited_steering=unlimited)
+
+
+def module_names(data: dict) -> tuple[str, ...]:
+    """The modules' names of a parsed description, in module order (``module_k`` where unnamed)."""
+    mods = data.get("geometry", {}).get("modules", [])
+    return tuple(m.get("name", f"module_{k}") if isinstance(m, dict) else f"module_{k}" for k, m in enumerate(mods))
