@@ -29,6 +29,7 @@ Controller interface (stable names, on ``env.unwrapped``):
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -184,7 +185,11 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     * ``control_period``: seconds per step (default 0.02). ``substeps``: physics substeps per step
       (default 8: a 2.5 ms substep). ``solver_iterations``: pymunk solver iterations per substep
       (default 20; 10 gives the same motion to ~1e-8 and runs ~15% faster, see ``AzimutPhysics``).
-    * ``params``: :class:`~azimut_env.params.RobotParams`. ``sensors``: ``SensorParams`` or
+    * ``robot``: a preset by name (``"azimut3"``, the default robot; ``"swerve"``, four coaxial
+      modules with unlimited steering; ``"tri"``; ``"hex"``: ``docs/robots.md``) or the path of a
+      robot description file (``"my_robot.toml"``), or ``params``:
+      :class:`~azimut_env.params.RobotParams` (e.g. ``RobotParams.preset("swerve")`` changed with
+      ``dataclasses.replace``); not both. ``sensors``: ``SensorParams`` or
       ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
       standard deviations (0: noise-free, quantisation kept).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering
@@ -232,12 +237,13 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
     _robots = 0  # the controller interface reads row 0 of the task's arrays
 
-    def __init__(self, track: str | Track = "paper", *, params: RobotParams | None = None,
+    def __init__(self, track: str | Track = "paper", *, robot: str | os.PathLike | None = None,
+                 params: RobotParams | None = None,
                  sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
                  render_mode: str | None = None, **config: Any) -> None:
         # **config: the TaskConfig fields (see "Arguments"; __signature__ below spells them out)
-        self._build(1, track, obstacles, render_mode, dict(params=params, sensors=sensors, noise_scale=noise_scale,
-                                                             **config))
+        self._build(1, track, obstacles, render_mode, dict(robot=robot, params=params, sensors=sensors,
+                                                             noise_scale=noise_scale, **config))
         self.action_space = self._single_action_space
         self.observation_space = self._single_observation_space
         self._done_error: str | None = None

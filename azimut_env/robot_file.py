@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import MISSING, Field, fields, is_dataclass
 from importlib import resources
 from typing import Any
@@ -153,14 +154,20 @@ def preset_params(name: str, params_cls: type) -> Any:
     return _preset(check_preset_name(name), params_cls)
 
 
-def resolve_robot(robot: str | None, params: Any, params_cls: type) -> Any:
-    """The robot of an entry point that takes both ``robot`` (a preset name) and ``params``:
-    one of them (``ValueError`` if both are given: a preset with parameters of its own is two
-    robots), or None when neither is."""
+def resolve_robot(robot: Any, params: Any, params_cls: type) -> Any:
+    """The robot of an entry point that takes both ``robot`` and ``params``: one of them
+    (``ValueError`` if both are given: a preset with parameters of its own is two robots), or
+    None when neither is. ``robot`` is a preset's name or the path of a description file
+    (a ``str`` ending in ``.toml``, or an ``os.PathLike``): a plain string, so it goes through
+    JSON (campaign keys, ``run.json``) as it is."""
     if robot is None:
         return params
-    check_preset_name(robot)
+    is_file = isinstance(robot, os.PathLike) or (isinstance(robot, str) and robot.endswith(".toml"))
+    if not is_file:
+        if not isinstance(robot, str) or robot not in PRESET_NAMES:
+            raise ValueError(f"unknown robot {robot!r}; choose from {', '.join(PRESET_NAMES)} or give the path of a "
+                             ".toml robot file")
     if params is not None:
-        raise ValueError(f"robot={robot!r} and params= both given: choose one (the preset's parameters are "
-                         f"RobotParams.preset({robot!r}); change them with dataclasses.replace)")
-    return preset_params(robot, params_cls)
+        raise ValueError(f"robot={robot!r} and params= both given: choose one (start from RobotParams.preset(...) or "
+                         "RobotParams.from_file(...) and change it with dataclasses.replace)")
+    return params_from_file(robot, params_cls) if is_file else preset_params(robot, params_cls)

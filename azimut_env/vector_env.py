@@ -17,6 +17,7 @@ with each other.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -105,7 +106,8 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50, "autoreset_mode": AutoresetMode.NEXT_STEP}
     _robots = slice(None)  # the controller interface reads the task's arrays over all robots
 
-    def __init__(self, num_envs: int = 1, track: str | Track = "paper", *, params: RobotParams | None = None,
+    def __init__(self, num_envs: int = 1, track: str | Track = "paper", *, robot: str | os.PathLike | None = None,
+                 params: RobotParams | None = None,
                  sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
                  render_mode: str | None = None, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
@@ -119,7 +121,7 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
             autoreset_mode = AutoresetMode(autoreset_mode)
         except (ValueError, TypeError):
             raise ValueError(f"autoreset_mode must be an AutoresetMode, got {autoreset_mode!r}") from None
-        self._build(num_envs, track, obstacles, render_mode, dict(params=params, sensors=sensors,
+        self._build(num_envs, track, obstacles, render_mode, dict(robot=robot, params=params, sensors=sensors,
                                                                    noise_scale=noise_scale, **config))
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)

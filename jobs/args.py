@@ -16,7 +16,8 @@ from collections.abc import Callable, Sequence
 
 from azimut_env.validation import check_range
 
-__all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "require_module"]
+__all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "require_module",
+           "arg_robot", "arg_robot_file", "add_robot_arguments", "robot_params", "robot_env_kwargs", "robot_label"]
 
 
 def arg_int(min_value: int | None = None, max_value: int | None = None) -> Callable[[str], int]:
@@ -168,3 +169,64 @@ def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
     return convert
 
 
+
+
+def arg_robot(text: str) -> str:
+    """``type=`` of ``--robot``: a preset's name (``azimut_env.robot_file.PRESET_NAMES``)."""
+    from azimut_env.robot_file import check_preset_name
+
+    try:
+        return check_preset_name(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def arg_robot_file(text: str) -> str:
+    """``type=`` of ``--robot-file``: a robot description file, read and checked now (every
+    refusal of ``RobotParams.from_file``: one line naming the file, the key and the value).
+    Returns the path as given."""
+    from azimut_env.params import RobotParams
+
+    try:
+        RobotParams.from_file(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e).splitlines()[0]) from None
+    return text
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--robot NAME`` and ``--robot-file PATH`` (exclusive: one robot per run)."""
+    from azimut_env.robot_file import PRESET_NAMES
+
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--robot", type=arg_robot, default=None, metavar="NAME",
+                       help=f"the robot, a preset among {', '.join(PRESET_NAMES)} (default azimut3, the AZIMUT-3 "
+                            "stand-in; docs/robots.md)")
+    group.add_argument("--robot-file", type=arg_robot_file, default=None, metavar="PATH",
+                       help="the robot, from a description file (TOML, schema in docs/robots.md)")
+
+
+def robot_params(args: argparse.Namespace):
+    """The ``RobotParams`` of ``--robot``/``--robot-file``, or None for the default robot."""
+    from azimut_env.params import RobotParams
+
+    if getattr(args, "robot_file", None):
+        return RobotParams.from_file(args.robot_file)
+    if getattr(args, "robot", None):
+        return RobotParams.preset(args.robot)
+    return None
+
+
+def robot_env_kwargs(robot: str | None = None, robot_file: str | None = None) -> dict:
+    """The env keyword arguments of a robot given by preset name or file path (empty for the
+    default): ``{"robot": name}`` or ``{"robot": absolute path}``, plain strings (JSON-safe)."""
+    if robot_file:
+        return {"robot": os.path.abspath(robot_file)}
+    return {"robot": robot} if robot else {}
+
+
+def robot_label(args: argparse.Namespace) -> str:
+    """What the report says the robot is: the preset's name, the file, or azimut3."""
+    if getattr(args, "robot_file", None):
+        return f"file {args.robot_file}"
+    return getattr(args, "robot", None) or "azimut3"

@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from azimut_env.tracks import TRACK_NAMES
-from jobs.args import arg_choice_list, arg_int
+from jobs.args import add_robot_arguments, arg_choice_list, arg_int, robot_label
 
 __all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
            "add_arguments", "run"]
@@ -64,7 +64,7 @@ ACTION_BENCH = {"raw": None, "residual": "residual", "icr-rate": "icr_rate", "ic
 
 
 def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, track: str = "random",
-                            seed: int = 0) -> dict[str, float]:
+                            seed: int = 0, robot_kwargs: dict | None = None) -> dict[str, float]:
     """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
     same-step autoresets), with the time per control step split into the policy-action ->
     controller-target stage (path followers, target shaping), the batched ICR controller, the
@@ -73,7 +73,8 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
 
     from azimut_env.vector_env import AzimutVectorEnv
 
-    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP)
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP,
+                           **(robot_kwargs or {}))
     kind = ACTION_BENCH[action]
     acc = {"targets": 0.0, "controller": 0.0, "env": 0.0}
     clock = time.perf_counter
@@ -114,14 +115,15 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
             "other_us": (inst - sum(acc.values())) * per, "instrumented_us": inst * per}
 
 
-def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8) -> dict[str, float]:
+def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8,
+              robot_kwargs: dict | None = None) -> dict[str, float]:
     """Single env: steps/s and per-stage microseconds per step. Returns a dict of figures.
 
     The stages are timed inside the end-to-end loop itself (thin timing wrappers on the task's
     stage methods), so the breakdown adds up to the measured total on a shared machine too."""
     from azimut_env.env import AzimutEnv
 
-    env = AzimutEnv(track=track, substeps=substeps)
+    env = AzimutEnv(track=track, substeps=substeps, **(robot_kwargs or {}))
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     actions = rng.uniform(-1, 1, size=(steps, env.action_space.shape[0])).astype(np.float32) * 0.2
@@ -184,7 +186,7 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
 
 def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "paper", seed: int = 0,
                      substeps: int = 8, split: bool = True, solver_iterations: int = 20,
-                     max_episode_steps: int | None = 6000) -> dict[str, float]:
+                     max_episode_steps: int | None = 6000, robot_kwargs: dict | None = None) -> dict[str, float]:
     """``AzimutVectorEnv`` with N = ``num_envs``: robot-steps/s over about ``robot_steps`` robot-steps
     (uninstrumented), the per-robot-step time split (a second, instrumented loop) and the memory
     per robot. ``max_episode_steps`` short enough puts autoresets (timed) in the loop. Returns a
@@ -194,7 +196,7 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
     gc.collect()
     rss0 = _rss_mb()
     venv = AzimutVectorEnv(num_envs=num_envs, track=track, substeps=substeps, solver_iterations=solver_iterations,
-                           max_episode_steps=max_episode_steps)
+                           max_episode_steps=max_episode_steps, **(robot_kwargs or {}))
     venv.reset(seed=seed)
     N = num_envs
     rng = np.random.default_rng(seed)
@@ -321,6 +323,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robots for --action (default 16)")
     parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,
                         help="single-env steps in the end-to-end loop")
+    add_robot_arguments(parser)
     parser.add_argument("--track", default="paper", choices=TRACK_NAMES,
                         help=f"built-in track among {', '.join(TRACK_NAMES)}")
     parser.add_argument("--substeps", type=arg_int(1, 10_000), default=8, help="physics substeps per control step")
@@ -345,13 +348,21 @@ def check_args(args: argparse.Namespace) -> None:
     before minutes of timing are spent (``--convergence`` sweeps its own substep counts)."""
     if not args.convergence:
         from azimut_env.physics.stability import check_substeps
+        from jobs.args import robot_params
 
-        check_substeps(args.substeps)
+        check_substeps(args.substeps, robot_params(args))
     if args.reference:
         import gymnasium as gym
 
         if args.reference not in gym.registry:
             raise ValueError(f"argument --reference: unknown Gymnasium env {args.reference!r} ('' to skip)")
+
+
+def _robot_kwargs(args: argparse.Namespace) -> dict:
+    """The env keyword arguments of ``--robot``/``--robot-file``."""
+    from jobs.args import robot_env_kwargs
+
+    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
 
 
 def run_action_bench(args: argparse.Namespace) -> int:
@@ -363,7 +374,8 @@ def run_action_bench(args: argparse.Namespace) -> int:
           f"within one run.")
     print(f"{'action':<12}{'steps/s':>9}{'targets':>9}{'ctl':>9}{'env':>9}{'other':>9}{'total':>9}")
     for action in args.action:
-        r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed)
+        r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed,
+                                    _robot_kwargs(args))
         print(f"{action:<12}{r['steps_per_s']:>9.0f}{r['targets_us']:>9.1f}{r['controller_us']:>9.1f}"
               f"{r['env_us']:>9.1f}{r['other_us']:>9.1f}{r['instrumented_us']:>9.1f}", flush=True)
     print("(targets: the policy action -> ICR target stage, i.e. the residual's per-robot path followers or the "
@@ -389,9 +401,10 @@ def run(args: argparse.Namespace) -> int:
                   f"{np.degrees(row['final_heading_error']):>12.4f}{np.degrees(row['max_beta_error']):>10.4f}"
                   f"{row['order']:>7.2f}")
         return 0
-    r = bench_env(args.steps, args.track, args.seed, args.substeps)
+    r = bench_env(args.steps, args.track, args.seed, args.substeps, _robot_kwargs(args))
     per = r["us_per_step"]
-    print(f"Azimut-v1 single env, track {args.track}, {int(r['substeps'])} substeps, {int(r['steps'])} steps")
+    print(f"Azimut-v1 single env, robot {robot_label(args)}, track {args.track}, {int(r['substeps'])} substeps, "
+          f"{int(r['steps'])} steps")
     print(f"{'stage':<16}{'us/step':>10}{'share':>8}")
     for key, label in (("physics_us", "physics"), ("estimation_us", "estimation"), ("observation_us", "observation"),
                        ("sensors_us", "  sensors"), ("track_us", "  track"), ("obs_reward_info_us", "  obs+rew+info"),
@@ -411,7 +424,8 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         for N in args.num_envs:
             v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
-                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps)
+                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
+                                 robot_kwargs=_robot_kwargs(args))
             rows.append(v)
             print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
                   f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
@@ -419,7 +433,8 @@ def run(args: argparse.Namespace) -> int:
         print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
               "env above, same run; bar 40000, goal 80000 at N = 64)")
         mb = memory_per_robot(512, args.track, args.substeps)
-        print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env, fresh process)")
+        print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env of the default robot, "
+              "fresh process)")
         print()
         print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
               "control step, all substeps; without obstacles pymunk is read and written once per step and not "

@@ -49,7 +49,7 @@ from azimut_env.tracks import TRACK_NAMES
 from control.episode import MOVING_MU, EpisodeLog, moving_mask, run_episode
 from control.feedforward import FeedForwardController, run_feedforward  # re-exported
 from estimation import estimate_icr, quality, steering_from_lambda
-from jobs.args import arg_float, arg_int, arg_output_path
+from jobs.args import add_robot_arguments, arg_float, arg_int, arg_output_path, robot_label, robot_params
 
 __all__ = ["DRIVERS", "FeedForwardController", "run_feedforward", "stiff_params", "stable_substeps",
            "qua_of_angles", "attribute", "run_phenomenon", "add_arguments", "check_args", "run"]
@@ -138,22 +138,23 @@ def _drive(driver: str, track: str, seed: int, speed: float, params: RobotParams
 
 def run_phenomenon(driver: str = "icr", track: str = "paper", speeds=DEFAULT_SPEEDS, seed: int = 0,
                    stiffness_factor: float = 100.0, sensors=None, substeps: int = 8,
-                   keep_logs: bool = False) -> dict:
-    """Drive ``track`` at each speed scale with the compliant and the stiff steering; returns
-    ``{"rows": [...], "substeps": {...}, "logs": {...}}`` (logs only with ``keep_logs``)."""
+                   keep_logs: bool = False, params: RobotParams | None = None) -> dict:
+    """Drive ``track`` at each speed scale with the robot's own steering (``params``, default
+    ``RobotParams()``) and the stiff one; returns ``{"rows": [...], "substeps": {...}, "logs":
+    {...}}`` (logs only with ``keep_logs``)."""
     if driver not in DRIVERS:
         raise ValueError(f"unknown driver {driver!r}; choose from {', '.join(DRIVERS)}")
     if track not in TRACK_NAMES:
         raise ValueError(f"unknown track {track!r}; choose from {', '.join(TRACK_NAMES)}")
-    base = RobotParams()
+    base = params if params is not None else RobotParams()
     geom = base.geometry
     stiff = stiff_params(base, stiffness_factor)
     stiff_sub = stable_substeps(stiff, start=substeps)
     rows, logs = [], {}
     for speed in speeds:
-        for steering, params, sub in (("compliant", None, substeps),
-                                      (f"stiff x{stiffness_factor:g}", stiff, stiff_sub)):
-            log = _drive(driver, track, seed, float(speed), params, sub, sensors)
+        for steering, run_params, sub in (("compliant", params, substeps),
+                                          (f"stiff x{stiffness_factor:g}", stiff, stiff_sub)):
+            log = _drive(driver, track, seed, float(speed), run_params, sub, sensors)
             row = {"driver": driver, "track": track, "speed_scale": float(speed), "steering": steering,
                    "substeps": sub, **attribute(log, geom)}
             rows.append(row)
@@ -227,6 +228,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speeds", type=arg_float(0.0, 3.0, lo_open=True), nargs="+", default=list(DEFAULT_SPEEDS),
                         help="speed scales of the track's profile (default 0.5 1 1.4)")
     parser.add_argument("--seed", type=arg_int(0), default=0)
+    add_robot_arguments(parser)
     parser.add_argument("--stiffness-factor", type=arg_float(1.0, 1e4), default=100.0,
                         help="spring stiffness factor of the stiff counterfactual (default 100; damper ×sqrt)")
     parser.add_argument("--substeps", type=arg_int(1, 256), default=8, help="physics substeps of the compliant run")
@@ -238,7 +240,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def check_args(args: argparse.Namespace) -> None:
     from azimut_env.physics.stability import check_substeps
 
-    check_substeps(args.substeps)  # the compliant run's physics, before any episode
+    check_substeps(args.substeps, robot_params(args))  # the compliant run's physics, before any episode
     if args.plot:
         try:
             import matplotlib  # noqa: F401
@@ -249,10 +251,11 @@ def check_args(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     res = run_phenomenon(args.driver, args.track, args.speeds, seed=args.seed, stiffness_factor=args.stiffness_factor,
                          sensors="ideal" if args.ideal_sensors else None, substeps=args.substeps,
-                         keep_logs=bool(args.plot))
+                         keep_logs=bool(args.plot), params=robot_params(args))
     rows = res["rows"]
-    print(f"{args.driver} on {args.track}, seed {args.seed}; qua while moving (controller RUNNING, true |μ| > "
-          f"{MOVING_MU} m/s); substeps: compliant {res['substeps']['compliant']}, stiff {res['substeps']['stiff']}")
+    print(f"{args.driver} on {args.track}, robot {robot_label(args)}, seed {args.seed}; qua while moving (controller "
+          f"RUNNING, true |μ| > {MOVING_MU} m/s); substeps: compliant {res['substeps']['compliant']}, "
+          f"stiff {res['substeps']['stiff']}")
     print(table_markdown(rows), end="")
     if args.json:
         with open(args.json, "w") as fh:
@@ -260,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
                        "substeps": res["substeps"], "rows": rows}, fh, indent=2, allow_nan=True)
         print(f"figures written to {args.json}")
     if args.plot:
-        plot_phenomenon(res["logs"], RobotParams().geometry, args.plot)
+        plot_phenomenon(res["logs"], (robot_params(args) or RobotParams()).geometry, args.plot)
         print(f"plot written to {args.plot}")
     failed = [r for r in rows if r["error"] is not None]
     for r in failed:

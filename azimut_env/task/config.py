@@ -1,7 +1,7 @@
 """The settings of the task, built once from the envs' keyword arguments.
 
 Both envs (:class:`~azimut_env.env.AzimutEnv`, :class:`~azimut_env.vector_env.AzimutVectorEnv`)
-take the same keyword arguments: a few that say *what* is simulated (``track``, ``params``,
+take the same keyword arguments: a few that say *what* is simulated (``track``, ``robot``, ``params``,
 ``sensors``, ``noise_scale``, ``obstacles``, ``render_mode``) and every field of
 :class:`TaskConfig` (step timing, reward weights and scales, termination, observation look-ahead,
 latency, pose source). :func:`task_settings` turns them into the validated pair
@@ -119,8 +119,15 @@ class TaskConfig:
                     action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
 
 
-def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float) -> RobotParams:
-    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied."""
+def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float,
+                   robot: str | None = None) -> RobotParams:
+    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied.
+
+    ``robot`` is a preset's name (``RobotParams.preset``); giving it with ``params`` raises
+    ``ValueError`` (a preset with parameters of its own is two robots)."""
+    from azimut_env.robot_file import resolve_robot
+
+    params = resolve_robot(robot, params, RobotParams)
     params = params if params is not None else RobotParams()
     if not isinstance(params, RobotParams):
         raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
@@ -146,17 +153,17 @@ TASK_CONFIG_FIELDS = tuple(f.name for f in fields(TaskConfig))
 
 
 def task_settings(params: RobotParams | None = None, sensors: SensorParams | str | None = None,
-                  noise_scale: float = 1.0, **config: Any) -> tuple[RobotParams, TaskConfig]:
+                  noise_scale: float = 1.0, robot: str | None = None, **config: Any) -> tuple[RobotParams, TaskConfig]:
     """The robot parameters and the task settings of an env from its keyword arguments.
 
-    ``params``, ``sensors`` and ``noise_scale`` go through :func:`resolve_params`; every other
+    ``robot``, ``params``, ``sensors`` and ``noise_scale`` go through :func:`resolve_params`; every other
     keyword must be a :class:`TaskConfig` field (``localisation=None`` means the default
     :class:`~azimut_env.task.localisation.LocalisationParams`). Raises ``TypeError`` naming an unknown
     keyword, and the field checks' ``ValueError``/``TypeError`` otherwise."""
-    params = resolve_params(params, sensors, noise_scale)
+    params = resolve_params(params, sensors, noise_scale, robot)
     unknown = sorted(set(config) - set(TASK_CONFIG_FIELDS))
     if unknown:
-        raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, params, sensors, "
+        raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, robot, params, sensors, "
                         f"noise_scale, obstacles, render_mode and the TaskConfig fields {list(TASK_CONFIG_FIELDS)}")
     config["localisation"] = config.get("localisation") or LocalisationParams()
     return params, TaskConfig(**config)

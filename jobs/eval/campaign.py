@@ -59,10 +59,10 @@ SUMMARY_COLUMNS = [
 
 
 def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
-              dt: float = DEFAULT_DT) -> dict:
+              dt: float = DEFAULT_DT, n_wheels: int = 4) -> dict:
     """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
 
-    1–4 random wheels, an angular impulse of ±(0.2–1.0) N·m·s (as in
+    1–``n_wheels`` random wheels (at most 4), an angular impulse of ±(0.2–1.0) N·m·s (as in
     :func:`jobs.eval.robustness.kick_trial`), at a random step between 20% and 60% of the nominal
     duration (or of ``max_time``, whichever is shorter).
     """
@@ -71,7 +71,8 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     if max_time is not None:
         horizon = min(horizon, float(max_time))
     step = int(rng.uniform(0.2, 0.6) * horizon / dt)
-    wheels = [int(w) for w in np.sort(rng.choice(4, size=int(rng.integers(1, 5)), replace=False))]
+    wheels = [int(w) for w in np.sort(rng.choice(n_wheels, size=int(rng.integers(1, min(n_wheels, 4) + 1)),
+                                                 replace=False))]
     impulse = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
     return {"step": max(step, 1), "wheels": wheels, "impulse": impulse}
 
@@ -86,14 +87,20 @@ def _load_policy(algo: str, path: str):
 
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
-                 return_log: bool = False) -> dict:
+                 return_log: bool = False, robot: str | None = None, robot_file: str | None = None) -> dict:
     """One campaign episode: ``{"metrics": row}`` (plus ``artifacts.log``, the
-    :class:`~control.episode.EpisodeLog`, with ``return_log``)."""
+    :class:`~control.episode.EpisodeLog`, with ``return_log``). ``robot`` (a preset's name) or
+    ``robot_file`` (a description file) pick the robot (default: azimut3)."""
     from control.episode import episode_metrics, run_episode
+    from jobs.args import robot_env_kwargs
     from jobs.eval.command import is_policy
 
-    kick = draw_kick(seed, track, speed_scale, max_time) if kicks else None
+    robot_kw = robot_env_kwargs(robot, robot_file)
+    n_wheels = _robot_n(robot_kw["robot"]) if robot_kw else 4
+    kick = draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels) if kicks else None
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
+    if robot_kw:
+        env_kwargs = {**(env_kwargs or {}), **robot_kw}
     if is_policy(controller):  # a trained policy (train.rollout; the rl extra)
         from train.rollout import run_policy_episode
 
@@ -114,11 +121,21 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     return out
 
 
+def _robot_n(robot: str) -> int:
+    """The wheel count of a robot (a preset's name or a file's path)."""
+    from azimut_env.params import RobotParams
+    from azimut_env.robot_file import resolve_robot
+
+    return resolve_robot(robot, None, RobotParams).n
+
+
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
-                  max_time: float | None = None, plot_seed: int | None = None) -> list[Task]:
+                  max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
+                  robot_file: str | None = None) -> list[Task]:
     """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes return
-    their logs for the plots."""
+    their logs for the plots. The robot (``robot``, ``robot_file``) is in each task's key only
+    when it is not the default, so the default campaign's task ids are those of before."""
     tasks = []
     for track in tracks:
         nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
@@ -127,6 +144,10 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),
                        "domain_randomization": float(domain_randomization), "kicks": bool(kicks),
                        "max_time": None if max_time is None else float(max_time)}
+                if robot_file:
+                    key["robot_file"] = str(Path(robot_file).resolve())
+                elif robot:
+                    key["robot"] = robot
                 cost = min(nominal, max_time) if max_time else nominal
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
@@ -238,7 +259,8 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
              f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
              f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
              + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
-             f"Control period {campaign['control_period']} s; limits {campaign['limits']}.",
+             f"Robot {campaign.get('robot', 'azimut3')}; control period {campaign['control_period']} s; limits "
+             f"{campaign['limits']}.",
              f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
              f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.", "",
              "## Summary", "",
@@ -304,7 +326,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     Returns 0, or 1 when an episode failed (after its retries; the report lists it)."""
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
-
+    from jobs.args import robot_env_kwargs, robot_label
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -313,11 +335,13 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     plot_seed = None if args.no_plots else seeds[0]
     video = getattr(args, "video", None)
     video_dir = out / "videos"
+    robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
-                          plot_seed=seeds[0] if (plot_seed is not None or video) else None)
+                          plot_seed=seeds[0] if (plot_seed is not None or video) else None, robot=robot,
+                          robot_file=robot_file)
     executor = run_kwargs(args)["executor"]
-    env0 = AzimutEnv()
+    env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file))
     geom, limits = env0.geometry, env0.limits
     if not args.resume and plot_dir.is_dir():
         for p in plot_dir.glob("*.png"):
@@ -397,7 +421,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
                 "limits": str(limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
-                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos}
+                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args)}
     write_campaign_report(out, rows, full, campaign, plots, compare)
     n_failed = len(rows) - len(ok_rows)
     print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")

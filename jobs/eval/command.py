@@ -36,7 +36,7 @@ from azimut_env.tracks import TRACK_NAMES
 
 # the episode runner lives in control.episode; its names stay importable from here
 from control.episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
-from jobs.args import arg_choice_list, arg_float, arg_int, arg_output_path, require_module
+from jobs.args import add_robot_arguments, arg_choice_list, arg_float, arg_int, arg_output_path, require_module
 from jobs.eval.plots import write_plots  # re-exported
 from jobs.eval.video import VIDEO_FORMATS, check_video_format
 
@@ -119,6 +119,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
                         help="env seed (noise, start, random track); default 0")
+    add_robot_arguments(parser)
     parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
                         help="multiply every track's speed profile (default 1: the track's nominal speed)")
     parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",

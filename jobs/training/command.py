@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
-from jobs.args import arg_choice_list, arg_int, arg_output_path, require_module
+from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
 from train.envs import ACTIONS, action_key
 
 __all__ = ["add_arguments", "check_args", "run", "train"]
@@ -39,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--track", choices=TRACK_NAMES, default="random",
                         help="training track (default random: a new track per episode; the built-ins are held out)")
     parser.add_argument("--seed", type=arg_int(0, 2**31 - 1), default=0, help="seed (default 0)")
+    add_robot_arguments(parser)
     parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1000000)")
     parser.add_argument("--out", type=arg_output_path(directory=True), required=True, help="run folder")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
@@ -220,18 +221,27 @@ def _plot_learning_curve(out: Path) -> None:
     plt.close(fig)
 
 
+def _robot_kwargs(args: argparse.Namespace) -> dict:
+    """The env keyword arguments of ``--robot``/``--robot-file`` (kept in run.json's env_kwargs,
+    so the trained policy is evaluated on its robot)."""
+    from jobs.args import robot_env_kwargs
+
+    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
+
+
 def run(args: argparse.Namespace) -> int:
     if getattr(args, "seeds", None) is not None:  # one agent per seed, as campaign tasks (jobs.training.seeds)
         from jobs.training.seeds import run_seeds
 
-        return run_seeds(args, args.seeds)
+        return run_seeds(args, args.seeds, _robot_kwargs(args) or None)
     import torch
 
     torch.set_num_threads(args.torch_threads)
     overrides = json.loads(Path(args.hyperparams).read_text()) if args.hyperparams else None
     record = train(args.algo, args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
                    tuple(args.eval_tracks), args.eval_every, args.checkpoint_every, args.resume, overrides,
-                   args.progress_bar, args.quiet, time_limit_min=args.time_limit)
+                   args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
+                   time_limit_min=args.time_limit)
     print(f"trained {record['num_timesteps']} steps in {record['learn_wall_s']:.0f} s "
           f"({record['steps_per_s_in_learn']:.0f} steps/s inside learn); model: {args.out}/model.zip", flush=True)
     for r in record["final_eval"]:
