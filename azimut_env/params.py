@@ -1,18 +1,15 @@
-"""Physical parameters of the simulated AZIMUT-3, as frozen dataclasses with units, and the map
-between the env's normalised actions and physical actuator set-points.
+"""Physical parameters of the simulated AZIMUT-3, as frozen dataclasses with units.
 
-Everything a controller needs to know about the actuators is in :class:`ActuatorLimits`
-(``env.unwrapped.limits``). The normalised action of :class:`~azimut_env.env.AzimutEnv` is
-
-* ``action[:n]``  steering set-points: ``β_cmd = action · β_max`` [rad] (β_max = π/2, the stop);
-* ``action[n:]``  propulsion set-points: ``φ̇_cmd = action · φ̇_max`` [rad/s].
-
-:func:`setpoints_from_action` and :func:`action_from_setpoints` convert both ways. They are pure
-functions of arrays (batched over leading axes) and are the single definition of that map.
+The actuator limits and the map between the env's normalised actions and the actuator
+set-points are in :mod:`azimut_env.action_map` (re-exported here: ``ActuatorLimits``,
+:func:`setpoints_from_action`, :func:`action_from_setpoints`).
 
 Default values are assumptions for a robot of AZIMUT-3's size (the paper does not publish them);
 they are chosen so that the steering compliance is visible (a few degrees of deflection under the
-largest tire force) while the simulation stays stable at the default substep.
+largest tire force) while the simulation stays stable at the default substep. The defaults of the
+imperfections (steering friction, module centre-of-mass offset, drive torque–speed line,
+geometric imperfections) are "none": the ``"paper"`` preset of :mod:`azimut_env.imperfections`
+sets them from their sources, and the envs use it by default (``Azimut-v2``).
 """
 
 from __future__ import annotations
@@ -21,9 +18,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
-from azimut_env.physics.layout import CMD
+from azimut_env.action_map import ActuatorLimits, action_from_setpoints, setpoints_from_action
+from azimut_env.validation import check_positive_fields as _check_positive
 from estimation.geometry import RobotGeometry
 
 __all__ = [
@@ -34,124 +31,11 @@ __all__ = [
     "TireParams",
     "ChassisParams",
     "SensorParams",
+    "ImperfectionParams",
     "RobotParams",
     "setpoints_from_action",
     "action_from_setpoints",
 ]
-
-
-def _check_positive(obj, *names: str, allow_zero: bool = False) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-        if not ok:
-            rel = ">= 0" if allow_zero else "> 0"
-            raise ValueError(f"{type(obj).__name__}.{name} must be finite and {rel}, got {value!r}")
-
-
-@dataclass(frozen=True)
-class ActuatorLimits:
-    """Limits of the steering and propulsion actuators (identical for every wheel).
-
-    Attributes:
-        steer_rate_max: steering motor speed limit |θ̇_m| [rad/s].
-        steer_accel_max: steering motor acceleration limit |θ̈_m| [rad/s²].
-        steer_torque_max: torque the steering motor can put through the spring [N·m]; beyond it the
-            motor stalls (its angle stays within ``steer_torque_max / stiffness`` of β).
-        wheel_speed_max: propulsion speed limit |φ̇| [rad/s], also the scale of the propulsion action.
-        wheel_accel_max: propulsion set-point acceleration limit |φ̈_ref| [rad/s²].
-        wheel_torque_max: propulsion motor torque limit [N·m].
-        steer_min, steer_max: steering range ]β_min, β_max] [rad] (hard stops); β_max scales the
-            steering action. ``−inf``, ``+inf``: unlimited steering (no stops; the steering action
-            then scales by π, :attr:`steer_action_scale`).
-    """
-
-    steer_rate_max: float = 4.0
-    steer_accel_max: float = 30.0
-    steer_torque_max: float = 15.0
-    wheel_speed_max: float = 20.0
-    wheel_accel_max: float = 40.0
-    wheel_torque_max: float = 5.0
-    steer_min: float = -math.pi / 2
-    steer_max: float = math.pi / 2
-
-    def __post_init__(self) -> None:
-        _check_positive(self, "steer_rate_max", "steer_accel_max", "steer_torque_max", "wheel_speed_max",
-                        "wheel_accel_max", "wheel_torque_max")
-        if self.unlimited_steering:
-            return
-        if not (math.isfinite(self.steer_min) and math.isfinite(self.steer_max)
-                and self.steer_min < 0 < self.steer_max):
-            raise ValueError(f"ActuatorLimits steering range must satisfy steer_min < 0 < steer_max (or be −inf, "
-                             f"+inf: unlimited), got ]{self.steer_min}, {self.steer_max}]")
-
-    @property
-    def unlimited_steering(self) -> bool:
-        """No steering stops (``steer_min = −inf``, ``steer_max = +inf``)."""
-        return self.steer_min == -math.inf and self.steer_max == math.inf
-
-    @property
-    def steer_action_range(self) -> tuple[float, float]:
-        """(β_lo, β_hi) [rad] of the steering action: β_cmd = max(a · β_hi, β_lo), a ∈ [−1, 1]; the
-        steering range, or (−π, π) for unlimited steering (every angle once, ±π the same)."""
-        if self.unlimited_steering:
-            return -math.pi, math.pi
-        return float(self.steer_min), float(self.steer_max)
-
-
-@njit(cache=True)
-def _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd):
-    """Set-points of the clipped action row a[i] (2n,) into cmd[i] (n, 2): β_cmd = a·β_max (not
-    below β_min) [rad], φ̇_cmd = a·φ̇_max [rad/s]. The one implementation of the action map; the
-    task's compiled step calls it too."""
-    for k in range(n):
-        cmd[i, k, CMD.BETA] = max(a[i, k] * steer_max, steer_min)
-        cmd[i, k, CMD.PHIDOT] = a[i, n + k] * wheel_speed_max
-
-
-@njit(cache=True)
-def _setpoints_batch(a, n, steer_min, steer_max, wheel_speed_max, cmd):
-    for i in range(a.shape[0]):
-        _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
-
-
-def setpoints_from_action(action, limits: ActuatorLimits, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised action (..., 2n) in [−1, 1] -> (β_cmd [rad], φ̇_cmd [rad/s]), each (..., n).
-
-    Values outside [−1, 1] are clipped first (the Gymnasium convention for Box actions). NaN or inf
-    raise ``ValueError``.
-    """
-    a = np.asarray(action, dtype=np.float64)
-    if a.ndim == 0 or a.shape[-1] != 2 * n:
-        raise ValueError(f"action must have shape (..., {2 * n}) for {n} wheels, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"action contains NaN or inf: {a}")
-    flat = np.ascontiguousarray(np.clip(a, -1.0, 1.0).reshape(-1, 2 * n))
-    cmd = np.empty((flat.shape[0], n, 2))
-    lo, hi = limits.steer_action_range
-    _setpoints_batch(flat, n, lo, hi, float(limits.wheel_speed_max), cmd)
-    batch = a.shape[:-1]
-    return cmd[..., 0].reshape(batch + (n,)), cmd[..., 1].reshape(batch + (n,))
-
-
-def action_from_setpoints(beta_cmd, phidot_cmd, limits: ActuatorLimits) -> np.ndarray:
-    """(β_cmd [rad], φ̇_cmd [rad/s]), each (..., n) -> normalised float32 action (..., 2n).
-
-    The inverse of :func:`setpoints_from_action`; set-points beyond the limits are clipped to
-    [−1, 1]. Steering angles are used as given (wrap them into the steering range first); with
-    unlimited steering they are taken modulo 2π into ]−π, π] (the module turns the short way to
-    its set-point).
-    """
-    beta = np.asarray(beta_cmd, dtype=np.float64)
-    phidot = np.asarray(phidot_cmd, dtype=np.float64)
-    if beta.shape != phidot.shape:
-        raise ValueError(f"beta_cmd and phidot_cmd must have the same shape, got {beta.shape} and {phidot.shape}")
-    if not (np.all(np.isfinite(beta)) and np.all(np.isfinite(phidot))):
-        raise ValueError("set-points contain NaN or inf")
-    if limits.unlimited_steering:
-        beta = math.pi - np.mod(math.pi - beta, 2 * math.pi)
-    a = np.concatenate([beta / limits.steer_action_range[1], phidot / limits.wheel_speed_max], axis=-1)
-    return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -163,10 +47,23 @@ class SteeringParams:
         damping: damper c_s [N·m·s/rad] in parallel with the spring.
         position_gain: motor position loop gain [1/s] (desired rate = gain · error, before limits).
         module_mass: mass of one steering module with its wheel [kg].
-        module_inertia: moment of inertia of a module about its steering axis A_k [kg·m²] (the
-            module's centre of mass is on the axis).
+        module_inertia: moment of inertia I_A of a module about its steering axis A_k [kg·m²]
+            (its inertia about its own centre of mass is I_A − m c², which must be positive).
         stop_restitution: coefficient of restitution e ∈ [0, 1] of the hard steering stops (0: the
             module stops dead at the stop, as a rubber-padded end stop; 1: elastic bounce).
+        friction_coulomb: τ_c, the sliding (Coulomb) friction torque of the steering joint [N·m]
+            (module against chassis; 0: none).
+        friction_static: τ_s ≥ τ_c, its breakaway (static) torque [N·m]: a joint at rest stays at
+            rest while the torque on it is at most τ_s. With the spring in series, the motor must
+            wind the spring by τ_s / k_s before the module moves: the dead band of the steering.
+        stribeck_speed: ω_s, the Stribeck speed [rad/s]: sliding at |β̇| the friction is
+            τ_c + (τ_s − τ_c) exp(−(β̇/ω_s)²) (Canudas de Wit et al. 1995, eq. 3; the
+            velocity-weakening of Armstrong-Hélouvry et al. 1994). See
+            :mod:`azimut_env.physics.modules` for the integration (a velocity-level impulse that
+            cannot chatter or add energy).
+        com_offset: c, the distance of the module's centre of mass from its steering axis, along the
+            propulsion axis toward the wheel [m] (0: on the axis, the v1/v2 model). The module then
+            couples to the chassis through the mass matrix (:mod:`azimut_env.physics.modules`).
     """
 
     stiffness: float = 60.0
@@ -175,12 +72,28 @@ class SteeringParams:
     module_mass: float = 2.0
     module_inertia: float = 0.02
     stop_restitution: float = 0.0
+    friction_coulomb: float = 0.0
+    friction_static: float = 0.0
+    stribeck_speed: float = 0.02
+    com_offset: float = 0.0
 
     def __post_init__(self) -> None:
-        _check_positive(self, "stiffness", "position_gain", "module_mass", "module_inertia")
-        _check_positive(self, "damping", allow_zero=True)
+        _check_positive(self, "stiffness", "position_gain", "module_mass", "module_inertia", "stribeck_speed")
+        _check_positive(self, "damping", "friction_coulomb", "friction_static", "com_offset", allow_zero=True)
         if not (math.isfinite(self.stop_restitution) and 0.0 <= self.stop_restitution <= 1.0):
             raise ValueError(f"SteeringParams.stop_restitution must be in [0, 1], got {self.stop_restitution!r}")
+        if self.friction_static < self.friction_coulomb:
+            raise ValueError(f"SteeringParams.friction_static ({self.friction_static!r}) must be >= friction_coulomb "
+                             f"({self.friction_coulomb!r}): the breakaway torque is not below the sliding one")
+        if not self.module_inertia > self.module_mass * self.com_offset ** 2:
+            raise ValueError(f"SteeringParams.module_inertia ({self.module_inertia!r} kg·m² about the steering axis) "
+                             f"must exceed module_mass · com_offset² ({self.module_mass * self.com_offset ** 2:.4g}): "
+                             "the inertia about the module's own centre of mass would not be positive")
+
+    @property
+    def has_friction(self) -> bool:
+        """True when the steering joint has friction (``friction_static`` > 0)."""
+        return self.friction_static > 0.0
 
 
 @dataclass(frozen=True)
@@ -227,19 +140,49 @@ class SteeringMotorParams:
 class WheelParams:
     """Propulsion: the wheel spin DOF and its velocity-controlled motor.
 
+    The drive motor (``drive_model``):
+
+    * ``"current_limit"`` (default): the loop's torque is clipped at the driver's current limit
+      ``ActuatorLimits.wheel_torque_max`` at every speed;
+    * ``"dc"``: a DC motor at its supply voltage as well: the torque–speed line
+      τ_stall (1 − |φ̇|/ω₀) while motoring, then the current limit, as the steering's "dc" model
+      (Hughes & Drury, *Electric Motors and Drives*, 5th ed., Ch. 3;
+      :func:`~azimut_env.physics.actuators.dc_torque_limits_kernel`). A wheel runs free at ω₀ and
+      stalls at τ_stall (or the current limit, the smaller).
+
+    The "dc" defaults are those of the class of a maxon RE 40 (150 W, 24 V, no-load speed
+    7,580 rpm, stall torque 2.29 N·m, from the maxon catalogue's data of part 148877) behind a
+    36:1 planetary gearhead at ~72% efficiency (an assumption; the paper says only that the
+    propulsion "uses standard stiff actuators"), seen at the wheel: ω₀ = 7580 · 2π/60 / 36 =
+    22.0 rad/s (above the 20 rad/s propulsion limit, so that every set-point is reachable
+    unloaded) and τ_stall = 2.29 · 36 · 0.72 = 59 N·m.
+
     Attributes:
         inertia: spin inertia of wheel + reflected rotor [kg·m²].
         velocity_gain: propulsion velocity loop gain [N·m·s/rad] (τ = gain · (φ̇_ref − φ̇), clipped).
         bearing_damping: viscous friction on the spin [N·m·s/rad].
+        drive_model: ``"current_limit"`` or ``"dc"`` (above).
+        drive_stall_torque: τ_stall at the wheel [N·m] ("dc" only).
+        drive_no_load_speed: ω₀ at the wheel [rad/s] ("dc" only).
     """
 
     inertia: float = 0.03
     velocity_gain: float = 8.0
     bearing_damping: float = 0.005
+    drive_model: str = "current_limit"
+    drive_stall_torque: float = 59.0
+    drive_no_load_speed: float = 22.0
 
     def __post_init__(self) -> None:
-        _check_positive(self, "inertia", "velocity_gain")
+        _check_positive(self, "inertia", "velocity_gain", "drive_stall_torque", "drive_no_load_speed")
         _check_positive(self, "bearing_damping", allow_zero=True)
+        if self.drive_model not in ("current_limit", "dc"):
+            raise ValueError(f"WheelParams.drive_model must be 'current_limit' or 'dc', got {self.drive_model!r}")
+
+    @property
+    def is_dc(self) -> bool:
+        """True for the DC drive model (torque–speed line)."""
+        return self.drive_model == "dc"
 
 
 @dataclass(frozen=True)
@@ -364,13 +307,78 @@ class SensorParams:
         return cls(0.0, 0.0, 0.0, 0, 0.0, 0.0)
 
 
+def _per_wheel(obj, name: str, bound: float) -> None:
+    """Freeze the per-wheel tuple ``name`` of ``obj`` (finite, |x| <= bound) in place."""
+    raw = getattr(obj, name)
+    try:
+        values = tuple(float(x) for x in np.asarray(raw, dtype=np.float64).reshape(-1))
+    except (TypeError, ValueError):
+        raise ValueError(f"{type(obj).__name__}.{name} must be a sequence of numbers, got {raw!r}") from None
+    if not all(math.isfinite(x) and abs(x) <= bound for x in values):
+        raise ValueError(f"{type(obj).__name__}.{name} must be finite and within ±{bound}, got {values}")
+    object.__setattr__(obj, name, values)
+
+
+@dataclass(frozen=True)
+class ImperfectionParams:
+    """Geometric imperfections of each wheel, fixed for a robot (the paper's "geometric
+    imperfections"), and their spread when domain randomisation draws a new robot.
+
+    * The **steering-axis zero offset** δ_k: the wheel's propulsion axis sits at γ_k = α_k + β_k + δ_k
+      while the encoders (motor and wheel side) and the controller count β_k from the nominal
+      zero (a module homed or assembled off by δ_k). The commanded configuration is on the
+      constraining surface; the true one is not, so the wheels fight (internal force) and the
+      tire moments deflect the springs.
+    * The **rolling-radius error** ε_k: the wheel rolls with r_k (1 + ε_k) while the controller
+      and the odometry assume r_k (tread wear, manufacturing, load): at a commanded φ̇ the wheel's
+      surface speed is off by the factor 1 + ε_k (Borenstein & Feng, "Measurement and correction
+      of systematic odometry errors in mobile robots", IEEE Trans. Robotics and Automation 12(6),
+      1996: unequal wheel diameters are one of the two dominant systematic errors).
+
+    Attributes:
+        steer_offset: δ_k per wheel [rad] (empty: none), |δ_k| <= 0.1.
+        radius_error: ε_k per wheel [-] (empty: none), |ε_k| <= 0.1.
+        steer_offset_std: standard deviation [rad] of δ_k drawn at each reset under domain
+            randomisation (``domain_randomization`` > 0; the draws replace ``steer_offset``).
+        radius_error_std: standard deviation [-] of ε_k drawn likewise.
+    """
+
+    steer_offset: tuple[float, ...] = ()
+    radius_error: tuple[float, ...] = ()
+    steer_offset_std: float = 0.0
+    radius_error_std: float = 0.0
+
+    def __post_init__(self) -> None:
+        _per_wheel(self, "steer_offset", 0.1)
+        _per_wheel(self, "radius_error", 0.1)
+        _check_positive(self, "steer_offset_std", "radius_error_std", allow_zero=True)
+        if self.steer_offset_std > 0.03 or self.radius_error_std > 0.03:
+            raise ValueError("ImperfectionParams: steer_offset_std and radius_error_std must be <= 0.03 (draws are "
+                             f"clipped at 3 standard deviations, within ±0.1), got {self.steer_offset_std!r}, "
+                             f"{self.radius_error_std!r}")
+
+    @property
+    def randomised(self) -> bool:
+        """True when domain randomisation draws imperfections (a spread is set)."""
+        return self.steer_offset_std > 0.0 or self.radius_error_std > 0.0
+
+    def offsets(self, n: int) -> np.ndarray:
+        """δ (n,) [rad] (zeros when none are set)."""
+        return np.asarray(self.steer_offset, dtype=np.float64) if self.steer_offset else np.zeros(n)
+
+    def radius_errors(self, n: int) -> np.ndarray:
+        """ε (n,) [-] (zeros when none are set)."""
+        return np.asarray(self.radius_error, dtype=np.float64) if self.radius_error else np.zeros(n)
+
+
 @dataclass(frozen=True)
 class RobotParams:
     """All physical parameters of one robot.
 
     Attributes:
         geometry: wheel layout (``RobotGeometry``; default the AZIMUT-3 stand-in).
-        chassis, steering, steer_motor, wheel, tire, limits, sensors: see their classes.
+        chassis, steering, steer_motor, wheel, tire, limits, sensors, imperfections: see their
+            classes (the imperfections preset of :mod:`azimut_env.imperfections` sets several).
         gravity: g [m/s²], used only for the static normal loads N_k.
     """
 
@@ -382,6 +390,7 @@ class RobotParams:
     tire: TireParams = field(default_factory=TireParams)
     limits: ActuatorLimits = field(default_factory=ActuatorLimits)
     sensors: SensorParams = field(default_factory=SensorParams)
+    imperfections: ImperfectionParams = field(default_factory=ImperfectionParams)
     gravity: float = 9.81
 
     def __post_init__(self) -> None:
@@ -391,9 +400,14 @@ class RobotParams:
             raise ValueError(f"RobotParams.geometry must be a RobotGeometry, got {type(g).__name__}")
         for name, kind in (("chassis", ChassisParams), ("steering", SteeringParams),
                            ("steer_motor", SteeringMotorParams), ("wheel", WheelParams), ("tire", TireParams),
-                           ("limits", ActuatorLimits), ("sensors", SensorParams)):
+                           ("limits", ActuatorLimits), ("sensors", SensorParams),
+                           ("imperfections", ImperfectionParams)):
             if not isinstance(getattr(self, name), kind):
                 raise TypeError(f"RobotParams.{name} must be {kind.__name__}, got {type(getattr(self, name)).__name__}")
+        for name in ("steer_offset", "radius_error"):
+            count = len(getattr(self.imperfections, name))
+            if count not in (0, g.n):
+                raise ValueError(f"RobotParams.imperfections.{name} has {count} values for {g.n} wheels")
         if g.unlimited_steering:
             if not self.limits.unlimited_steering:
                 raise ValueError("RobotParams: the geometry has unlimited steering: limits.steer_min/steer_max must "

@@ -20,7 +20,7 @@ from gymnasium import error as gymnasium_error
 __all__ = [
     "check_finite", "check_range", "check_positive", "check_nonnegative", "check_int", "check_bool",
     "check_choice", "check_real_array", "check_index_list",
-    "check_seed",
+    "check_seed", "check_positive_fields",
     "ResetNeeded",
 ]
 
@@ -58,6 +58,17 @@ def check_positive(name: str, value: Any) -> float:
 def check_nonnegative(name: str, value: Any) -> float:
     """A finite real number >= 0 as ``float``."""
     return check_range(name, value, 0.0)
+
+
+def check_positive_fields(obj: Any, *names: str, allow_zero: bool = False) -> None:
+    """The fields ``names`` of the dataclass ``obj`` are finite and > 0 (>= 0 with ``allow_zero``):
+    ``ValueError`` naming ``Class.field`` otherwise (the parameter dataclasses' ``__post_init__``)."""
+    for name in names:
+        value = getattr(obj, name)
+        ok = _is_real_number(value) and math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
+        if not ok:
+            rel = ">= 0" if allow_zero else "> 0"
+            raise ValueError(f"{type(obj).__name__}.{name} must be finite and {rel}, got {value!r}")
 
 
 def check_int(name: str, value: Any, min_value: int | None = None, max_value: int | None = None) -> int:

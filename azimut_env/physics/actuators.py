@@ -106,14 +106,17 @@ def rolling_resistance_kernel(phidot: float, r: float, rr_torque: float, rr_knee
 
 @njit(cache=True, inline="always")
 def wheel_spin_step_kernel(phidot: float, ref: float, f_long: float, enabled: bool, r: float, inertia: float,
-                           kv: float, torque_max: float, bearing: float, rr_torque: float, rr_knee: float,
-                           dt: float) -> float:
+                           kv: float, torque_lo: float, torque_hi: float, bearing: float, rr_torque: float,
+                           rr_knee: float, dt: float) -> float:
     """One substep of the wheel spin driven by its velocity-controlled motor and loaded by the
     tire force ``f_long`` [N] (on the robot, along d) of :func:`azimut_env.physics.tire.tire_step_kernel`.
 
-    ``I φ̇' = I φ̇ + dt (τ_m + τ_rr − b φ̇' − r F_long)`` with ``τ_m = clip(K_v (φ̇_ref − φ̇'), ±τ_max)``:
+    ``I φ̇' = I φ̇ + dt (τ_m + τ_rr − b φ̇' − r F_long)`` with ``τ_m = clip(K_v (φ̇_ref − φ̇'), τ_lo, τ_hi)``:
     the motor gain and bearing are implicit (no bound on dt from K_v/I), the rolling resistance
-    and the tire force explicit. The tire is a spring-damper on the spin: its bound is
+    and the tire force explicit. The torque range is ±τ_max (the current limit), or with the DC
+    drive model :func:`dc_torque_limits_kernel` at the substep's starting speed (the torque–speed
+    line explicit: its slope τ_stall/ω₀ acts as a damping with the bound dt τ_stall/(ω₀ I) < 1 of
+    the stability budget). The tire is a spring-damper on the spin: its bound is
     :func:`azimut_env.physics.tire.stability_numbers` with the mass I/r² (longitudinal direction). The
     tire force reacts on the spin with torque −r F_long (F_long > 0 pushes the robot forward and
     brakes the wheel). Returns φ̇' [rad/s]."""
@@ -122,8 +125,8 @@ def wheel_spin_step_kernel(phidot: float, ref: float, f_long: float, enabled: bo
     if enabled:
         new = (inertia * phidot + dt * (kv * ref + load)) / (inertia + dt * (kv + bearing))
         tau_m = kv * (ref - new)
-        if tau_m > torque_max or tau_m < -torque_max:
-            tau_m = torque_max if tau_m > 0 else -torque_max
+        if tau_m > torque_hi or tau_m < torque_lo:
+            tau_m = torque_hi if tau_m > torque_hi else torque_lo
             new = (inertia * phidot + dt * (tau_m + load)) / (inertia + dt * bearing)
         return new
     return (inertia * phidot + dt * load) / (inertia + dt * bearing)

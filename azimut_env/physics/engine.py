@@ -7,21 +7,26 @@ static obstacles. The pieces:
 
 * :mod:`azimut_env.physics.kernels`: the model (Newton–Euler equations of chassis and modules,
   tires, actuators, hard stops, load transfer) and its compiled substep and summary kernels;
+* :mod:`azimut_env.physics.modules`: the steering joint's friction, the coupling of a module whose
+  centre of mass is off its axis, and the mechanical energy;
+* :mod:`azimut_env.physics.wheel_params`: the per-wheel parameter arrays (imperfections included)
+  and their domain randomisation;
 * :mod:`azimut_env.physics.layout`: the names of the columns of every state and parameter array;
 * :mod:`azimut_env.physics.stability`: the stability budget that bounds the substep (checked here at
   construction and on a change of mass);
 * :mod:`azimut_env.physics.body_io`: the batched reads and writes of the pymunk bodies;
+* :mod:`azimut_env.physics.contacts`: the substeps through pymunk's contact solver (obstacles);
+* :mod:`azimut_env.physics.obstacles`: the obstacles and the collision shapes;
 * :mod:`azimut_env.physics.blowup`: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
 
 Without obstacles the whole control period (all substeps, all robots) is one compiled call
 (:func:`~azimut_env.physics.kernels.step_kernel`) that integrates the chassis too; pymunk's
-bodies are read before it and written after it. With obstacles pymunk integrates the chassis: each
-substep the kernel's velocity change is handed to pymunk as a force and torque, and ``space.step``
-integrates them and resolves
-the contacts (Chipmunk moves the position with the velocity of the start of the substep, then
-updates the velocity: explicit Euler for the chassis pose while in the presence of obstacles).
-Robots have collision shapes (the chassis box; the wheels lie within its footprint up to 2 cm)
-only when there are obstacles.
+bodies are read before it and written after it. With obstacles pymunk integrates the chassis:
+each substep the kernel's velocity change is handed to pymunk as a force and torque, and
+``space.step`` integrates them and resolves the contacts (Chipmunk moves the position with the
+velocity of the start of the substep, then updates the velocity: explicit Euler for the chassis
+pose while in the presence of obstacles).
+Robots have collision shapes (:mod:`azimut_env.physics.obstacles`) only when there are obstacles.
 
 Per-robot parameters live in arrays (``wheel_params``, columns :class:`WP`) so that domain
 randomisation can vary them robot by robot (:meth:`AzimutPhysics.set_wheel_params`,
@@ -44,44 +49,17 @@ import pymunk
 from azimut_env.params import RobotParams
 from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.physics.body_io import BodyIO
+from azimut_env.physics.contacts import lap, step_with_contacts
 from azimut_env.physics.kernels import step_kernel, summary_kernel
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, FT, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
-from azimut_env.physics.obstacles import Obstacle
+from azimut_env.physics.modules import mechanical_energy, module_impulse_response
+from azimut_env.physics.obstacles import Obstacle, add_obstacle_shape, add_robot_shape, overlapping_shapes
 from azimut_env.physics.stability import check_load_scale, check_stability, stability_figures
 from azimut_env.physics.tire import TS
+from azimut_env.physics.wheel_params import default_wheel_params
 
 __all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "BlowUp", "default_wheel_params", "WP", "MS", "JS", "TS",
            "ACC", "BODY", "CMD", "CS", "FT", "RS", "WS"]
-
-#: Collision categories: robots collide with obstacles only, never with each other.
-_CAT_ROBOT = 0b01
-_CAT_OBSTACLE = 0b10
-
-
-def default_wheel_params(params: RobotParams, n_robots: int = 1) -> np.ndarray:
-    """(n_robots, n, len(WP)) per-wheel parameters of ``params`` (the same for every robot):
-    each column of :class:`WP` from its parameter class."""
-    g, st, wh, t, lim, m = params.geometry, params.steering, params.wheel, params.tire, params.limits, \
-        params.steer_motor
-    columns = {
-        WP.B: g.b, WP.R: g.r, WP.ALPHA: g.alpha, WP.LOAD: params.static_normal_loads(), WP.MU: t.friction,
-        WP.K_S: st.stiffness, WP.C_S: st.damping, WP.KP: st.position_gain, WP.I_MOD: st.module_inertia,
-        WP.I_W: wh.inertia, WP.KV: wh.velocity_gain, WP.BEARING: wh.bearing_damping,
-        WP.RR_TORQUE: t.rolling_resistance, WP.RR_KNEE: t.rolling_knee,
-        WP.STEER_RATE: lim.steer_rate_max, WP.STEER_ACCEL: lim.steer_accel_max, WP.STEER_TORQUE: lim.steer_torque_max,
-        WP.WHEEL_ACCEL: lim.wheel_accel_max, WP.WHEEL_TORQUE: lim.wheel_torque_max, WP.STEER_MIN: lim.steer_min,
-        WP.STEER_MAX: lim.steer_max,
-        WP.C_KAPPA: t.longitudinal_stiffness, WP.C_ALPHA: t.cornering_stiffness,
-        WP.SIGMA_LONG: t.longitudinal_relaxation_length, WP.SIGMA_LAT: t.relaxation_length,
-        WP.HALF_LEN: t.contact_half_length, WP.DAMP_TIME: t.damping_time,
-        WP.MOTOR_STALL: m.stall_torque, WP.MOTOR_NO_LOAD: m.no_load_speed, WP.MOTOR_INERTIA: m.rotor_inertia,
-    }
-    assert set(columns) == set(WP), "every wheel parameter column has its source"
-    wp = np.zeros((n_robots, params.n, len(WP)))
-    for col, value in columns.items():
-        wp[..., col] = value
-    return wp
-
 
 class AzimutPhysics:
     """N robots in one pymunk Space, stepped at ``control_period`` with ``substeps`` substeps.
@@ -156,32 +134,24 @@ class AzimutPhysics:
         space = pymunk.Space()
         space.iterations = self.solver_iterations
         space.gravity = (0.0, 0.0)
-        robot_filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
         # Collision shapes only matter against obstacles; without obstacles the bodies carry their
         # mass and inertia alone and pymunk is not stepped at all.
-        with_shapes = bool(self.obstacles)
         self.chassis: list[pymunk.Body] = []
         for i in range(self.n_robots):
             mass, moment = self.body_inertia[i]
             ch = pymunk.Body(float(mass), float(moment))
             space.add(ch)
-            if with_shapes:
-                box = pymunk.Poly.create_box(ch, (p.chassis.length, p.chassis.width))
-                box.filter = robot_filter
-                box.friction = 0.5
-                space.add(box)
+            if self.obstacles:
+                add_robot_shape(space, ch, p.chassis.length, p.chassis.width)
             self.chassis.append(ch)
         self.space = space
-        self._obstacle_shapes: list[pymunk.Shape] = []
-        for ob in self.obstacles:
-            self._add_obstacle(ob)
+        self._obstacle_shapes = [add_obstacle_shape(space, ob) for ob in self.obstacles]
         self._setup_buffers()
 
     def _setup_buffers(self) -> None:
         """(Re)create the batched body I/O for the current Space and read the bodies."""
         self._io = BodyIO(self.space, self.chassis)
         self._state = self._io.state
-        self._forces = self._io.forces
         self._before = np.zeros((self.n_robots, len(CS)))
         self._read_state()
 
@@ -206,18 +176,6 @@ class AzimutPhysics:
                         self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self.blowup.speed,
                         self.blowup.yaw_rate, self.blowup.spin, self.blowup.position, self.summary[sl],
                         self.wheel_summary[sl])
-
-    def _add_obstacle(self, ob: Obstacle) -> None:
-        body = self.space.static_body
-        if ob.vertices:
-            shape = pymunk.Poly(body, ob.vertices)
-        else:
-            shape = pymunk.Circle(body, ob.radius, (ob.x, ob.y))
-        shape.filter = pymunk.ShapeFilter(categories=_CAT_OBSTACLE, mask=_CAT_ROBOT)
-        shape.friction = 0.5
-        shape.elasticity = 0.2
-        self.space.add(shape)
-        self._obstacle_shapes.append(shape)
 
     def _build_space_keep_state(self) -> None:
         """Rebuild the Space and copy every robot body's state over."""
@@ -250,8 +208,7 @@ class AzimutPhysics:
         if bool(obs) != had_shapes:  # robots need (or no longer need) collision shapes
             self._build_space_keep_state()
             return
-        for ob in obs:
-            self._add_obstacle(ob)
+        self._obstacle_shapes = [add_obstacle_shape(self.space, ob) for ob in obs]
         self._setup_buffers()
 
     # ------------------------------------------------------------------ pickling
@@ -344,13 +301,14 @@ class AzimutPhysics:
         self.joint_state[robot, :, JS.OMEGA] = w
         self.tire_state[robot] = 0.0  # unloaded patches: a rolling start builds its slip by distance
         self.chassis_accel[robot] = 0.0
-        # wheel spins that roll without slip: r φ̇ = v(P)·d
-        gam = th + g.alpha + beta
-        px = x + c * g.axis_xy[:, 0] - s * g.axis_xy[:, 1] + g.b * np.cos(gam)
-        py = y + s * g.axis_xy[:, 0] + c * g.axis_xy[:, 1] + g.b * np.sin(gam)
+        # wheel spins that roll without slip: r φ̇ = v(P)·d (the true wheels: imperfections included)
+        wp = self.wheel_params[robot]
+        gam = th + wp[:, WP.ALPHA] + beta
+        px = x + c * g.axis_xy[:, 0] - s * g.axis_xy[:, 1] + wp[:, WP.B] * np.cos(gam)
+        py = y + s * g.axis_xy[:, 0] + c * g.axis_xy[:, 1] + wp[:, WP.B] * np.sin(gam)
         vpx = v_world[0] - w * (py - y)
         vpy = v_world[1] + w * (px - x)
-        phidot = (vpx * np.sin(gam) - vpy * np.cos(gam)) / g.r
+        phidot = (vpx * np.sin(gam) - vpy * np.cos(gam)) / wp[:, WP.R]
         ms = self.motor_state[robot]
         ms[:, MS.THETA] = beta
         ms[:, MS.OMEGA] = 0.0
@@ -365,14 +323,7 @@ class AzimutPhysics:
 
     def overlapping_obstacles(self, robot: int = 0) -> list[int]:
         """Indices of the obstacles that overlap robot ``robot``'s chassis now."""
-        if not self.obstacles:
-            return []
-        hits = set()
-        for shape in self.chassis[robot].shapes:
-            for info in self.space.shape_query(shape):
-                if info.shape in self._obstacle_shapes:
-                    hits.add(self._obstacle_shapes.index(info.shape))
-        return sorted(hits)
+        return overlapping_shapes(self.space, self.chassis[robot], self._obstacle_shapes) if self.obstacles else []
 
     def set_commands(self, beta_cmd, phidot_cmd) -> None:
         """Set-points for all robots: β_cmd (N, n) [rad], φ̇_cmd (N, n) [rad/s] (clipped to limits)."""
@@ -408,8 +359,21 @@ class AzimutPhysics:
         for k in wheels:
             if not 0 <= int(k) < self.n:
                 raise ValueError(f"kick: wheel index {k} out of range 0..{self.n - 1}")
-        for k in wheels:
-            self.joint_state[robot, int(k), JS.OMEGA] += impulse / self.wheel_params[robot, int(k), WP.I_MOD]
+        wp = self.wheel_params[robot]
+        if not np.any(wp[:, WP.COM]):
+            for k in wheels:
+                self.joint_state[robot, int(k), JS.OMEGA] += impulse / wp[int(k), WP.I_MOD]
+        else:  # a module off its axis: the impulse moves the body and the other modules too, Δq̇ = M⁻¹ J
+            z = np.zeros(self.n)
+            for k in wheels:
+                z[int(k)] += impulse
+            dq = module_impulse_response(self.body_inertia[robot], self._state[robot, CS.TH], self._axis_xy, wp,
+                                         self.joint_state[robot, :, JS.BETA], z)
+            body = self.chassis[robot]
+            v = body.velocity
+            body.velocity = (v.x + dq[0], v.y + dq[1])
+            body.angular_velocity = body.angular_velocity + dq[2]
+            self.joint_state[robot, :, JS.OMEGA] += dq[3:]
         self._read_robot_state(robot)
 
     # ------------------------------------------------------------------ stepping
@@ -425,47 +389,26 @@ class AzimutPhysics:
         args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
                 self.acc, self.body_inertia, self.chassis_accel, self._axis_xy, self._load_transfer,
                 float(p.chassis.com_height), float(p.steering.stop_restitution), bool(p.steer_motor.is_dc),
-                self.n, self.dt)
+                bool(p.wheel.is_dc), self.n, self.dt)
         tm = times if times is not None else self.stage_times
         t = time.perf_counter() if tm is not None else 0.0
         self._io.read()
         if tm is not None:
-            t = _lap(tm, "read", t)
+            t = lap(tm, "read", t)
         state = self._state
         if not self.obstacles:  # the whole control period in one compiled call
             step_kernel(state, *args, self.substeps, True)
             if tm is not None:
-                t = _lap(tm, "force", t)
+                t = lap(tm, "force", t)
             self._io.write()
             if tm is not None:
-                t = _lap(tm, "write", t)
+                t = lap(tm, "write", t)
         else:  # pymunk integrates the bodies (forces from the kernel's velocity change) and resolves contacts
-            space, dt, N = self.space, self.dt, self.n_robots
-            forces, before = self._forces, self._before
-            for j in range(self.substeps):
-                if j:
-                    self._io.read()
-                    if tm is not None:
-                        t = _lap(tm, "read", t)
-                before[:] = state[:N]
-                step_kernel(state, *args, 1, False)
-                # the same velocity change, as the force and torque pymunk applies in its step
-                mass, moment = self.body_inertia[:, BODY.MASS], self.body_inertia[:, BODY.MOMENT]
-                forces[:N, FT.FX] = (state[:N, CS.VX] - before[:, CS.VX]) * (mass / dt)
-                forces[:N, FT.FY] = (state[:N, CS.VY] - before[:, CS.VY]) * (mass / dt)
-                forces[:N, FT.TAU] = (state[:N, CS.W] - before[:, CS.W]) * (moment / dt)
-                self._io.write_forces()
-                if tm is not None:
-                    t = _lap(tm, "force", t)
-                space.step(dt)
-                if tm is not None:
-                    t = _lap(tm, "space_step", t)
-            self._io.read()
-            if tm is not None:
-                t = _lap(tm, "read", t)
+            t = step_with_contacts(self.space, self._io, self._before, self.body_inertia, self.substeps, self.dt,
+                                   step_kernel, args, tm, t)
         self._summarize()
         if tm is not None:
-            _lap(tm, "summary", t)
+            lap(tm, "summary", t)
 
     # ------------------------------------------------------------------ state
 
@@ -524,25 +467,11 @@ class AzimutPhysics:
         return self.summary[:, RS.INTERNAL].copy()
 
     def energy(self) -> np.ndarray:
-        """(N,) kinetic energy (chassis with the module masses, module rotations, wheel spins)
-        plus the elastic energy of the steering springs and the tires' contact patches [J]."""
-        st = self._state[: self.n_robots]
-        m, inertia = self.body_inertia[:, BODY.MASS], self.body_inertia[:, BODY.MOMENT]
-        e = 0.5 * m * (st[:, CS.VX] ** 2 + st[:, CS.VY] ** 2) + 0.5 * inertia * st[:, CS.W] ** 2
-        wp = self.wheel_params
-        e += 0.5 * np.sum(wp[..., WP.I_MOD] * self.joint_state[..., JS.OMEGA] ** 2, axis=1)
-        e += 0.5 * np.sum(wp[..., WP.I_W] * self.motor_state[..., MS.PHIDOT] ** 2, axis=1)
-        e += 0.5 * np.sum(wp[..., WP.K_S] * (self.motor_state[..., MS.THETA] - self.joint_state[..., JS.BETA]) ** 2,
-                          axis=1)
-        # the tire's contact springs: k_x = C_κ/σ_κ, k_y = C_α/σ_α, twist k_y a²/2 (tire module)
-        loads = self.normal_loads()
-        ts = self.tire_state
-        k_x = wp[..., WP.C_KAPPA] * loads / wp[..., WP.SIGMA_LONG]
-        k_y = wp[..., WP.C_ALPHA] * loads / wp[..., WP.SIGMA_LAT]
-        k_t = 0.5 * k_y * wp[..., WP.HALF_LEN] ** 2
-        e += 0.5 * np.sum(k_x * ts[..., TS.U_LONG] ** 2 + k_y * ts[..., TS.U_LAT] ** 2 + k_t * ts[..., TS.TWIST] ** 2,
-                          axis=1)
-        return e
+        """(N,) kinetic energy (chassis with the module masses, module rotations and their coupling
+        with the chassis, wheel spins) plus the elastic energy of the steering springs and the
+        tires' contact patches [J] (:func:`~azimut_env.physics.modules.mechanical_energy`)."""
+        return mechanical_energy(self._state, self.body_inertia, self.joint_state, self.motor_state, self.tire_state,
+                                 self.wheel_params, self._axis_xy, self.normal_loads())
 
     def check(self) -> tuple[np.ndarray, list[str]]:
         """Blow-up detection: (ok (N,) bool, reason per robot, '' where ok)."""
@@ -552,9 +481,3 @@ class AzimutPhysics:
             return ok, [""] * self.n_robots
         return ok, [BLOWUP_MESSAGES.get(int(c), "") if c else "" for c in codes]
 
-
-def _lap(times: dict[str, float], key: str, t0: float) -> float:
-    """Add the time since ``t0`` to ``times[key]``; return now."""
-    t = time.perf_counter()
-    times[key] = times.get(key, 0.0) + t - t0
-    return t

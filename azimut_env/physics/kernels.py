@@ -70,9 +70,10 @@ import math
 import numpy as np
 from numba import njit
 
-from azimut_env.physics.actuators import steer_actuator_kernel, wheel_spin_step_kernel
+from azimut_env.physics.actuators import dc_torque_limits_kernel, steer_actuator_kernel, wheel_spin_step_kernel
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, JS, MS, RS, WP, WS
+from azimut_env.physics.modules import FRICTION_PASSES, coupled_apply, coupled_factor, coupling_row, friction_impulse
 from azimut_env.physics.tire import TS, tire_step_kernel
 
 __all__ = ["step_kernel", "summary_kernel"]
@@ -81,8 +82,8 @@ _CS_COUNT = len(CS)
 
 
 @njit(cache=True, error_model="numpy")
-def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, transfer, com_h, restitution, dc, n, dt,
-                substeps, integrate):
+def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, transfer, com_h, restitution, dc, drive_dc,
+                n, dt, substeps, integrate):
     """``substeps`` substeps of every robot (see the module docstring for the equations).
 
     state (rows, CS): chassis pose and velocity in the world, robot i at row i, updated in place
@@ -94,10 +95,20 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
     updated. transfer (n, 2): the load change on each axis per unit moment (M_x, M_y) [1/m] (the
     last two columns of ``RobotParams.load_map``); com_h: the centre of mass height h [m].
     restitution: the hard stops' e. dc: the steering motor model (False: kinematic position
-    source; True: DC motor with back-EMF, ``actuators.steer_actuator_kernel``).
+    source; True: DC motor with back-EMF, ``actuators.steer_actuator_kernel``). drive_dc: the
+    drive motors' torque–speed line (``WheelParams.drive_model == "dc"``) on top of their current
+    limit.
     """
     n_robots = ms.shape[0]
     omega_new = np.empty(n)
+    # the coupled modules' mass matrix (modules.py): B (n, 3), D (n,), S⁻¹, generalised forces, responses
+    B = np.zeros((n, 3))
+    D = np.ones(n)
+    S_inv = np.zeros((3, 3))
+    q_gam = np.zeros(n)
+    resp = np.zeros(n)
+    unit = np.zeros(n)
+    j_fric = np.zeros(n)
     for i in range(n_robots):
         mass = body[i, BODY.MASS]
         inertia = body[i, BODY.MOMENT]
@@ -105,12 +116,22 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
         x, y, th = state[i, CS.X], state[i, CS.Y], state[i, CS.TH]
         vx, vy, w = state[i, CS.VX], state[i, CS.VY], state[i, CS.W]
         ax_r, ay_r = accel[i, 0], accel[i, 1]
+        coupled = False
+        friction = False
+        for k in range(n):
+            coupled = coupled or wp[i, k, WP.COM] != 0.0
+            friction = friction or wp[i, k, WP.FRIC_S] > 0.0
+            D[k] = wp[i, k, WP.I_MOD]
         for _ in range(substeps):
             c = math.cos(th)
             s = math.sin(th)
             fx_sum = 0.0
             fy_sum = 0.0
             tau_c = 0.0
+            cx = 0.0  # the coupled modules' velocity-squared terms on (v, θ)
+            cy = 0.0
+            cth = 0.0
+            w0 = w
             for k in range(n):
                 p = wp[i, k]
                 b = p[WP.B]
@@ -160,7 +181,11 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                     tire_step_kernel(s_long, v_lat, v_roll, wm, load, ts[i, k, TS.U_LONG], ts[i, k, TS.U_LAT],
                                      ts[i, k, TS.TWIST], p[WP.MU], p[WP.C_KAPPA], p[WP.C_ALPHA], p[WP.SIGMA_LONG],
                                      p[WP.SIGMA_LAT], p[WP.HALF_LEN], p[WP.DAMP_TIME], dt)
-                phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[WP.I_W], p[WP.KV], p[WP.WHEEL_TORQUE],
+                tau_hi = p[WP.WHEEL_TORQUE]
+                tau_lo = -tau_hi
+                if drive_dc:
+                    tau_lo, tau_hi = dc_torque_limits_kernel(phidot, p[WP.DRIVE_STALL], p[WP.DRIVE_NO_LOAD], tau_hi)
+                phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[WP.I_W], p[WP.KV], tau_lo, tau_hi,
                                                 p[WP.BEARING], p[WP.RR_TORQUE] * load * r, p[WP.RR_KNEE], dt)
                 ms[i, k, MS.PHIDOT_REF] = ref
                 ms[i, k, MS.PHIDOT] = phidot
@@ -172,16 +197,64 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 tau_c += axw * fy - ayw * fx - tau_s
                 # on the module about A_k: spring, the force's moment −b F_long, aligning and scrub couples
                 tau_m = tau_s - b * f_long + m_align + m_scrub
-                omega_new[k] = wm + dt * tau_m / p[WP.I_MOD]
                 acc[i, k, ACC.FX] += fx
                 acc[i, k, ACC.FY] += fy
                 acc[i, k, ACC.SLIP] += abs(f_long * s_long + f_lat * v_lat)
+                if not coupled:
+                    omega_new[k] = wm + dt * tau_m / p[WP.I_MOD]
+                    continue
+                # centre of mass off the axis (modules.py): the velocity-squared terms and the module's column of M
+                mc = p[WP.M_MOD] * p[WP.COM]
+                cross = axw * sg - ayw * cg  # w_k × u_k
+                cx += mc * wm * wm * cg  # (the θ̇² w_k terms cancel the chassis's own: the centre of mass is at O)
+                cy += mc * wm * wm * sg
+                cth += mc * wm * wm * cross
+                q_gam[k] = tau_m - mc * w * w * cross
+                coupling_row(gam, axw, ayw, p[WP.M_MOD], p[WP.COM], B, k)
+                omega_new[k] = wm
             # chassis velocities (symplectic Euler: positions move with the new velocities)
-            vx += dt * fx_sum / mass
-            vy += dt * fy_sum / mass
-            w += dt * tau_c / inertia
+            if coupled:
+                coupled_factor(B, D, mass, inertia, S_inv)
+                a0, a1, a2 = coupled_apply(B, D, S_inv, fx_sum + cx, fy_sum + cy, tau_c + cth, q_gam, resp)
+                vx += dt * a0
+                vy += dt * a1
+                w += dt * a2
+                for k in range(n):
+                    omega_new[k] += dt * resp[k]
+            else:
+                vx += dt * fx_sum / mass
+                vy += dt * fy_sum / mass
+                w += dt * tau_c / inertia
             ax_r = (c * fx_sum + s * fy_sum) / mass
             ay_r = (-s * fx_sum + c * fy_sum) / mass
+            # steering joint friction: velocity-level impulses, projected Gauss–Seidel (modules.py)
+            if friction:
+                for k in range(n):
+                    j_fric[k] = 0.0
+                for _ in range(FRICTION_PASSES):
+                    for k in range(n):
+                        if wp[i, k, WP.FRIC_S] <= 0.0:
+                            continue
+                        rel = omega_new[k] - w
+                        rel0 = js[i, k, JS.OMEGA] - w0
+                        if coupled:
+                            unit[k] = 1.0
+                            r0, r1, r2 = coupled_apply(B, D, S_inv, 0.0, 0.0, -1.0, unit, resp)
+                            unit[k] = 0.0
+                            j = friction_impulse(rel, rel0, resp[k] - r2, j_fric[k], wp[i, k, WP.FRIC_C],
+                                                 wp[i, k, WP.FRIC_S], wp[i, k, WP.STRIBECK], dt) - j_fric[k]
+                            vx += j * r0
+                            vy += j * r1
+                            w += j * r2
+                            for kk in range(n):
+                                omega_new[kk] += j * resp[kk]
+                        else:
+                            i_m = wp[i, k, WP.I_MOD]
+                            j = friction_impulse(rel, rel0, 1.0 / i_m + 1.0 / inertia, j_fric[k], wp[i, k, WP.FRIC_C],
+                                                 wp[i, k, WP.FRIC_S], wp[i, k, WP.STRIBECK], dt) - j_fric[k]
+                            omega_new[k] += j / i_m
+                            w -= j / inertia
+                        j_fric[k] += j
             # steering angles, exact hard stops by projection and a stop impulse
             for k in range(n):
                 i_m = wp[i, k, WP.I_MOD]
@@ -193,11 +266,26 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                     beta = hi if beta > hi else lo
                     rel = wm - w
                     if (beta == hi and rel > 0.0) or (beta == lo and rel < 0.0):
-                        j = -(1.0 + restitution) * rel / (1.0 / i_m + 1.0 / inertia)
-                        wm += j / i_m
-                        w -= j / inertia
+                        if coupled:  # the impulse pair through M⁻¹: every module and the body respond
+                            unit[k] = 1.0
+                            r0, r1, r2 = coupled_apply(B, D, S_inv, 0.0, 0.0, -1.0, unit, resp)
+                            unit[k] = 0.0
+                            j = -(1.0 + restitution) * rel / (resp[k] - r2)
+                            vx += j * r0
+                            vy += j * r1
+                            w += j * r2
+                            for kk in range(n):
+                                omega_new[kk] += j * resp[kk]
+                            wm = omega_new[k]
+                        else:
+                            j = -(1.0 + restitution) * rel / (1.0 / i_m + 1.0 / inertia)
+                            wm += j / i_m
+                            w -= j / inertia
                 js[i, k, JS.BETA] = beta
                 js[i, k, JS.OMEGA] = wm
+            if coupled:  # a later module's stop impulse moved the earlier ones too
+                for k in range(n):
+                    js[i, k, JS.OMEGA] = omega_new[k]
             if integrate:
                 x += dt * vx
                 y += dt * vy

@@ -65,12 +65,20 @@ class WP(IntEnum):
     contact half-length a [m], DAMP_TIME the bristle damping time τ_d [s]. DC steering motor
     (``params.SteeringMotorParams``, used when its model is "dc"): MOTOR_STALL the stall torque
     [N·m], MOTOR_NO_LOAD the no-load speed [rad/s], MOTOR_INERTIA the reflected rotor inertia
-    [kg·m²]."""
+    [kg·m²]. Steering joint friction (``params.SteeringParams``): FRIC_C the sliding torque τ_c,
+    FRIC_S the breakaway torque τ_s [N·m] (0: no friction), STRIBECK the Stribeck speed [rad/s].
+    The module's centre of mass: M_MOD its mass [kg], COM its offset c from the axis [m] (0: on
+    the axis). Drive motor (``params.WheelParams``, "dc" model): DRIVE_STALL τ_stall [N·m],
+    DRIVE_NO_LOAD ω₀ [rad/s] at the wheel.
+
+    ALPHA and R are the wheel's true values: the geometry's plus the robot's imperfections
+    (``params.ImperfectionParams``: steering-axis zero offset, rolling-radius error)."""
 
     B, R, ALPHA, LOAD, MU, K_S, C_S, KP, I_W, KV, BEARING, RR_TORQUE, RR_KNEE, \
         STEER_RATE, STEER_ACCEL, STEER_TORQUE, WHEEL_ACCEL, WHEEL_TORQUE, STEER_MIN, STEER_MAX, I_MOD, \
         C_KAPPA, C_ALPHA, SIGMA_LONG, SIGMA_LAT, HALF_LEN, DAMP_TIME, \
-        MOTOR_STALL, MOTOR_NO_LOAD, MOTOR_INERTIA = range(30)
+        MOTOR_STALL, MOTOR_NO_LOAD, MOTOR_INERTIA, \
+        FRIC_C, FRIC_S, STRIBECK, M_MOD, COM, DRIVE_STALL, DRIVE_NO_LOAD = range(37)
 
 
 class JS(IntEnum):

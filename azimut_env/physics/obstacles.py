@@ -1,4 +1,10 @@
-"""Static obstacles of the robots' world (circles and convex polygons), as :class:`Obstacle`."""
+"""Static obstacles of the robots' world (circles and convex polygons), as :class:`Obstacle`, and
+their pymunk shapes: the collision shapes of obstacles and robots (robots collide with obstacles
+only, never with each other) and the overlap query.
+
+:class:`~azimut_env.physics.engine.AzimutPhysics` gives its robots collision shapes (the chassis
+box; the wheels lie within its footprint up to 2 cm) only when there are obstacles.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +12,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pymunk
 
-__all__ = ["Obstacle"]
+__all__ = ["Obstacle", "add_obstacle_shape", "add_robot_shape", "overlapping_shapes"]
+
+#: Collision categories: robots collide with obstacles only, never with each other.
+_CAT_ROBOT = 0b01
+_CAT_OBSTACLE = 0b10
 
 
 @dataclass(frozen=True)
@@ -46,3 +57,32 @@ class Obstacle:
         if arr.ndim == 2 and arr.shape[1] == 2:
             return cls(vertices=tuple(map(tuple, arr)))
         raise ValueError(f"cannot interpret {spec!r} as an obstacle: give (x, y, radius) or [(x, y), ...]")
+
+
+def add_obstacle_shape(space: pymunk.Space, ob: Obstacle) -> pymunk.Shape:
+    """Add obstacle ``ob`` to ``space`` as a static shape (friction 0.5, restitution 0.2); return it."""
+    body = space.static_body
+    shape = pymunk.Poly(body, ob.vertices) if ob.vertices else pymunk.Circle(body, ob.radius, (ob.x, ob.y))
+    shape.filter = pymunk.ShapeFilter(categories=_CAT_OBSTACLE, mask=_CAT_ROBOT)
+    shape.friction = 0.5
+    shape.elasticity = 0.2
+    space.add(shape)
+    return shape
+
+
+def add_robot_shape(space: pymunk.Space, body: pymunk.Body, length: float, width: float) -> None:
+    """Give a robot's body its collision shape: the chassis box ``length`` × ``width`` [m]."""
+    box = pymunk.Poly.create_box(body, (length, width))
+    box.filter = pymunk.ShapeFilter(categories=_CAT_ROBOT, mask=_CAT_OBSTACLE)
+    box.friction = 0.5
+    space.add(box)
+
+
+def overlapping_shapes(space: pymunk.Space, body: pymunk.Body, shapes: list[pymunk.Shape]) -> list[int]:
+    """Indices in ``shapes`` of those that overlap ``body``'s shapes now."""
+    hits = set()
+    for own in body.shapes:
+        for info in space.shape_query(own):
+            if info.shape in shapes:
+                hits.add(shapes.index(info.shape))
+    return sorted(hits)

@@ -18,7 +18,14 @@ parameters, 8 substeps of 2.5 ms at the 20 ms control period:
   is stable below 2; refused above 0.5), its damper c_s dt / I_m = 0.075 (refused above 1);
 * the propulsion velocity loop and bearing are implicit in the spin, and the DC steering motor's
   rotor (``SteeringMotorParams.model = "dc"``) on the spring is implicit: no bound on dt;
-* the hard stops are exact projections (no stiffness, no bound on dt);
+* the hard stops are exact projections (no stiffness, no bound on dt); the steering joint's
+  friction is a velocity-level impulse that stops the joint at most (``modules.py``: no
+  stiffness, no bound on dt, no energy added, no chattering);
+* a module whose centre of mass is off its axis (``SteeringParams.com_offset`` > 0) couples to
+  the chassis through the mass matrix: the tire and spring figures then use the exact inverse
+  effective masses J M⁻¹ Jᵀ (worst wheel, worst module angle on a grid) instead of the bounds above;
+* the drive's torque–speed line (``WheelParams.drive_model = "dc"``) is explicit in the spin: a
+  damping τ_stall/ω₀ on I_w, refused at dt τ_stall/(ω₀ I_w) >= 1 (0.22 for the "dc" defaults);
 * load transfer (h > 0) closes a loop N → F → a → N; its gain is at most 2 μ h / ℓ (ℓ the
   shorter wheelbase, between the axes along x or y; the worst case has the front and rear wheels
   saturated in opposite directions). It is explicit with a one-substep lag: refused at gain ≥ 1
@@ -34,6 +41,7 @@ import math
 import numpy as np
 
 from azimut_env.params import RobotParams
+from azimut_env.physics.modules import mass_matrix
 from azimut_env.physics.tire import stability_numbers
 
 __all__ = ["stability_figures", "check_stability", "check_substeps", "check_load_scale", "LOADED_MARGIN_MAX"]
@@ -63,10 +71,47 @@ def stability_figures(params: RobotParams, dt: float) -> dict[str, tuple[float, 
     for d in ("long", "lat", "twist"):
         out[f"tire_{d}_damping"] = (tire[f"{d}_a"], 1.5)
         out[f"tire_{d}_margin"] = (tire[f"{d}_margin"], 3.0)
-    out["spring_omega_dt"] = (math.sqrt(p.steering.stiffness / i_m) * dt, 0.5)
-    out["spring_damping_dt"] = (p.steering.damping / i_m * dt, 1.0)
+    i_spring = i_m
+    if p.steering.com_offset > 0:  # the coupled module (modules.py): exact effective inertias
+        tire, i_spring = _coupled_budget(p, load, dt)
+        for d in ("long", "lat", "twist"):
+            out[f"tire_{d}_damping"] = (tire[f"{d}_a"], 1.5)
+            out[f"tire_{d}_margin"] = (tire[f"{d}_margin"], 3.0)
+    out["spring_omega_dt"] = (math.sqrt(p.steering.stiffness / i_spring) * dt, 0.5)
+    out["spring_damping_dt"] = (p.steering.damping / i_spring * dt, 1.0)
     out["load_transfer_gain"] = (p.tire.friction * p.chassis.com_height / half, 1.0)
+    if p.wheel.is_dc:  # the drive's torque–speed line, explicit in the spin: a damping τ_stall/ω₀
+        out["drive_line_dt"] = (p.wheel.drive_stall_torque / p.wheel.drive_no_load_speed / p.wheel.inertia * dt, 1.0)
     return out
+
+
+def _coupled_budget(p: RobotParams, load: float, dt: float) -> tuple[dict[str, float], float]:
+    """The tire figures and the spring's effective inertia of modules whose centre of mass is off
+    the axis: the inverse effective masses J M⁻¹ Jᵀ of the mass matrix (modules.mass_matrix), the
+    worst over the wheels and over every module angle on a grid (all modules at the same angle)."""
+    g, st = p.geometry, p.steering
+    mass, inertia = (float(v) for v in p.body_inertia())
+    n = g.n
+    inv_long = inv_lat = inv_twist = inv_spring = 0.0
+    for beta in np.linspace(g.steer_min, g.steer_max, 13):
+        gam = g.alpha + beta
+        M_inv = np.linalg.inv(mass_matrix(mass, inertia, g.axis_xy, gam, np.full(n, st.module_mass),
+                                          np.full(n, st.com_offset), np.full(n, st.module_inertia)))
+        for k in range(n):
+            u = np.array([math.cos(gam[k]), math.sin(gam[k])])
+            d = np.array([u[1], -u[0]])
+            arm_perp = np.array([-g.axis_xy[k, 1], g.axis_xy[k, 0]])  # J w_k
+            j_d = np.zeros(3 + n)
+            j_d[:2], j_d[2], j_d[3 + k] = d, arm_perp @ d, -g.b[k]
+            j_e = np.zeros(3 + n)
+            j_e[:2], j_e[2] = u, arm_perp @ u
+            j_s = np.zeros(3 + n)
+            j_s[3 + k], j_s[2] = 1.0, -1.0
+            inv_long = max(inv_long, float(j_d @ M_inv @ j_d) + float(g.r[k] ** 2 / p.wheel.inertia))
+            inv_lat = max(inv_lat, float(j_e @ M_inv @ j_e))
+            inv_twist = max(inv_twist, float(M_inv[3 + k, 3 + k]))
+            inv_spring = max(inv_spring, float(j_s @ M_inv @ j_s))
+    return stability_numbers(p.tire, load, dt, 1.0 / inv_long, 1.0 / inv_lat, 1.0 / inv_twist), 1.0 / inv_spring
 
 
 def check_stability(params: RobotParams, dt: float) -> None:

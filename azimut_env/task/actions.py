@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit
 
-from azimut_env.params import ActuatorLimits, _setpoints_row
+from azimut_env.action_map import ActuatorLimits, setpoints_row
 from azimut_env.physics.layout import CMD
 
 __all__ = ["CommandPath", "float32_copy"]
@@ -35,7 +35,7 @@ def _apply_actions_kernel(a, cmd, rows, steer_min, steer_max, wheel_speed_max):
         if rows[i]:
             for j in range(a.shape[1]):
                 a[i, j] = min(max(a[i, j], -1.0), 1.0)
-            _setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
+            setpoints_row(a, i, n, steer_min, steer_max, wheel_speed_max, cmd)
     return -1
 
 

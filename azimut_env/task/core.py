@@ -45,8 +45,9 @@ from numba.typed import List as NumbaList
 
 from azimut_env.params import RobotParams, action_from_setpoints
 from azimut_env.physics.blowup import BlowUp
-from azimut_env.physics.engine import AzimutPhysics, BlowUpLimits, default_wheel_params
-from azimut_env.physics.layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WP, WS, WS_FORCE
+from azimut_env.physics.engine import AzimutPhysics, BlowUpLimits
+from azimut_env.physics.layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WS, WS_FORCE
+from azimut_env.physics.wheel_params import default_wheel_params, randomized_wheel_params
 from azimut_env.task.actions import CommandPath
 from azimut_env.task.config import TaskConfig, resolve_params
 from azimut_env.task.lap_time import nominal_duration, reference_lap_time  # noqa: F401 (re-exported)
@@ -314,31 +315,13 @@ class AzimutTask:
         return steering_from_lambda(lam, self.params.geometry)
 
     def _randomize(self, i: int, rng: np.random.Generator) -> None:
-        """Robot i's parameters for this episode: the defaults, scaled by factors drawn from
-        [1 − d, 1 + d] with d = ``domain_randomization`` (friction, spring, damper, chassis mass,
-        tire stiffness, contact patch size). Everything that depends on the mass follows it: the
-        body's mass and moment and the wheels' normal loads (``AzimutPhysics.set_chassis_mass``).
-
-        The tire's cornering and longitudinal stiffness coefficients and its relaxation lengths
-        take the same factor: σ = C/k with k the carcass (contact) stiffness (Pacejka 2012, Ch. 7),
-        so a stiffer or softer tread changes the slip stiffness and the distance to build force,
-        and leaves the contact stiffness k, hence the stability budget, as it is. The contact
-        half-length scales the aligning trail, the scrub torque limit and the twist stiffness."""
-        phys = self.physics
-        wp = self._default_wp[i].copy()
-        d = self.config.domain_randomization
-        mass = self.params.chassis.mass
-        if d > 0:
-            f = rng.uniform(1 - d, 1 + d, size=6)
-            wp[..., WP.MU] *= f[0]
-            wp[..., WP.K_S] *= f[1]
-            wp[..., WP.C_S] *= f[2]
-            mass *= f[3]
-            for col in (WP.C_KAPPA, WP.C_ALPHA, WP.SIGMA_LONG, WP.SIGMA_LAT):
-                wp[..., col] *= f[4]
-            wp[..., WP.HALF_LEN] *= f[5]
-        phys.set_wheel_params(wp, robot=i)
-        phys.set_chassis_mass(i, mass)
+        """Robot i's parameters for this episode: the defaults, or under domain randomisation a
+        robot drawn by :func:`~azimut_env.physics.wheel_params.randomized_wheel_params`. Everything
+        that depends on the mass follows it: the body's mass and moment and the wheels' normal
+        loads (``AzimutPhysics.set_chassis_mass``)."""
+        wp, mass = randomized_wheel_params(self._default_wp[i], self.params, self.config.domain_randomization, rng)
+        self.physics.set_wheel_params(wp, robot=i)
+        self.physics.set_chassis_mass(i, mass)
 
     def park(self, i: int) -> None:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for

@@ -34,7 +34,8 @@ def _drive(mass, ref, seconds, v0=0.0, phidot0=0.0, load=N):
     for _ in range(int(round(seconds / DT))):
         f = tire_step_kernel(v - R * phidot, 0.0, v, 0.0, load, *st, *_tire_args(), DT)
         st = f[4:]
-        phidot = wheel_spin_step_kernel(phidot, ref, f[0], True, R, I_W, KV, TAU_W, BEARING, RR, TIRE.rolling_knee, DT)
+        phidot = wheel_spin_step_kernel(phidot, ref, f[0], True, R, I_W, KV, -TAU_W, TAU_W, BEARING, RR,
+                                        TIRE.rolling_knee, DT)
         v += DT * f[0] / mass
         out.append((v, phidot, f[0]))
     return np.array(out)
@@ -44,14 +45,14 @@ def test_wheel_spin_without_load_follows_the_velocity_loop():
     """No tire force, no resistance: φ̇' = (I φ̇ + dt K_v ref)/(I + dt (K_v + b)) while unsaturated."""
     ph = 0.0
     for _ in range(3):
-        new = wheel_spin_step_kernel(ph, 0.5, 0.0, True, R, I_W, KV, TAU_W, BEARING, 0.0, 0.02, DT)
+        new = wheel_spin_step_kernel(ph, 0.5, 0.0, True, R, I_W, KV, -TAU_W, TAU_W, BEARING, 0.0, 0.02, DT)
         assert new == pytest.approx((I_W * ph + DT * KV * 0.5) / (I_W + DT * (KV + BEARING)))
         ph = new
     # a far set-point saturates the torque: φ̇' = φ̇ + dt τ_max / I (bearing implicit)
-    new = wheel_spin_step_kernel(0.0, 20.0, 0.0, True, R, I_W, KV, TAU_W, BEARING, 0.0, 0.02, DT)
+    new = wheel_spin_step_kernel(0.0, 20.0, 0.0, True, R, I_W, KV, -TAU_W, TAU_W, BEARING, 0.0, 0.02, DT)
     assert new == pytest.approx(DT * TAU_W / (I_W + DT * BEARING))
     # motors off: only the load
-    assert wheel_spin_step_kernel(2.0, 20.0, 10.0, False, R, I_W, KV, TAU_W, 0.0, 0.0, 0.02, DT) == \
+    assert wheel_spin_step_kernel(2.0, 20.0, 10.0, False, R, I_W, KV, -TAU_W, TAU_W, 0.0, 0.0, 0.02, DT) == \
         pytest.approx(2.0 - DT * R * 10.0 / I_W)
 
 
@@ -199,5 +200,6 @@ def test_steering_kernels_finite_on_finite_input(theta, omega, target, beta, bet
 @settings(max_examples=200, deadline=None)
 @given(_f, _f, st.floats(-1e4, 1e4), st.booleans(), st.floats(1e-5, 0.01))
 def test_wheel_spin_kernel_finite_on_finite_input(phidot, ref, f_long, enabled, dt):
-    new = wheel_spin_step_kernel(phidot, ref, f_long, enabled, R, I_W, KV, TAU_W, BEARING, RR, TIRE.rolling_knee, dt)
+    new = wheel_spin_step_kernel(phidot, ref, f_long, enabled, R, I_W, KV, -TAU_W, TAU_W, BEARING, RR,
+                                 TIRE.rolling_knee, dt)
     assert math.isfinite(new)
