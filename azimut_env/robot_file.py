@@ -5,7 +5,8 @@ A preset *is* a description file: ``azimut_env/robots/NAME.toml``, shipped in th
 read by the same reader as a user's file. The file format (schema 1) is described in
 ``docs/robots.md`` and :mod:`estimation.robot_file`, which reads the ``[geometry]`` table; this
 module reads the parameter tables, one per group of ``RobotParams`` (``[chassis]``,
-``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``, ``[sensors]``), whose
+``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``, ``[sensors]``,
+``[imperfections]``), whose
 keys are the fields of the group's dataclass in its units (SI; angles in radians), and the
 top-level ``gravity`` [m/s²]. A group or key the file leaves out keeps the default of
 ``RobotParams`` (the AZIMUT-3 stand-in). The steering range of ``[limits]`` is not a key: it

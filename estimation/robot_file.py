@@ -53,7 +53,7 @@ __all__ = ["SCHEMA_VERSION", "PARAMETER_TABLES", "TOP_LEVEL_KEYS", "RobotFileErr
 SCHEMA_VERSION = 1
 #: the tables of the simulator's parameter groups (the fields of ``azimut_env.params.RobotParams``
 #: other than ``geometry`` and ``gravity``); a test checks the two lists agree
-PARAMETER_TABLES = ("chassis", "steering", "steer_motor", "wheel", "tire", "limits", "sensors")
+PARAMETER_TABLES = ("chassis", "steering", "steer_motor", "wheel", "tire", "limits", "sensors", "imperfections")
 #: the top-level keys that are not tables
 TOP_LEVEL_KEYS = ("schema", "name", "description", "sources", "gravity")
 

@@ -93,7 +93,8 @@ def _coupled_budget(p: RobotParams, load: float, dt: float) -> tuple[dict[str, f
     mass, inertia = (float(v) for v in p.body_inertia())
     n = g.n
     inv_long = inv_lat = inv_twist = inv_spring = 0.0
-    for beta in np.linspace(g.steer_min, g.steer_max, 13):
+    lo, hi = (-math.pi, math.pi) if g.unlimited_steering else (g.steer_min, g.steer_max)
+    for beta in np.linspace(lo, hi, 13):
         gam = g.alpha + beta
         M_inv = np.linalg.inv(mass_matrix(mass, inertia, g.axis_xy, gam, np.full(n, st.module_mass),
                                           np.full(n, st.com_offset), np.full(n, st.module_inertia)))
