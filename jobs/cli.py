@@ -27,6 +27,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sim-paper": ("jobs.sim_paper", "the paper's phenomenon: qua while moving under the ICR controller at three "
                   "speeds, split into motor lag and compliance, with a stiff-steering counterfactual"),
     "record-d2": ("jobs.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
+    "estimate": ("jobs.estimate.command", "estimate the ICR, the H state and odometry from a recorded robot log "
+                 "(CSV, ROS 2 bag, WPILib .wpilog)"),
     "train": ("jobs.training.command", "train an RL baseline (needs the [rl] extra)"),
 }
 

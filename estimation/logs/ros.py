@@ -1,0 +1,314 @@
+"""ROS 2 bags (MCAP or SQLite3 storage, a bag directory or a bare ``.mcap`` / ``.db3`` file) through
+``rosbags`` (the ``logs`` extra; no ROS install needed): a streaming reader of
+``sensor_msgs/msg/JointState`` and a writer of the messages an episode export needs.
+
+Reading: module ``m``'s steering angle is the ``position`` of joint ``steer_joint.format(module=m)``
+and its wheel spin rate φ̇ [rad/s] the ``velocity`` of joint ``drive_joint.format(module=m)`` (the
+robot file's module names; joints are found by name in each message, so their order may change and
+other joints may be present). Each message's time is its ``header.stamp`` (``time="header"``, the
+default) or the time the bag recorded it (``time="log"``). A reference pose may come from a
+``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseStamped`` or ``PoseWithCovarianceStamped``
+topic (x, y and the yaw of the orientation).
+
+Tested with rosbags 0.11 (``Writer(path, version=9, storage_plugin=...)``; bare files need 0.11).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from estimation.geometry import RobotGeometry
+from estimation.logs.source import (
+                                    BAD_MISSING_JOINT,
+                                    BAD_NO_VELOCITY,
+                                    STEER_CONVENTIONS,
+                                    GroundTruth,
+                                    LogError,
+                                    LogSource,
+                                    SampleChunk,
+                                    beta_from_heading,
+                                    fold_coaxial,
+)
+
+__all__ = ["RosLog", "BagWriter", "JOINT_STATE", "TRUTH_TYPES", "yaw_from_quaternion", "TIME_SOURCES"]
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+#: message types a reference pose may come from
+TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+#: where a message's time comes from: its header's stamp, or the time the bag logged it
+TIME_SOURCES = ("header", "log")
+
+
+def _rosbags():
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise LogError("reading ROS 2 bags needs the rosbags package: pip install 'azimut[logs]'") from None
+    return AnyReader, get_typestore(Stores.ROS2_HUMBLE)
+
+
+def yaw_from_quaternion(x, y, z, w) -> float:
+    """The rotation about z [rad] of the unit quaternion (x, y, z, w): atan2(2(wz + xy), 1 − 2(y² + z²))."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class RosLog(LogSource):
+    """A ROS 2 bag's JointState topic as wheel samples (see the module docstring)."""
+
+    format = "ROS 2 bag"
+
+    def __init__(self, path, geom: RobotGeometry, modules, topic: str = "/joint_states",
+                 steer_joint: str = "{module}_steer", drive_joint: str = "{module}_drive",
+                 truth_topic: str | None = None, time: str = "header", steer_convention: str = "beta") -> None:
+        super().__init__(path, geom, modules)
+        if time not in TIME_SOURCES:
+            raise ValueError(f"time must be one of {TIME_SOURCES}, got {time!r}")
+        if steer_convention not in STEER_CONVENTIONS:
+            raise ValueError(f"steer_convention must be one of {STEER_CONVENTIONS}, got {steer_convention!r}")
+        for name, template in (("steer_joint", steer_joint), ("drive_joint", drive_joint)):
+            if "{module}" not in template:
+                raise ValueError(f"{name} must contain {{module}} (the module's name), got {template!r}")
+        self.topic, self.truth_topic, self.time, self.steer_convention = topic, truth_topic, time, steer_convention
+        self.steer_joints = [steer_joint.replace("{module}", m) for m in self.modules]
+        self.drive_joints = [drive_joint.replace("{module}", m) for m in self.modules]
+        if not Path(path).exists():
+            raise self.error("no such file or directory")
+        self._any_reader, self._typestore = _rosbags()
+        with self._open() as reader:
+            topics = {c.topic: c.msgtype for c in reader.connections}
+            self._check_topic(topics, topic, (JOINT_STATE,), "joint states")
+            if truth_topic is not None:
+                self._check_topic(topics, truth_topic, TRUTH_TYPES, "reference pose")
+            conns = [c for c in reader.connections if c.topic == topic]
+            self.n_samples = sum(c.msgcount for c in conns)
+            first = next(self._messages(reader, conns), None)
+        if first is None:
+            raise self.error(f"topic {topic} holds no message")
+        self._check_names(first[1], 0)
+
+    @contextmanager
+    def _open(self):
+        """The bag opened with rosbags' AnyReader; an error opening it -> LogError."""
+        reader = self._any_reader([Path(self.path)], default_typestore=self._typestore)
+        try:
+            reader.open()
+        except Exception as exc:  # noqa: BLE001 (rosbags and its storage raise many types: say it in one line)
+            raise self.error(f"cannot be read as a ROS 2 bag ({type(exc).__name__}: {exc})") from None
+        try:
+            yield reader
+        finally:
+            reader.close()
+
+    def _messages(self, reader, conns) -> Iterator[tuple[int, object]]:
+        """(time [ns], message) of ``conns``, in the bag's time order; a storage error -> LogError."""
+        it = reader.messages(connections=conns)
+        while True:
+            try:
+                conn, t_log, raw = next(it)
+                msg = reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001
+                raise self.error(f"cannot be read to its end ({type(exc).__name__}: {exc}): a truncated or "
+                                 "corrupt file?") from None
+            if self.time == "header":
+                stamp = msg.header.stamp
+                t = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+                if t == 0:
+                    raise self.error(f"a {conn.topic} message has no header stamp (0); pass time='log' "
+                                     "(--time log) to use the time the bag recorded it")
+            else:
+                t = int(t_log)
+            yield t, msg
+
+    def _check_topic(self, topics: dict, topic: str, types: tuple, what: str) -> None:
+        if topic not in topics:
+            raise self.error(f"no topic {topic} ({what}); the bag has: "
+                             + (", ".join(f"{k} [{v}]" for k, v in sorted(topics.items())) or "no topic"))
+        if topics[topic] not in types:
+            raise self.error(f"topic {topic} holds {topics[topic]}, not {' or '.join(types)}")
+
+    def _check_names(self, msg, k: int) -> None:
+        names = set(msg.name)
+        for m, s, d in zip(self.modules, self.steer_joints, self.drive_joints):
+            for joint in (s, d):
+                if joint not in names:
+                    raise self.error(f"message {k} of {self.topic}: no joint {joint!r} for module {m!r} (its joints: "
+                                     f"{', '.join(msg.name)}); name the joints with --steer-joint/--drive-joint "
+                                     "templates such as '{module}_steer'")
+
+    def chunks(self, size: int) -> Iterator[SampleChunk]:
+        n = self.geom.n
+        with self._open() as reader:
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            buf_t, buf_q, buf_w, buf_bad, fill = _buffers(size, n)
+            names, steer_idx, drive_idx = None, None, None
+            for t, msg in self._messages(reader, conns):
+                if msg.name != names:
+                    names = msg.name
+                    index = {j: i for i, j in enumerate(names)}
+                    steer_idx = [index.get(j, -1) for j in self.steer_joints]
+                    drive_idx = [index.get(j, -1) for j in self.drive_joints]
+                buf_t[fill] = t
+                pos, vel = msg.position, msg.velocity
+                if min(steer_idx) < 0 or min(drive_idx) < 0 or len(pos) != len(names):
+                    buf_bad[fill] = BAD_MISSING_JOINT
+                elif len(vel) != len(names):
+                    buf_bad[fill] = BAD_NO_VELOCITY
+                else:
+                    buf_q[fill] = pos[steer_idx]
+                    buf_w[fill] = vel[drive_idx]
+                    buf_bad[fill] = 0
+                fill += 1
+                if fill == size:
+                    yield self._chunk(buf_t, buf_q, buf_w, buf_bad, fill)
+                    buf_t, buf_q, buf_w, buf_bad, fill = _buffers(size, n)
+            if fill:
+                yield self._chunk(buf_t, buf_q, buf_w, buf_bad, fill)
+
+    def _chunk(self, t, q, w, bad, m) -> SampleChunk:
+        q, w = q[:m], w[:m]
+        if self.steer_convention == "heading":
+            q = beta_from_heading(q, self.geom)
+        beta, phidot = fold_coaxial(q, w, self.geom)
+        return SampleChunk(t[:m].copy(), beta, phidot, bad[:m].copy())
+
+    def ground_truth(self) -> GroundTruth | None:
+        if self.truth_topic is None:
+            return None
+        with self._open() as reader:
+            conns = [c for c in reader.connections if c.topic == self.truth_topic]
+            ts, poses = [], []
+            for t, msg in self._messages(reader, conns):
+                pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose  # Odometry/WithCovariance, Stamped
+                o = pose.orientation
+                ts.append(t)
+                poses.append((pose.position.x, pose.position.y, yaw_from_quaternion(o.x, o.y, o.z, o.w)))
+        return GroundTruth(np.asarray(ts, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(-1, 3),
+                           f"topic {self.truth_topic}")
+
+    def describe(self) -> dict:
+        return {"format": self.format, "path": self.path, "topic": self.topic, "time": self.time,
+                "steer_joints": self.steer_joints, "drive_joints": self.drive_joints,
+                "truth_topic": self.truth_topic, "steer_convention": self.steer_convention}
+
+
+def _buffers(size: int, n: int):
+    return (np.empty(size, np.int64), np.full((size, n), np.nan), np.full((size, n), np.nan),
+            np.zeros(size, np.int8), 0)
+
+
+class BagWriter:
+    """A ROS 2 bag (MCAP by default, which Foxglove opens; or SQLite3) of the messages an episode
+    export writes. Each ``add_*`` queues one topic's series; :meth:`close` writes them all merged
+    in time order. Times are int nanoseconds; each message's header stamp equals its log time."""
+
+    def __init__(self, path, storage: str = "mcap") -> None:
+        try:
+            from rosbags.rosbag2 import StoragePlugin, Writer
+            from rosbags.typesys import Stores, get_typestore
+        except ImportError:
+            raise LogError("writing ROS 2 bags needs the rosbags package: pip install 'azimut[logs]'") from None
+        if storage not in ("mcap", "sqlite3"):
+            raise ValueError(f"storage must be 'mcap' or 'sqlite3', got {storage!r}")
+        self.path = Path(path)
+        if self.path.exists():
+            raise ValueError(f"{self.path} exists already (a bag is a new directory)")
+        self.ts = get_typestore(Stores.ROS2_HUMBLE)
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        self._writer = Writer(self.path, version=9, storage_plugin=plugin)
+        self._series: list = []
+
+    def _type(self, name: str):
+        return self.ts.types[name]
+
+    def _header(self, t: int, frame: str):
+        return self._type("std_msgs/msg/Header")(
+            stamp=self._type("builtin_interfaces/msg/Time")(sec=t // 1_000_000_000, nanosec=t % 1_000_000_000),
+            frame_id=frame)
+
+    def _quaternion(self, theta: float):
+        return self._type("geometry_msgs/msg/Quaternion")(x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2))
+
+    def _pose(self, p):
+        return self._type("geometry_msgs/msg/Pose")(
+            position=self._type("geometry_msgs/msg/Point")(x=float(p[0]), y=float(p[1]), z=0.0),
+            orientation=self._quaternion(float(p[2])))
+
+    def _vector(self, v):
+        return self._type("geometry_msgs/msg/Vector3")(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+    def _add(self, topic: str, msgtype: str, t_ns, make) -> None:
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        self._series.append((topic, msgtype, t_ns, make))
+
+    def add_joint_states(self, topic: str, t_ns, names, position, velocity, frame: str = "") -> None:
+        """JointState messages: ``names`` (J,), ``position`` and ``velocity`` (T, J) (NaN allowed)."""
+        cls = self._type(JOINT_STATE)
+        pos = np.ascontiguousarray(position, dtype=np.float64)
+        vel = np.ascontiguousarray(velocity, dtype=np.float64)
+        names = list(names)
+        self._add(topic, JOINT_STATE, t_ns, lambda i, t: cls(header=self._header(t, frame), name=names,
+                                                             position=pos[i].copy(), velocity=vel[i].copy(),
+                                                             effort=np.zeros(0)))
+
+    def add_odometry(self, topic: str, t_ns, pose, twist, frame: str = "odom", child: str = "base_link") -> None:
+        """nav_msgs/Odometry: ``pose`` (T, 3) (x, y, θ) in ``frame``, ``twist`` (T, 3) (ẋ, ẏ, θ̇) in ``child``."""
+        cls = self._type("nav_msgs/msg/Odometry")
+        pwc = self._type("geometry_msgs/msg/PoseWithCovariance")
+        twc = self._type("geometry_msgs/msg/TwistWithCovariance")
+        tw = self._type("geometry_msgs/msg/Twist")
+        self._add(topic, "nav_msgs/msg/Odometry", t_ns, lambda i, t: cls(
+            header=self._header(t, frame), child_frame_id=child,
+            pose=pwc(pose=self._pose(pose[i]), covariance=np.zeros(36)),
+            twist=twc(twist=tw(linear=self._vector((twist[i][0], twist[i][1], 0.0)),
+                               angular=self._vector((0.0, 0.0, twist[i][2]))), covariance=np.zeros(36))))
+
+    def add_pose_stamped(self, topic: str, t_ns, pose, frame: str = "world") -> None:
+        """geometry_msgs/PoseStamped: ``pose`` (T, 3) (x, y, θ)."""
+        cls = self._type("geometry_msgs/msg/PoseStamped")
+        self._add(topic, "geometry_msgs/msg/PoseStamped", t_ns,
+                  lambda i, t: cls(header=self._header(t, frame), pose=self._pose(pose[i])))
+
+    def add_vector3_stamped(self, topic: str, t_ns, vec, frame: str = "base_link") -> None:
+        """geometry_msgs/Vector3Stamped: ``vec`` (T, 3)."""
+        cls = self._type("geometry_msgs/msg/Vector3Stamped")
+        self._add(topic, "geometry_msgs/msg/Vector3Stamped", t_ns,
+                  lambda i, t: cls(header=self._header(t, frame), vector=self._vector(vec[i])))
+
+    def add_twist_stamped(self, topic: str, t_ns, twist, frame: str = "base_link") -> None:
+        """geometry_msgs/TwistStamped: ``twist`` (T, 3) (ẋ, ẏ, θ̇)."""
+        cls, tw = self._type("geometry_msgs/msg/TwistStamped"), self._type("geometry_msgs/msg/Twist")
+        self._add(topic, "geometry_msgs/msg/TwistStamped", t_ns, lambda i, t: cls(
+            header=self._header(t, frame), twist=tw(linear=self._vector((twist[i][0], twist[i][1], 0.0)),
+                                                    angular=self._vector((0.0, 0.0, twist[i][2])))))
+
+    def add_transforms(self, topic: str, t_ns, pose, parent: str = "world", child: str = "base_link") -> None:
+        """tf2_msgs/TFMessage with one parent -> child transform per message: ``pose`` (T, 3)."""
+        cls, tfs = self._type("tf2_msgs/msg/TFMessage"), self._type("geometry_msgs/msg/TransformStamped")
+        tr = self._type("geometry_msgs/msg/Transform")
+        self._add(topic, "tf2_msgs/msg/TFMessage", t_ns, lambda i, t: cls(transforms=[tfs(
+            header=self._header(t, parent), child_frame_id=child,
+            transform=tr(translation=self._vector((pose[i][0], pose[i][1], 0.0)),
+                         rotation=self._quaternion(float(pose[i][2]))))]))
+
+    def close(self) -> None:
+        """Write every queued series, merged in time order, and close the bag."""
+        w = self._writer
+        w.open()
+        try:
+            streams = []
+            for order, (topic, msgtype, t_ns, make) in enumerate(self._series):
+                conn = w.add_connection(topic, msgtype, typestore=self.ts)
+                streams.append(((int(t), order, i, conn, msgtype, make) for i, t in enumerate(t_ns)))
+            for t, _, i, conn, msgtype, make in heapq.merge(*streams):
+                w.write(conn, t, self.ts.serialize_cdr(make(i, t), msgtype))
+        finally:
+            w.close()

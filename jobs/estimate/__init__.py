@@ -1,0 +1,1 @@
+"""jobs.estimate: ``azimut estimate``, the estimation of a recorded robot log."""
