@@ -75,7 +75,7 @@ def write_csv_log(path, t_s, steer, phidot, modules, pose=None) -> None:
 class CsvLog(LogSource):
     """A CSV wheel log (see the module docstring), read ``size`` rows at a time."""
 
-    format = "CSV"
+    format = "CSV log"
 
     def __init__(self, path, geom: RobotGeometry, modules, steer_convention: str = "beta") -> None:
         super().__init__(path, geom, modules)

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from estimation.estimate import METHODS, estimate_eta
 from estimation.kinematics import integrate_pose, odometry_twist
@@ -82,15 +83,26 @@ class LogEstimate:
         return (self.t_ns - self.t_ns[0]) * 1e-9 if self.t_ns.size else np.zeros(0)
 
 
+@njit(cache=True)
+def _compose_kernel(start, inc, out):
+    x, y, th = start[0], start[1], start[2]
+    for k in range(inc.shape[0]):
+        c, s = math.cos(th), math.sin(th)
+        x = x + (c * inc[k, 0] - s * inc[k, 1])
+        y = y + (s * inc[k, 0] + c * inc[k, 1])
+        th = th + inc[k, 2]
+        out[k, 0], out[k, 1], out[k, 2] = x, y, th
+
+
 def compose_increments(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
     """Poses (K, 3) after each of the chassis-frame increments ``inc`` (K, 3) (dx, dy, dθ), applied
-    in order from ``start`` (3,): θ_k = θ_{k−1} + dθ_k, (x, y)_k = (x, y)_{k−1} + R(θ_{k−1}) (dx, dy)_k
-    (the composition of SE(2) motions; ``integrate_pose`` from the origin gives the increments)."""
-    theta = np.cumsum(np.concatenate([[start[2]], inc[:, 2]]))
-    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
-    x = start[0] + np.cumsum(c * inc[:, 0] - s * inc[:, 1])
-    y = start[1] + np.cumsum(s * inc[:, 0] + c * inc[:, 1])
-    return np.column_stack([x, y, theta[1:]])
+    in order from ``start`` (3,): (x, y)_k = (x, y)_{k−1} + R(θ_{k−1}) (dx, dy)_k, θ_k = θ_{k−1} + dθ_k
+    (the composition of SE(2) motions; ``integrate_pose`` from the origin gives the increments).
+    One pass in order, so that composing a path in pieces gives the same bits as in one go."""
+    inc = np.ascontiguousarray(inc, dtype=np.float64)
+    out = np.empty_like(inc)
+    _compose_kernel(np.asarray(start, dtype=np.float64), inc, out)
+    return out
 
 
 class _Odometry:

@@ -144,7 +144,7 @@ class LogSource:
         knows its message count), for the progress bar; None when unknown.
     """
 
-    format = "?"
+    format = "log"
 
     def __init__(self, path, geom: RobotGeometry, modules) -> None:
         self.path = str(path)
@@ -166,4 +166,4 @@ class LogSource:
 
     def error(self, what: str) -> LogError:
         """A :class:`LogError` naming this log."""
-        return LogError(f"{self.format} log {self.path}: {what}")
+        return LogError(f"{self.format} {self.path}: {what}")

@@ -23,9 +23,9 @@ import sys
 import time
 from pathlib import Path
 
-from jobs.args import arg_choice_list, arg_int, arg_output_path, require_module
+from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
 
-__all__ = ["add_arguments", "check_args", "run", "ROS_OPTIONS", "WPILOG_OPTIONS"]
+__all__ = ["add_arguments", "check_args", "run", "robot_geometry", "ROS_OPTIONS", "WPILOG_OPTIONS"]
 
 #: flags that only a ROS 2 bag takes (dest -> flag), and only a .wpilog
 ROS_OPTIONS = {"topic": "--topic", "steer_joint": "--steer-joint", "drive_joint": "--drive-joint",
@@ -42,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", metavar="LOG", help="the log: a .csv file, a .wpilog, a ROS 2 bag directory or a bare "
                                                    ".mcap / .db3 file")
     parser.add_argument("--out", required=True, type=arg_output_path(directory=True), help="report folder")
+    add_robot_arguments(parser)  # --robot NAME / --robot-file PATH: the geometry and the module names
     parser.add_argument("--format", choices=FORMATS, default=None, help="the log's format (default: from its "
                                                                          "content, then its suffix)")
     parser.add_argument("--methods", type=arg_choice_list(METHODS), default=list(DEFAULT_METHODS),
@@ -78,13 +79,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
 
 
-def _robot(args: argparse.Namespace):
-    """The robot's geometry and module names."""
+def robot_geometry(args: argparse.Namespace):
+    """The geometry and module names of ``--robot-file`` or ``--robot`` (default: the azimut3 preset)."""
+    from azimut_env.robot_file import DEFAULT_PRESET, preset_source
     from estimation.geometry import RobotGeometry
-    from estimation.logs import default_module_names
+    from estimation.robot_file import module_names, parse_robot_text, read_robot_file
 
-    geom = RobotGeometry.azimut3()
-    return geom, default_module_names(geom.n)
+    if getattr(args, "robot_file", None):
+        data = read_robot_file(args.robot_file)
+    else:
+        name = getattr(args, "robot", None) or DEFAULT_PRESET
+        data = parse_robot_text(preset_source(name), f"preset {name!r}")
+    return RobotGeometry.from_description(data), module_names(data)
 
 
 def _reader_options(args: argparse.Namespace, fmt: str) -> dict:
@@ -111,7 +117,7 @@ def check_args(args: argparse.Namespace) -> None:
     odo = args.odometry_method
     if odo is not None and odo not in args.methods:
         raise ValueError(f"argument --odometry-method: {odo} is not among --methods {','.join(args.methods)}")
-    geom, modules = _robot(args)
+    geom, modules = robot_geometry(args)
     fmt = args.format or detect_format(args.log)
     options = _reader_options(args, fmt)
     args.source = open_log(args.log, geom, modules, fmt=fmt, **options)
