@@ -40,6 +40,7 @@ from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.actions import float32_copy
 from azimut_env.task.config import front_signature
 from azimut_env.task.core import observation_layout
+from azimut_env.task.info import robot_info
 from azimut_env.tracks import Track
 from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_seed
 from estimation import estimate_eta
@@ -115,23 +116,32 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     pose the observation used.
 
     ## Rewards
-    Per step, ``reward = progress + lateral + heading + overspeed + slip + internal_force +
-    action_rate + off_track`` (every term but progress ≤ 0; each is in ``info["reward_terms"]``), with
-    v_max the track's top reference speed and dt the control period:
+    Per step, the reward is the sum of the terms of the table ``reward.REWARD_TERMS``, in this
+    order; each is in ``info["reward_terms"]`` under its name. w is the term's weight
+    (``reward_weights={name: w}`` sets it), v_max the track's top reference speed, dt the control
+    period; every term but progress is ≤ 0:
 
-    * progress = ``progress_weight`` · clip(Δs, −v_max·dt, v_ref·dt) / (v_max·dt): about
-      ``progress_weight`` per step at the reference speed, nothing more for going faster, and a
+    | name           | weight | unit | term (per step)                                            |
+    |----------------|--------|------|------------------------------------------------------------|
+    | progress       | 3      | -    | w·clip(Δs, −v_max·dt, v_ref·dt)/(v_max·dt)                 |
+    | lateral        | 0.5    | -    | −w·(1 − exp(−abs(e_lat)/lateral_scale))                    |
+    | heading        | 0.3    | -    | −w·(1 − exp(−abs(e_θ)/heading_scale))                      |
+    | overspeed      | 2      | -    | −w·max(0, v_along − v_ref)/v_max                           |
+    | slip           | 0.02   | 1/W  | −min(w·P_slip, antagonism_cap), P_slip the tire slip power |
+    | internal_force | 0.01   | 1/N  | −min(w·F_int, antagonism_cap), F_int the internal force    |
+    | action_rate    | 0.05   | -    | −w·‖a − a_prev‖² (normalised actions)                      |
+    | off_track      | 10     | -    | −w on the step that leaves the track or stalls             |
+
+    * progress: about w per step at the reference speed, nothing more for going faster, and a
       backward jump of the track projection costs at most one step's worth;
-    * lateral = −``lateral_weight`` · (1 − exp(−|e_lat| / ``lateral_scale``)) and heading =
-      −``heading_weight`` · (1 − exp(−|e_θ| / ``heading_scale``)): bounded (a lost robot costs at
-      most the weight) and steepest at zero error, so centimetres matter (1 cm: −0.09, 5 cm: −0.32);
-    * overspeed = −``overspeed_weight`` · max(0, v_along − v_ref) / v_max: going faster than the
-      reference is penalised (finishing early would otherwise save the per-step costs);
-    * slip = −min(``slip_weight`` · Σ|F·v_slip| [W], ``antagonism_cap``) and internal_force =
-      −min(``internal_force_weight`` · F_int [N], ``antagonism_cap``): the actuator antagonism the
-      paper is about (tire slip power and the internal force of wheels that fight each other);
-    * action_rate = −``action_rate_weight`` · ‖a − a_prev‖² (the set-point action);
-    * off_track = −``off_track_penalty`` on the step that leaves the track (or stalls, below).
+    * lateral and heading: bounded (a lost robot costs at most w) and steepest at zero error, so
+      centimetres matter (lateral, default weight: 1 cm −0.09, 5 cm −0.32);
+    * overspeed: going faster than the reference is penalised (finishing early would otherwise
+      save the per-step costs);
+    * slip (P_slip = Σ abs(F·v_slip) [W]) and internal_force (F_int [N]): the actuator antagonism
+      the paper is about (tire slip power and the internal force of wheels that fight each other);
+    * off_track: also charged on the step that stalls (below); a physics blow-up gets −w as its
+      reward.
 
     Typical per-step means, measured with default weights (one run, seed 0, the v2 physics with
     the brush tire): the ICR reference controller (``control``'s path follower + ICR controller)
@@ -151,7 +161,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     (the paper track's reference slows down and stops to turn its wheels in place at its corners,
     hence its lower progress per step). A policy that fights its wheels (mean internal force
     120 N, slip 40 W, as a raw-action PPO agent trained on ``Azimut-v0`` did) loses about 2 per
-    step, two thirds of the 3 that driving at the reference speed earns. ``progress_weight`` is 3
+    step, two thirds of the 3 that driving at the reference speed earns. The progress weight is 3
     (it was 1 in the first ``Azimut-v1``): with 1, a policy exploring around a good constant raw
     action on ``circle`` (per-step Gaussian noise σ = 0.135 on the set-points, which alone makes
     the wheels fight: about 97 N) earned −0.58 per step, so standing still or leaving the track
@@ -179,6 +189,34 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     1 440, square 3 084, figure8 4 057, paper 4 513; was 3 × the speed profile's time, up to
     3× the lap on circle); ``random`` tracks get theirs from the same formula at each reset.
 
+    ## Info
+    ``reset`` and ``step`` return the info dict of the table ``info.INFO_FIELDS`` (the vector env's
+    is the same, batched); every value is ground truth or the robot's own estimate, as named. The
+    step whose physics blew up has only ``reward_terms``, ``off_track``, ``finished``, ``stalled``
+    and ``error``.
+
+    | key            | value      | unit       | content                                             |
+    |----------------|------------|------------|-----------------------------------------------------|
+    | pose           | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame            |
+    | pose_estimate  | (3,)       | m, m, rad  | the pose the observation used (pose_source)         |
+    | twist          | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame         |
+    | eta_true       | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign    |
+    | eta_hat        | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's               |
+    | beta_true      | (n,)       | rad        | true steering angles (wheel side of the spring)     |
+    | beta_est       | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR          |
+    | tire_forces    | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame     |
+    | slip_power     | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)           |
+    | internal_force | ()         | N          | step-mean internal force of the wheels              |
+    | qua            | ()         | -          | qua of the measured steering angles (eq. 28–29)     |
+    | progress       | ()         | m          | true progress along the track (unwrapped over laps) |
+    | lateral_error  | ()         | m          | true distance to the path, positive to its left     |
+    | heading_error  | ()         | rad        | true θ − θ_ref, wrapped                             |
+    | reward_terms   | {term: ()} | -          | the reward terms of the step by name (0 at a reset) |
+    | off_track      | ()         | bool       | the step left the track (terminated)                |
+    | finished       | ()         | bool       | the step finished the track (terminated)            |
+    | stalled        | ()         | bool       | the step ended a stall (terminated)                 |
+    | error          | ()         | str        | the physics failure, only on the step that blew up  |
+
     ## Arguments
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
       ``figure8``, ``square``, ``crab``, ``random``: a new seeded track per reset). Default ``paper``.
@@ -196,10 +234,11 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       stiffness and damping, chassis mass (the normal loads follow), tire slip stiffness (with its
       relaxation lengths, so the contact stiffness stays) and contact patch size are scaled by
       factors uniform in [1 − d, 1 + d].
-    * reward weights: ``progress_weight``, ``lateral_weight``, ``heading_weight``,
-      ``overspeed_weight``, ``slip_weight`` [1/W], ``internal_force_weight`` [1/N],
-      ``action_rate_weight``, ``off_track_penalty``; scales ``lateral_scale`` [m],
-      ``heading_scale`` [rad], ``antagonism_cap``; ``max_lateral_error`` [m].
+    * ``reward_weights``: the weights by term name (see Rewards), e.g. ``{"slip": 0.05}``; the
+      terms not named keep their defaults, an unknown name is refused. (The keywords
+      ``progress_weight``, ..., ``off_track_penalty`` of earlier versions still work, with a
+      ``DeprecationWarning``.) Scales ``lateral_scale`` [m], ``heading_scale`` [rad],
+      ``antagonism_cap``; ``max_lateral_error`` [m].
     * ``stall_time`` [s] (0: off) and ``stall_distance`` [m]: stall termination.
       ``time_limit_factor``: the per-track step limit (see Episode End).
     * ``lookahead_count`` K and ``lookahead_spacing`` [m of progress].
@@ -220,7 +259,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     episode; one that overlaps the
     robot at its start raises ``ValueError``) and ``"kick": {"step": int, "wheels": [...],
     "impulse": N·m·s}``, an angular impulse on chosen modules at a given step; :meth:`kick` does it
-    immediately. A physics blow-up gives the reward ``−off_track_penalty``.
+    immediately. A physics blow-up gives the reward −``reward_weights["off_track"]``.
 
     ## Version History
     * v1: a reward that prices what the paper measures: bounded exponential tracking terms (were
@@ -285,7 +324,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
             raise
         self._start_trail()
         obs = self.task.obs[0].copy()
-        info = self.task.info(0, with_terms=False)
+        info = robot_info(self.task, 0)
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -306,18 +345,14 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
         errored, messages = task.end_blown_up(task.step_physics())
         if errored[0]:
             self._done_error = messages[0]
-            info = {"error": self._done_error, "reward_terms": {}, "off_track": False, "finished": False}
+            info = robot_info(task, 0, error=self._done_error)
             return task.obs[0].copy(), float(task.reward[0]), True, False, info
         task.observe(a, (self.np_random,))
         self._extend_trail()
-        off_track, finished, stalled = bool(task.off_track[0]), bool(task.finished[0]), bool(task.stalled[0])
-        info = task.info(0)
-        info["off_track"] = off_track
-        info["finished"] = finished
-        info["stalled"] = stalled
+        info = robot_info(task, 0)
         if self.render_mode == "human":
             self.render()
-        terminated = off_track or finished or stalled
+        terminated = info["off_track"] or info["finished"] or info["stalled"]
         truncated = bool(task.truncated()[0])
         return task.obs[0].copy(), float(task.reward[0]), terminated, truncated, info
 

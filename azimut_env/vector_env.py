@@ -30,9 +30,8 @@ from numba.typed import List as NumbaList
 
 from azimut_env.frontend import AzimutFrontEnd
 from azimut_env.params import RobotParams, SensorParams
-from azimut_env.physics.layout import RS, RS_POSE
 from azimut_env.task.config import front_signature
-from azimut_env.task.core import REWARD_TERMS
+from azimut_env.task.info import batch_info, robot_info
 from azimut_env.tracks import Track
 from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
@@ -64,19 +63,42 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
 
     ## Episode End
     As the single env, per sub-env: off the track or finished (terminated), a physics blow-up of
-    that robot (terminated, reward ``−off_track_penalty``, the last finite observation, and
+    that robot (terminated, reward −``reward_weights["off_track"]``, the last finite observation, and
     ``info["error"][i]``; the other robots go on), a stall (``stall_time``, terminated), and the
     step limits (truncated): the per-track limit of ``time_limit_factor`` (1.5 × the reference
     controller's nominal lap on the track by default, see the single env) and ``max_episode_steps``
     if given (default ``None``).
 
     ## Info
-    ``step`` and ``reset`` return a dict of arrays with a leading ``num_envs`` axis and, per key,
-    a boolean mask ``"_key"`` (the Gymnasium vector convention): ``pose`` (N, 3), ``progress``,
-    ``lateral_error``, ``heading_error``, ``qua``, ``slip_power``, ``internal_force``,
-    ``off_track``, ``finished`` and ``reward_terms`` (a dict of (N,) arrays); ``error`` (object
-    array) only where a robot blew up. :meth:`sub_env_info` gives the single env's full info of
-    one sub-env.
+    ``step`` and ``reset`` return the single env's info (the table ``info.INFO_FIELDS``) batched
+    with the Gymnasium vector convention: each value with a leading ``num_envs`` axis (the pairs
+    ``eta_true``, ``eta_hat``: a pair of batched arrays; ``reward_terms``: a dict of (N,) arrays
+    with their masks) and a boolean mask ``"_key"`` saying which sub-envs have the key. A sub-env
+    whose physics blew up on the step has only ``reward_terms``, ``off_track``, ``finished``,
+    ``stalled`` and ``error`` (an object array). ``info.sub_info(info, i)`` gives sub-env i's info,
+    equal to the single env's key by key; :meth:`sub_env_info` gives it from the current state.
+
+    | key            | value      | unit       | content                                             |
+    |----------------|------------|------------|-----------------------------------------------------|
+    | pose           | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame            |
+    | pose_estimate  | (3,)       | m, m, rad  | the pose the observation used (pose_source)         |
+    | twist          | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame         |
+    | eta_true       | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign    |
+    | eta_hat        | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's               |
+    | beta_true      | (n,)       | rad        | true steering angles (wheel side of the spring)     |
+    | beta_est       | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR          |
+    | tire_forces    | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame     |
+    | slip_power     | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)           |
+    | internal_force | ()         | N          | step-mean internal force of the wheels              |
+    | qua            | ()         | -          | qua of the measured steering angles (eq. 28–29)     |
+    | progress       | ()         | m          | true progress along the track (unwrapped over laps) |
+    | lateral_error  | ()         | m          | true distance to the path, positive to its left     |
+    | heading_error  | ()         | rad        | true θ − θ_ref, wrapped                             |
+    | reward_terms   | {term: ()} | -          | the reward terms of the step by name (0 at a reset) |
+    | off_track      | ()         | bool       | the step left the track (terminated)                |
+    | finished       | ()         | bool       | the step finished the track (terminated)            |
+    | stalled        | ()         | bool       | the step ended a stall (terminated)                 |
+    | error          | ()         | str        | the physics failure, only on the step that blew up  |
 
     ## Arguments
     ``num_envs``; ``max_episode_steps`` (default None: the per-track limit only); ``autoreset_mode``; ``render_index``
@@ -162,7 +184,7 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
 
     def sub_env_info(self, i: int) -> dict[str, Any]:
         """Sub-env i's info dict as the single env gives it (ground truth, estimate, terms)."""
-        return self.task.info(check_int("i", i, min_value=0, max_value=self.num_envs - 1))
+        return robot_info(self.task, check_int("i", i, min_value=0, max_value=self.num_envs - 1))
 
     # ------------------------------------------------------------------ vector API
 
@@ -325,38 +347,11 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
         self._errors[i] = None
 
     def _vector_info(self, errored: np.ndarray | None) -> dict[str, Any]:
-        """The batched info (arrays with masks) of the current state."""
-        task, N = self.task, self.num_envs
-        summ = self.physics.summary
-        info: dict[str, Any] = {
-            "pose": summ[:, RS_POSE].copy(),
-            "progress": task.s.copy(),
-            "lateral_error": task.lat.copy(),
-            "heading_error": task.head.copy(),
-            "qua": task.qua.copy(),
-            "slip_power": summ[:, RS.SLIP].copy(),
-            "internal_force": summ[:, RS.INTERNAL].copy(),
-            "off_track": task.off_track.copy(),
-            "finished": task.finished.copy(),
-            "stalled": task.stalled.copy(),
-        }
-        every = np.ones(N, dtype=np.bool_)
-        for key in list(info):
-            info["_" + key] = every.copy()
-        columns = task.reward_terms.T.copy()
-        terms: dict[str, np.ndarray] = {}
-        for j, name in enumerate(REWARD_TERMS):
-            terms[name] = columns[j]
-            terms["_" + name] = every.copy()
-        info["reward_terms"] = terms
-        info["_reward_terms"] = every
-        if errored is not None and errored.any():
-            err = np.full(N, None, dtype=object)
-            for i in np.flatnonzero(errored):
-                err[i] = self._errors[i]
-            info["error"] = err
-            info["_error"] = errored.copy()
-        return info
+        """The batched info (:func:`~azimut_env.task.info.batch_info`) of the current state;
+        ``errored``: the sub-envs whose physics blew up on this step."""
+        if errored is None or not errored.any():
+            return batch_info(self.task)
+        return batch_info(self.task, [self._errors[i] if errored[i] else None for i in range(self.num_envs)])
 
     # ------------------------------------------------------------------ rendering
 

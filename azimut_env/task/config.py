@@ -13,15 +13,18 @@ live in one place: the fields of :class:`TaskConfig`.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields, replace
 from typing import Any
 
 from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.localisation import LocalisationParams, check_pose_source
+from azimut_env.task.reward import OFF_TRACK, check_reward_weights, default_reward_weights
 from azimut_env.validation import check_int, check_nonnegative, check_positive, check_range
 
-__all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS"]
+__all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS",
+           "LEGACY_WEIGHT_KEYWORDS"]
 
 
 @dataclass(frozen=True)
@@ -34,9 +37,10 @@ class TaskConfig:
         domain_randomization: relative spread d ∈ [0, 0.5] of friction, steering stiffness and
             damping, chassis mass (the loads follow), tire slip stiffness (with its relaxation
             lengths) and contact patch size, drawn per reset.
-        progress_weight, lateral_weight, heading_weight, overspeed_weight, slip_weight [1/W],
-        internal_force_weight [1/N], action_rate_weight, off_track_penalty: reward weights (the
-            terms are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
+        reward_weights: the weight of each reward term by name (a read-only
+            :class:`~azimut_env.task.reward.RewardWeights`); a partial mapping given to the
+            constructor is merged onto the defaults of :data:`~azimut_env.task.reward.REWARD_TERMS`
+            (the terms and their units are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
         lateral_scale [m], heading_scale [rad]: scales of the bounded tracking terms
             w·(1 − exp(−|e|/scale)).
         antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
@@ -66,14 +70,7 @@ class TaskConfig:
     substeps: int = 8
     solver_iterations: int = 20
     domain_randomization: float = 0.0
-    progress_weight: float = 3.0
-    lateral_weight: float = 0.5
-    heading_weight: float = 0.3
-    overspeed_weight: float = 2.0
-    slip_weight: float = 0.02
-    internal_force_weight: float = 0.01
-    action_rate_weight: float = 0.05
-    off_track_penalty: float = 10.0
+    reward_weights: Mapping[str, float] = field(default_factory=default_reward_weights)
     lateral_scale: float = 0.05
     heading_scale: float = 0.1
     antagonism_cap: float = 2.0
@@ -97,9 +94,8 @@ class TaskConfig:
         fix("solver_iterations", check_int("solver_iterations", self.solver_iterations, min_value=1,
                                            max_value=10_000))
         fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
-        for name in ("progress_weight", "lateral_weight", "heading_weight", "overspeed_weight", "slip_weight",
-                     "internal_force_weight", "action_rate_weight", "off_track_penalty", "start_noise", "stall_time",
-                     "time_limit_factor"):
+        fix("reward_weights", check_reward_weights(self.reward_weights))
+        for name in ("start_noise", "stall_time", "time_limit_factor"):
             fix(name, check_nonnegative(name, getattr(self, name)))
         for name in ("lateral_scale", "heading_scale", "antagonism_cap", "stall_distance"):
             fix(name, check_positive(name, getattr(self, name)))
@@ -112,11 +108,9 @@ class TaskConfig:
             raise TypeError(f"localisation must be LocalisationParams, got {type(self.localisation).__name__}")
 
     @property
-    def weights(self) -> dict[str, float]:
-        """Reward weights by term name (``off_track`` is the penalty)."""
-        return dict(progress=self.progress_weight, lateral=self.lateral_weight, heading=self.heading_weight,
-                    overspeed=self.overspeed_weight, slip=self.slip_weight, internal_force=self.internal_force_weight,
-                    action_rate=self.action_rate_weight, off_track=self.off_track_penalty)
+    def off_track_penalty(self) -> float:
+        """The weight of the ``off_track`` term: the penalty of leaving the track, stalling or a blow-up."""
+        return self.reward_weights[OFF_TRACK]
 
 
 def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float,
@@ -161,12 +155,44 @@ def task_settings(params: RobotParams | None = None, sensors: SensorParams | str
     :class:`~azimut_env.task.localisation.LocalisationParams`). Raises ``TypeError`` naming an unknown
     keyword, and the field checks' ``ValueError``/``TypeError`` otherwise."""
     params = resolve_params(params, sensors, noise_scale, robot)
+    config = _legacy_weights(config)
     unknown = sorted(set(config) - set(TASK_CONFIG_FIELDS))
     if unknown:
         raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, robot, params, sensors, "
                         f"noise_scale, obstacles, render_mode and the TaskConfig fields {list(TASK_CONFIG_FIELDS)}")
     config["localisation"] = config.get("localisation") or LocalisationParams()
     return params, TaskConfig(**config)
+
+
+#: the reward weights' keywords before ``reward_weights`` (deprecated; recorded in older runs' env_kwargs)
+LEGACY_WEIGHT_KEYWORDS = {"progress_weight": "progress", "lateral_weight": "lateral", "heading_weight": "heading",
+                          "overspeed_weight": "overspeed", "slip_weight": "slip",
+                          "internal_force_weight": "internal_force", "action_rate_weight": "action_rate",
+                          "off_track_penalty": "off_track"}
+
+
+def _legacy_weights(config: dict[str, Any]) -> dict[str, Any]:
+    """``config`` with the deprecated per-term weight keywords (:data:`LEGACY_WEIGHT_KEYWORDS`) moved
+    into ``reward_weights``, with a ``DeprecationWarning`` naming the new spelling. A term given both
+    ways is refused (``TypeError``), whatever the two values."""
+    legacy = [k for k in config if k in LEGACY_WEIGHT_KEYWORDS]
+    if not legacy:
+        return config
+    config = dict(config)
+    weights = config.get("reward_weights")
+    if weights is not None and not isinstance(weights, Mapping):
+        raise TypeError(f"reward_weights must be a mapping term name -> weight, got {type(weights).__name__}")
+    weights = dict(weights or {})
+    for key in legacy:
+        term = LEGACY_WEIGHT_KEYWORDS[key]
+        if term in weights:
+            raise TypeError(f"{key} and reward_weights[{term!r}] both set the weight of {term!r}: "
+                            f"pass reward_weights only")
+        warnings.warn(f"{key}=... is deprecated: pass reward_weights={{{term!r}: ...}}", DeprecationWarning,
+                      stacklevel=5)
+        weights[term] = config.pop(key)
+    config["reward_weights"] = weights
+    return config
 
 
 def front_signature(init: Callable) -> inspect.Signature:

@@ -25,9 +25,14 @@ Data flow of one control step (each stage batched over the robots, compiled wher
    observation (:mod:`azimut_env.task.observation`: the layout table's fields, clipped) →
    stall check (termination, with its penalty).
 
+Resets (:meth:`AzimutTask.reset_robot`) draw the episode's parameters and starting configuration
+(:mod:`azimut_env.task.start_state`); both envs build their ``info`` from the table of
+:mod:`azimut_env.task.info`.
+
 Where to add things: a sensor in :mod:`azimut_env.task.sensors` (its state in ``SensorState``), a
-reward term in :mod:`azimut_env.task.reward`, an observation field in :mod:`azimut_env.task.observation`,
-an end condition in :mod:`azimut_env.task.termination`, a setting in :class:`~azimut_env.task.config.TaskConfig`.
+reward term in :mod:`azimut_env.task.reward` (a row and a function), an observation field in
+:mod:`azimut_env.task.observation`, an info key in :mod:`azimut_env.task.info`, an end condition in
+:mod:`azimut_env.task.termination`, a setting in :class:`~azimut_env.task.config.TaskConfig`.
 
 Randomness comes from one ``numpy.random.Generator`` per robot, passed in by the caller (the single
 env's ``np_random``, or the vector env's sub-env generators). Each robot consumes its generator in
@@ -36,7 +41,6 @@ the same order whatever N is, so robot i of a batch replays a single env seeded 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -46,7 +50,7 @@ from numba.typed import List as NumbaList
 from azimut_env.params import RobotParams, action_from_setpoints
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.engine import AzimutPhysics, BlowUpLimits
-from azimut_env.physics.layout import MS, RS, RS_POSE, RS_TWIST_BODY, RS_VEL_WORLD, WS, WS_FORCE
+from azimut_env.physics.layout import MS, RS, RS_POSE, RS_VEL_WORLD, WS
 from azimut_env.physics.wheel_params import default_wheel_params, randomized_wheel_params
 from azimut_env.task.actions import CommandPath
 from azimut_env.task.config import TaskConfig, resolve_params
@@ -68,18 +72,21 @@ from azimut_env.task.reset_options import (  # noqa: F401
     start_progress_on,
 )
 from azimut_env.task.reward import (
-    REWARD_TERMS,
-    RewardTerm,
+    OFF_TRACK,
+    RewardInput,
     charge_penalty,
-    compute_rewards,
-    reward_scales,
-    reward_weights,
+    current_reward_terms,
+    fill_reward_inputs,
+    reward_constants,
+    reward_kernel,
+    reward_weight_array,
 )
 from azimut_env.task.sensors import SensorState
+from azimut_env.task.start_state import start_configuration
 from azimut_env.task.termination import check_stalls, check_track_limits, episode_step_limit
 from azimut_env.tracks import TQ, Track, make_track, query_tracks
 from azimut_env.validation import check_int
-from estimation import estimate_eta, eta_from_twist, steering_from_lambda
+from estimation import estimate_eta
 
 # Plain-int columns of the IntEnum layouts for the per-step paths (numpy indexes with an int
 # several µs faster than with an IntEnum member; the enums stay the names).
@@ -89,7 +96,7 @@ _WS_BETA = int(WS.BETA)
 _TQ_S, _TQ_LATERAL, _TQ_HEADING, _TQ_V_REF = int(TQ.S), int(TQ.LATERAL), int(TQ.HEADING), int(TQ.V_REF)
 
 __all__ = ["TaskConfig", "AzimutTask", "observation_layout", "observation_bounds", "resolve_params",
-           "REWARD_TERMS", "RESET_OPTIONS", "coerce_obstacles", "nominal_duration", "reference_lap_time"]
+           "RESET_OPTIONS", "coerce_obstacles", "nominal_duration", "reference_lap_time"]
 
 _FINE = int(BlowUp.NONE)  # a plain int: comparing an array with the IntEnum member is ~7x slower
 
@@ -110,7 +117,7 @@ class AzimutTask:
     ``motor_m`` (measurements, (N, n)); ``lam_hat`` (N, 3), ``mu_hat``, ``qua`` (N,), ``beta_est``
     (N, n) (the IT estimate); ``s``, ``lat``, ``head``, ``v_ref``, ``v_along`` (N,), ``look``
     (N, K, 3) (track state); ``prev_action`` (N, 2n) float32; ``obs`` (N, D) float32;
-    ``reward`` (N,), ``reward_terms`` (N, 8) (columns :data:`REWARD_TERMS`), ``off_track``,
+    ``reward`` (N,), ``reward_terms`` (N, T) (columns: the terms of ``reward_table``), ``off_track``,
     ``finished``, ``stalled`` (N,) bool of the last step; ``steps`` (N,) steps since the robot's
     reset; ``step_limit`` (N,) the episode's step limit (``time_limit_factor``).
     """
@@ -143,8 +150,14 @@ class AzimutTask:
         self.layout = observation_layout(n, K)
         self.obs_low, self.obs_high = observation_bounds(n, K, params.limits.wheel_speed_max)
         self._obs_offsets = field_offsets(n, K)
-        self._weights = reward_weights(config)
-        self._scales = reward_scales(config)
+        # the reward (azimut_env.task.reward): the table as it is now, its weights, constants and compiled kernel
+        self.reward_table = current_reward_terms()
+        self.reward_names = tuple(t.name for t in self.reward_table)
+        self._reward_kernel = reward_kernel(self.reward_table)
+        self._weights = reward_weight_array(config.reward_weights, self.reward_table)
+        self._reward_constants = reward_constants(config.control_period, config.lateral_scale, config.heading_scale,
+                                                  config.antagonism_cap)
+        self._off_track_column = self.reward_names.index(OFF_TRACK)
         self.sensors = SensorState(params.sensors, config.control_period, N, n)
         # the last readings, by the names the task uses (the sensors' arrays, written in place)
         self.beta_m, self.phidot_m, self.motor_m = self.sensors.beta, self.sensors.phidot, self.sensors.motor
@@ -162,7 +175,8 @@ class AzimutTask:
         self.prev_action = np.zeros((N, 2 * n), dtype=np.float32)
         self.obs = np.zeros((N, self.obs_low.shape[0]), dtype=np.float32)
         self.reward = np.zeros(N)
-        self.reward_terms = np.zeros((N, len(RewardTerm)))
+        self.reward_terms = np.zeros((N, len(self.reward_table)))
+        self.reward_inputs = np.zeros((N, len(RewardInput)))
         self.off_track = np.zeros(N, dtype=np.bool_)
         self.finished = np.zeros(N, dtype=np.bool_)
         self.stalled = np.zeros(N, dtype=np.bool_)
@@ -256,14 +270,11 @@ class AzimutTask:
         if "kick" in options:
             self.kicks[i] = dict(options["kick"])
             self._kick_step[i] = self.kicks[i]["step"]
-        self._randomize(i, rng)
+        wp, mass = randomized_wheel_params(self._default_wp[i], self.params, cfg.domain_randomization, rng)
+        phys.set_wheel_params(wp, robot=i)
+        phys.set_chassis_mass(i, mass)
         self.sensors.draw_bias(i, rng)
-        ref = track.sample(s0)
-        noise = cfg.start_noise
-        pose = ref[:3] + rng.uniform(-noise, noise, size=3)
-        beta = self.reference_beta(track, s0, pose[2]) + rng.uniform(-noise, noise, size=n)
-        geom = self.params.geometry
-        beta = np.clip(beta, geom.steer_min + 1e-6, geom.steer_max)
+        pose, beta = start_configuration(track, s0, cfg.start_noise, self.params.geometry, rng)
         phys.reset_robot(i, pose, beta)
         self.commands.reset_robot(i, phys.commands[i])  # latency: the reset set-points are held for k steps
         clash = phys.overlapping_obstacles(i)
@@ -305,23 +316,6 @@ class AzimutTask:
         fill_row(self.obs[i], self._obs_offsets, self.lam_hat[i], self.mu_hat[i], self.beta_m[i], self.phidot_m[i],
                  self.motor_m[i], obs_track[TQ.LATERAL], obs_track[TQ.HEADING], va, obs_track[TQ.V_REF], obs_look,
                  self.prev_action[i], self.obs_low, self.obs_high)
-
-    def reference_beta(self, track: Track, s: float, theta: float) -> np.ndarray:
-        """Steering angles of the reference motion at progress s (direction only)."""
-        tw = track.reference_twist_body(s, theta, speed=1.0)
-        if np.linalg.norm(tw) < 1e-9:
-            return np.zeros(self.n)
-        lam, _ = eta_from_twist(tw)
-        return steering_from_lambda(lam, self.params.geometry)
-
-    def _randomize(self, i: int, rng: np.random.Generator) -> None:
-        """Robot i's parameters for this episode: the defaults, or under domain randomisation a
-        robot drawn by :func:`~azimut_env.physics.wheel_params.randomized_wheel_params`. Everything
-        that depends on the mass follows it: the body's mass and moment and the wheels' normal
-        loads (``AzimutPhysics.set_chassis_mass``)."""
-        wp, mass = randomized_wheel_params(self._default_wp[i], self.params, self.config.domain_randomization, rng)
-        self.physics.set_wheel_params(wp, robot=i)
-        self.physics.set_chassis_mass(i, mass)
 
     def park(self, i: int) -> None:
         """Put a blown-up robot back at a finite rest state (its episode is over; it waits for
@@ -410,9 +404,11 @@ class AzimutTask:
         cfg, summary = self.config, self.physics.summary
         check_track_limits(rows, self.track_out, self.track_length, cfg.max_lateral_error, self.off_track,
                            self.finished)
-        compute_rewards(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
-                        summary[:, _RS_SLIP], summary[:, _RS_INTERNAL], action, self.prev_action, self.off_track,
-                        self._weights, self._scales, cfg.control_period, self.v_along, self.reward_terms, self.reward)
+        fill_reward_inputs(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
+                           summary[:, _RS_SLIP], summary[:, _RS_INTERNAL], action, self.prev_action, self.off_track,
+                           self.v_along, self.reward_inputs)
+        self._reward_kernel(rows, self.reward_inputs, self._reward_constants, self._weights, self.reward_terms,
+                            self.reward)
         if rows is self._all:
             np.copyto(self.prev_action, action)
         else:
@@ -425,7 +421,7 @@ class AzimutTask:
         if stalled is not None:
             self.stalled[:] = stalled
             if stalled.any():
-                charge_penalty(stalled, cfg.off_track_penalty, self.reward, self.reward_terms)
+                charge_penalty(stalled, cfg.off_track_penalty, self.reward, self.reward_terms, self._off_track_column)
 
     # ------------------------------------------------------------------ stages
 
@@ -445,13 +441,9 @@ class AzimutTask:
         self.beta_est[rows] = beta_est
         self.qua[rows] = qua
 
-    def pose_estimate(self, i: int) -> np.ndarray:
-        """Robot i's pose (x, y, θ) as the observation sees it: the estimate with
-        ``pose_source="odometry"``, the true pose otherwise."""
-        return self.odometry.pose[i].copy() if self.odometry else self.physics.summary[i, RS_POSE].copy()
-
     def pose_estimates(self) -> np.ndarray:
-        """(N, 3) :meth:`pose_estimate` of every robot."""
+        """(N, 3) each robot's pose (x, y, θ) as the observation sees it: the estimate with
+        ``pose_source="odometry"``, the true pose otherwise."""
         return self.odometry.pose.copy() if self.odometry else self.physics.chassis_pose()
 
     def _pose_source_state(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -498,36 +490,3 @@ class AzimutTask:
     def __setstate__(self, d: dict) -> None:
         self.__dict__.update(d)
         self._packs = NumbaList([t.packed() for t in self.tracks])
-
-    # ------------------------------------------------------------------ info
-
-    def info(self, i: int, with_terms: bool = True) -> dict[str, Any]:
-        """Robot i's info dict of the single env (ground truth, estimate, reward terms)."""
-        phys = self.physics
-        summ = phys.summary[i]
-        twist = summ[RS_TWIST_BODY]
-        # true η from the twist, ξ̇ = μ (v, −u, w): λ ∝ (−ẏ, ẋ, θ̇), μ = ‖ξ̇‖ ≥ 0
-        mu = math.sqrt(float(twist @ twist))
-        lam = np.array([-twist[1], twist[0], twist[2]]) / mu if mu > 0 else np.array([0.0, 0.0, 1.0])
-        if mu <= 1e-3:  # the sign rule of canonical_eta(mu_tol=1e-3), as for the estimate
-            key = lam[2] if lam[2] != 0 else (lam[0] if lam[0] != 0 else lam[1])
-            if key < 0:
-                lam, mu = -lam, -mu
-        terms = dict(zip(REWARD_TERMS, self.reward_terms[i].tolist())) if with_terms else {}  # tolist: Python floats
-        return {
-            "pose": summ[RS_POSE].copy(),
-            "pose_estimate": self.pose_estimate(i),
-            "twist": twist,
-            "eta_true": (lam, mu),
-            "eta_hat": (self.lam_hat[i].copy(), float(self.mu_hat[i])),
-            "beta_true": phys.wheel_summary[i, :, _WS_BETA].copy(),
-            "beta_est": self.beta_est[i].copy(),
-            "tire_forces": phys.wheel_summary[i, :, WS_FORCE].copy(),
-            "slip_power": float(summ[_RS_SLIP]),
-            "internal_force": float(summ[_RS_INTERNAL]),
-            "qua": float(self.qua[i]),
-            "progress": float(self.s[i]),
-            "lateral_error": float(self.lat[i]),
-            "heading_error": float(self.head[i]),
-            "reward_terms": terms,
-        }

@@ -129,7 +129,7 @@ def test_observation_layout_and_bounds():
     lam_hat, mu_hat = env.estimated_eta
     assert np.allclose(dec["lambda_hat"], lam_hat, atol=1e-6)
     assert np.allclose(dec["beta"], env.measured_beta, atol=1e-6)
-    assert set(info["reward_terms"]) == set()
+    assert info["reward_terms"] == dict.fromkeys(info["reward_terms"], 0.0) and len(info["reward_terms"]) == 8
     assert observation_table() in textwrap.dedent(AzimutEnv.__doc__)  # the docs show the layout table
     _, rew, _, _, info = env.step(env.action_space.sample())
     assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "overspeed", "slip", "internal_force",
@@ -289,8 +289,8 @@ def test_one_front_end_for_both_envs():
                 assert params[f.name].default == getattr(TaskConfig(), f.name)
         with pytest.raises(TypeError, match="progress_wieght"):
             cls(progress_wieght=2.0)
-    env, venv = AzimutEnv(lateral_weight=0.7), AzimutVectorEnv(num_envs=2, lateral_weight=0.7)
-    assert env.config == venv.config == TaskConfig(lateral_weight=0.7)
+    env, venv = AzimutEnv(reward_weights={"lateral": 0.7}), AzimutVectorEnv(num_envs=2, reward_weights={"lateral": 0.7})
+    assert env.config == venv.config == TaskConfig(reward_weights={"lateral": 0.7})
     assert isinstance(env, ControllerInterface) and not missing_members(env, ControllerInterface)
     assert isinstance(venv, VectorControllerInterface) and not missing_members(venv, VectorControllerInterface)
     assert missing_members(venv, ControllerInterface) == ["track"]

@@ -150,11 +150,12 @@ def test_track_far_from_origin_refused_where_it_enters(env):
 
 @pytest.mark.parametrize("kwargs", [
     dict(control_period=float("nan")), dict(control_period=0.0), dict(substeps=0), dict(substeps=2.5),
-    dict(solver_iterations=-1), dict(domain_randomization=float("nan")), dict(lateral_weight=-1.0),
+    dict(solver_iterations=-1), dict(domain_randomization=float("nan")), dict(reward_weights={"lateral": -1.0}),
     dict(max_lateral_error=float("inf")), dict(lookahead_count=0), dict(lookahead_spacing=float("nan")),
     dict(start_noise=-0.1), dict(noise_scale=float("nan")), dict(sensors="perfect"), dict(sensors=3),
     dict(params="default"), dict(track=None), dict(obstacles=[(0.0, 0.0, float("nan"))]),
-    dict(render_mode="video"), dict(progress_weight="1"),
+    dict(render_mode="video"), dict(reward_weights={"progress": "1"}), dict(reward_weights={"slipp": 1.0}),
+    dict(reward_weights=[("slip", 1.0)]), dict(reward_weights={"slip": float("nan")}),
 ])
 def test_constructor_refuses_bad_kwargs(kwargs):
     with pytest.raises((ValueError, TypeError)):

@@ -40,7 +40,7 @@ def _per_step_rewards(steps: int = 300) -> dict[str, float]:
 
 
 def test_moving_beats_standing_and_fighting_loses_most_of_the_progress():
-    w = TaskConfig().progress_weight
+    w = TaskConfig().reward_weights["progress"]
     r = _per_step_rewards()
     assert r["clean"] > 0.8 * w  # the reference motion earns nearly the full progress term
     assert r["exploring"] > 0.2 * w  # an exploring mover is paid for moving ...
