@@ -1,15 +1,19 @@
 """``azimut train``: train a PPO or SAC agent on ``Azimut-v1`` (Stable-Baselines3, the ``rl`` extra).
 
-Defaults come from the versioned hyperparameter files (``train/hyperparams/{ppo,sac}.json``, one
-entry per action space); ``--hyperparams FILE`` (JSON) overrides keys. The run folder ``--out``
-gets ``model.zip`` + ``vecnormalize.pkl`` (the final policy and its observation/reward
-normalisation), ``best_model.zip`` + ``best_vecnormalize.pkl`` (highest mean return on the
-held-out tracks), ``checkpoints/``, ``evaluations.json`` (the periodic held-out evaluations, with
-the ``azimut eval`` metrics), ``progress.csv`` and TensorBoard logs (``tb/``, if ``tensorboard``
-is installed), ``learning_curve.png`` (if matplotlib is) and ``run.json`` (arguments,
-hyperparameters and their file version, wall time and steps/s inside ``learn``).
-``--resume`` continues from the newest checkpoint in ``--out`` (SAC starts a new replay buffer).
-Trained policies go into ``azimut eval --controllers ppo:OUT/model.zip``.
+The training is :func:`train.trainer.train` (library code); this job adds the command line, the
+provenance in ``run.json`` (package version and git commit, :func:`jobs.records.provenance`) and
+``learning_curve.png`` labelled from the run's own arguments. Defaults come from the versioned
+hyperparameter files (``train/hyperparams/{ppo,sac}.json``, one entry per action space);
+``--hyperparams FILE`` (JSON) overrides keys. The run folder ``--out`` gets ``model.zip`` +
+``vecnormalize.pkl`` (the final policy and its observation/reward normalisation),
+``best_model.zip`` + ``best_vecnormalize.pkl`` (highest mean return on the evaluation
+tracks, ``--eval-tracks``),
+``checkpoints/``, ``evaluations.json`` (the periodic evaluations, with the ``azimut eval``
+metrics), ``progress.csv`` and TensorBoard logs (``tb/``, if ``tensorboard`` is installed),
+``learning_curve.png`` (if matplotlib is) and ``run.json`` (arguments, hyperparameters and their
+file version, wall time and steps/s inside ``learn``). ``--resume`` continues from the newest
+checkpoint in ``--out`` (SAC starts a new replay buffer). Trained policies go into ``azimut eval
+--controllers ppo:OUT/model.zip``.
 """
 
 from __future__ import annotations
@@ -17,19 +21,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import sys
-import time
 from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
-from train.envs import ACTIONS, action_key
+from train.envs import ACTIONS
+from train.trainer import EVAL_TRACKS, latest_checkpoint
 
-__all__ = ["add_arguments", "check_args", "run", "train"]
-
-EVAL_TRACKS = ("circle", "figure8", "square", "crab", "paper")
+__all__ = ["add_arguments", "check_args", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,14 +37,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--action", choices=tuple(ACTIONS), default="raw",
                         help="action space: raw set-points, residual on the ICR controller, or ICR rates (default raw)")
     parser.add_argument("--track", choices=TRACK_NAMES, default="random",
-                        help="training track (default random: a new track per episode; the built-ins are held out)")
+                        help="training track (default random: a new track per episode, so that the built-ins are "
+                             "held out)")
     parser.add_argument("--seed", type=arg_int(0, 2**31 - 1), default=0, help="seed (default 0)")
     add_robot_arguments(parser)
     parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1000000)")
     parser.add_argument("--out", type=arg_output_path(directory=True), required=True, help="run folder")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
     parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(EVAL_TRACKS[:2]),
-                        help="held-out tracks of the periodic evaluation (default circle,figure8)")
+                        help="tracks of the periodic evaluation (default circle,figure8)")
     parser.add_argument("--eval-every", type=arg_int(0), default=200_000,
                         help="environment steps between evaluations (default 200000; 0: only at the end)")
     parser.add_argument("--checkpoint-every", type=arg_int(0), default=200_000,
@@ -93,7 +94,7 @@ def check_args(args: argparse.Namespace) -> None:
                  if value != default]
         if given:
             raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
-        if args.resume and _latest_checkpoint(Path(args.out)) is None:
+        if args.resume and latest_checkpoint(Path(args.out)) is None:
             raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
         if not args.resume and (Path(args.out) / "model.zip").exists():
             raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
@@ -109,116 +110,6 @@ def check_args(args: argparse.Namespace) -> None:
             check_hyperparams(args.algo, action_key(args.action), data)
         except ValueError as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
-
-
-def _latest_checkpoint(out: Path) -> Path | None:
-    ckpts = sorted((out / "checkpoints").glob("model_*_steps.zip"),
-                   key=lambda p: int(p.stem.split("_")[1]) if p.stem.split("_")[1].isdigit() else -1)
-    return ckpts[-1] if ckpts else None
-
-
-def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
-          eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
-          resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
-          env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None) -> dict:
-    """Train and save (see the module docstring); returns the run record (``run.json``)."""
-    import torch
-    from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, WallClockLimit
-    from train.envs import make_sb3_env
-    from train.hyperparams import load_hyperparams
-
-    out.mkdir(parents=True, exist_ok=True)
-    key = action_key(action)
-    hp, hp_version = load_hyperparams(algo, key)
-    hp.update(overrides or {})
-    env_kwargs = dict(env_kwargs or {})
-    cls = PPO if algo == "ppo" else SAC
-    venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs))
-    venv.seed(seed)
-    ckpt = _latest_checkpoint(out) if resume else None
-    gamma = float(hp.get("gamma", 0.99))
-    if ckpt is not None:
-        from train.policy import vecnormalize_path
-
-        venv = VecNormalize.load(str(vecnormalize_path(ckpt)), venv)
-        model = cls.load(str(ckpt), env=venv, device="cpu")
-        print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
-    else:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
-        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **hp)
-    formats = ["csv"] + ([] if quiet else ["stdout"])
-    try:
-        import tensorboard  # noqa: F401
-
-        formats.append("tensorboard")
-    except ImportError:
-        pass
-    model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
-    callbacks = [InfoStatsCallback()]
-    if time_limit_min > 0:
-        callbacks.append(WallClockLimit(60.0 * time_limit_min))
-    evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
-                                    env_kwargs, seed=seed, max_time=eval_max_time)
-    callbacks.append(evaluator)
-    if checkpoint_every > 0:
-        callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),
-                                            name_prefix="model", save_vecnormalize=True))
-    start_steps = model.num_timesteps
-    t0 = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
-                progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
-    learn_s = time.perf_counter() - t0
-    done_steps = model.num_timesteps - start_steps
-    model.save(str(out / "model.zip"))
-    venv.save(str(out / "vecnormalize.pkl"))
-    final = evaluator.evaluate()
-    final["final"] = True
-    evaluator.history.append(final)
-    (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
-    record = {"time_limit_min": time_limit_min, "algo": algo, "action": action, "track": track, "seed": seed,
-              "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
-              "eval_tracks": list(eval_tracks),
-              "hyperparams": hp, "hyperparams_version": hp_version, "env_id": "Azimut-v1", "env_kwargs": env_kwargs,
-              "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
-              "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
-              "machine": f"{platform.node()} ({os.cpu_count()} CPUs, shared)", "final_eval": final["rows"]}
-    (out / "run.json").write_text(json.dumps(record, indent=1, allow_nan=True, default=str))
-    _plot_learning_curve(out)
-    venv.close()
-    return record
-
-
-def _plot_learning_curve(out: Path) -> None:
-    """learning_curve.png: training episode return (progress.csv) and held-out returns."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("learning_curve.png not written: matplotlib is not installed (pip install 'azimut[plot]')",
-              file=sys.stderr)
-        return
-    from jobs.training.plots import evaluation_history, training_returns
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    pts = training_returns(out)
-    if pts:
-        ax.plot(*zip(*pts), label="training episodes (random tracks)")
-    ev = evaluation_history(out)
-    if ev:
-        ax.plot([e["timesteps"] for e in ev], [e["mean_return"] for e in ev], "o-", label="held-out tracks (mean)")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("episode return")
-    ax.legend(fontsize=8)
-    ax.set_title(out.name)
-    fig.savefig(out / "learning_curve.png", dpi=100, bbox_inches="tight")
-    plt.close(fig)
 
 
 def _robot_kwargs(args: argparse.Namespace) -> dict:
@@ -237,11 +128,16 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     torch.set_num_threads(args.torch_threads)
+    from jobs.records import provenance
+    from jobs.training.plots import write_learning_curve
+    from train.trainer import train
+
     overrides = json.loads(Path(args.hyperparams).read_text()) if args.hyperparams else None
     record = train(args.algo, args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
                    tuple(args.eval_tracks), args.eval_every, args.checkpoint_every, args.resume, overrides,
                    args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
-                   time_limit_min=args.time_limit)
+                   time_limit_min=args.time_limit, record_extra={"provenance": provenance()})
+    write_learning_curve(Path(args.out), record)
     print(f"trained {record['num_timesteps']} steps in {record['learn_wall_s']:.0f} s "
           f"({record['steps_per_s_in_learn']:.0f} steps/s inside learn); model: {args.out}/model.zip", flush=True)
     for r in record["final_eval"]:

@@ -8,7 +8,22 @@ import json
 import sys
 from pathlib import Path
 
-__all__ = ["plot_runs", "training_returns", "evaluation_history"]
+__all__ = ["plot_runs", "training_returns", "evaluation_history", "training_label", "evaluation_label",
+           "write_learning_curve"]
+
+
+def training_label(track: str) -> str:
+    """What the training episodes ran on, from the run's ``--track``."""
+    return "random tracks (a new one per episode)" if track == "random" else f"the {track} track"
+
+
+def evaluation_label(track: str, eval_tracks: list[str] | tuple[str, ...]) -> str:
+    """What the periodic evaluation ran on, from the run's ``--track`` and ``--eval-tracks``: held
+    out only when the policy never trained on them."""
+    names = ", ".join(eval_tracks)
+    if track == "random" or track not in eval_tracks:
+        return f"{names} (held out: never trained on)"
+    return f"{names} ({track} is also the training track)"
 
 
 def training_returns(run: Path) -> list[tuple[float, float]]:
@@ -24,13 +39,13 @@ def training_returns(run: Path) -> list[tuple[float, float]]:
 
 
 def evaluation_history(run: Path) -> list[dict]:
-    """A run folder's ``evaluations.json`` (the held-out evaluations; empty if there is none)."""
+    """A run folder's ``evaluations.json`` (the periodic evaluations; empty if there is none)."""
     ev_file = Path(run) / "evaluations.json"
     return json.loads(ev_file.read_text()) if ev_file.is_file() else []
 
 
 def plot_runs(runs: list[Path], out: Path) -> None:
-    """Training episode return (``logs/progress.csv`` or ``tb/progress.csv``) and held-out mean
+    """Training episode return (``logs/progress.csv`` or ``tb/progress.csv``) and evaluation mean
     return (``evaluations.json``) against environment steps, one colour per run."""
     import matplotlib
 
@@ -55,6 +70,46 @@ def plot_runs(runs: list[Path], out: Path) -> None:
     fig.tight_layout()
     fig.savefig(out, dpi=100)
     plt.close(fig)
+
+
+def write_learning_curve(out: Path, record: dict) -> Path | None:
+    """``out/learning_curve.png``: the training episodes' return and the evaluations' mean return
+    against environment steps, labelled from the run's record (``run.json``: algorithm, action
+    space, seed, training and evaluation tracks). Returns the file, or None without matplotlib
+    (with a line on stderr)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("learning_curve.png not written: matplotlib is not installed (pip install 'azimut[plot]')",
+              file=sys.stderr)
+        return None
+    out = Path(out)
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    pts = training_returns(out)
+    if pts:
+        ax.plot(*zip(*pts), color="C0",
+                label=f"training: mean return of the last 100 episodes, on {training_label(record['track'])}")
+    ev = evaluation_history(out)
+    if ev:
+        ax.plot([e["timesteps"] for e in ev], [e["mean_return"] for e in ev], "o-", color="C1",
+                label="evaluation: deterministic episode, mean over "
+                      + evaluation_label(record["track"], record["eval_tracks"]))
+    if not pts and not ev:
+        ax.text(0.5, 0.5, "no finished training episode and no evaluation yet", ha="center", va="center",
+                transform=ax.transAxes)
+    ax.set_xlabel("environment steps (all robots)")
+    ax.set_ylabel("episode return (sum of rewards)")
+    if pts or ev:
+        ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(f"{record['algo'].upper()}, {record['action']} actions, seed {record['seed']}: {out.name}",
+                 fontsize=10)
+    path = out / "learning_curve.png"
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 if __name__ == "__main__":

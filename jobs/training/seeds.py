@@ -40,14 +40,18 @@ def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, n
     and no final model); returns ``{"run": run.json, "evaluations": [...]}``."""
     import torch
 
-    from jobs.training.command import _latest_checkpoint, train
+    from jobs.records import provenance
+    from jobs.training.plots import write_learning_curve
+    from train.trainer import latest_checkpoint, train
 
     torch.set_num_threads(int(torch_threads))
     folder = Path(out)
-    resume = bool(resume) and _latest_checkpoint(folder) is not None and not (folder / "model.zip").exists()
+    resume = bool(resume) and latest_checkpoint(folder) is not None and not (folder / "model.zip").exists()
     record = train(algo, action, track, int(seed), int(steps), folder, int(num_robots), tuple(eval_tracks),
                    int(eval_every), int(checkpoint_every), resume, overrides, False, quiet,
-                   env_kwargs=env_kwargs, time_limit_min=float(time_limit_min))
+                   env_kwargs=env_kwargs, time_limit_min=float(time_limit_min),
+                   record_extra={"provenance": provenance()})
+    write_learning_curve(folder, record)
     evaluations = json.loads((folder / "evaluations.json").read_text())
     return {"run": record, "evaluations": evaluations}
 

@@ -21,9 +21,9 @@ SHORT = {"time_limit_factor": 0.1}
 
 @pytest.mark.parametrize("algo,action", [("ppo", "raw"), ("sac", "residual")])
 def test_train_save_load_evaluate(tmp_path, algo, action):
-    from jobs.training.command import train
     from train.policy import load_policy
     from train.rollout import policy_metrics
+    from train.trainer import train
 
     overrides = {"n_steps": 32, "batch_size": 64, "n_epochs": 1} if algo == "ppo" else \
         {"learning_starts": 64, "batch_size": 32, "gradient_steps": 1, "buffer_size": 2000}
@@ -48,7 +48,7 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
 
 
 def test_resume_continues_from_the_checkpoint(tmp_path):
-    from jobs.training.command import train
+    from train.trainer import train
 
     hp = {"n_steps": 32, "batch_size": 64, "n_epochs": 1}
     out = tmp_path / "run"
@@ -130,7 +130,7 @@ def test_core_imports_and_runs_without_torch():
 
 def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
     from jobs.cli import main
-    from jobs.training.command import train
+    from train.trainer import train
 
     out = tmp_path / "run"
     train("ppo", "raw", "crab", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",), eval_every=0,

@@ -1,0 +1,118 @@
+"""Train a PPO or SAC agent on ``Azimut-v1`` and save its run folder (``azimut train``'s library).
+
+:func:`train` is what ``azimut train`` (:mod:`jobs.training.command`) and its several-seeds
+campaign (:mod:`jobs.training.seeds`) run; both import it from here. The run folder ``out``
+gets ``model.zip`` + ``vecnormalize.pkl`` (the final policy and its observation/reward
+normalisation), ``best_model.zip`` + ``best_vecnormalize.pkl`` (highest mean return on the
+evaluation tracks), ``checkpoints/``, ``evaluations.json`` (the periodic evaluations, with the
+``azimut eval`` metrics), ``progress.csv`` and TensorBoard logs (``tb/``, if ``tensorboard`` is
+installed) and ``run.json`` (arguments, hyperparameters and their file version, wall time and
+steps/s inside ``learn``). Defaults come from the versioned hyperparameter files
+(``train/hyperparams/{ppo,sac}.json``, one entry per action space). Needs the ``rl`` extra.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+from train.envs import action_key
+
+__all__ = ["EVAL_TRACKS", "latest_checkpoint", "train"]
+
+#: the built-in tracks a run can be evaluated on, the default two first
+EVAL_TRACKS = ("circle", "figure8", "square", "crab", "paper")
+
+
+def latest_checkpoint(out: Path) -> Path | None:
+    """The newest ``checkpoints/model_<steps>_steps.zip`` of a run folder, None if there is none."""
+    ckpts = sorted((Path(out) / "checkpoints").glob("model_*_steps.zip"),
+                   key=lambda p: int(p.stem.split("_")[1]) if p.stem.split("_")[1].isdigit() else -1)
+    return ckpts[-1] if ckpts else None
+
+
+def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
+          eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
+          resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
+          env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None,
+          record_extra: dict[str, Any] | None = None) -> dict:
+    """Train and save (see the module docstring); returns the run record (``run.json``), to which
+    ``record_extra`` (e.g. the caller's provenance: package version, commit) is added.
+
+    ``track`` is the training track (``random``: a new track per episode); ``eval_tracks`` the
+    tracks of the periodic deterministic evaluations (every ``eval_every`` steps, and at the end);
+    ``resume`` continues from :func:`latest_checkpoint` (SAC starts a new replay buffer)."""
+    import torch
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, WallClockLimit
+    from train.envs import make_sb3_env
+    from train.hyperparams import load_hyperparams
+
+    out.mkdir(parents=True, exist_ok=True)
+    key = action_key(action)
+    hp, hp_version = load_hyperparams(algo, key)
+    hp.update(overrides or {})
+    env_kwargs = dict(env_kwargs or {})
+    cls = PPO if algo == "ppo" else SAC
+    venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs))
+    venv.seed(seed)
+    ckpt = latest_checkpoint(out) if resume else None
+    gamma = float(hp.get("gamma", 0.99))
+    if ckpt is not None:
+        from train.policy import vecnormalize_path
+
+        venv = VecNormalize.load(str(vecnormalize_path(ckpt)), venv)
+        model = cls.load(str(ckpt), env=venv, device="cpu")
+        print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
+    else:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
+        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **hp)
+    formats = ["csv"] + ([] if quiet else ["stdout"])
+    try:
+        import tensorboard  # noqa: F401
+
+        formats.append("tensorboard")
+    except ImportError:
+        pass
+    model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
+    callbacks = [InfoStatsCallback()]
+    if time_limit_min > 0:
+        callbacks.append(WallClockLimit(60.0 * time_limit_min))
+    evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
+                                    env_kwargs, seed=seed, max_time=eval_max_time)
+    callbacks.append(evaluator)
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),
+                                            name_prefix="model", save_vecnormalize=True))
+    start_steps = model.num_timesteps
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=steps, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
+                progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
+    learn_s = time.perf_counter() - t0
+    done_steps = model.num_timesteps - start_steps
+    model.save(str(out / "model.zip"))
+    venv.save(str(out / "vecnormalize.pkl"))
+    final = evaluator.evaluate()
+    final["final"] = True
+    evaluator.history.append(final)
+    (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
+    record = {"time_limit_min": time_limit_min, "algo": algo, "action": action, "track": track, "seed": seed,
+              "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
+              "eval_tracks": list(eval_tracks),
+              "hyperparams": hp, "hyperparams_version": hp_version, "env_id": "Azimut-v1", "env_kwargs": env_kwargs,
+              "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
+              "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
+              "machine": f"{platform.node()} ({os.cpu_count()} CPUs, shared)", "final_eval": final["rows"],
+              **(record_extra or {})}
+    (out / "run.json").write_text(json.dumps(record, indent=1, allow_nan=True, default=str))
+    venv.close()
+    return record
