@@ -138,7 +138,10 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     task._estimate = _timed(acc, task._estimate, "estimation")
     task._query_tracks = _timed(acc, task._query_tracks, "track")
     task.observe = _timed(acc, task.observe, "observe")  # includes sensors, estimation, track
-    task.info = _timed(acc, task.info, "observe")
+    import azimut_env.env as env_module  # the info dict, built per step by the env (azimut_env.task.info)
+
+    robot_info = env_module.robot_info
+    env_module.robot_info = _timed(acc, robot_info, "observe")
     env.reset(seed=seed)
     for key in acc:
         acc[key] = 0.0
@@ -163,6 +166,7 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
             env.reset()
             acc.update(saved)
             resets += 1
+    env_module.robot_info = robot_info
     total = elapsed / done
     per = {key: value / done for key, value in acc.items()}
     obs_rest = max(0.0, per["observe"] - per["sensors"] - per["estimation"] - per["track"])
