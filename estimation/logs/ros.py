@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.geometry import RobotGeometry
+from estimation.logs.ros_cdr import POSE_STRINGS, JointStateBatcher, decode_poses, pose_offset
 from estimation.logs.source import (
                                     BAD_MISSING_JOINT,
                                     BAD_NO_VELOCITY,
@@ -54,9 +55,10 @@ def _rosbags():
     return AnyReader, get_typestore(Stores.ROS2_HUMBLE)
 
 
-def yaw_from_quaternion(x, y, z, w) -> float:
-    """The rotation about z [rad] of the unit quaternion (x, y, z, w): atan2(2(wz + xy), 1 − 2(y² + z²))."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+def yaw_from_quaternion(x, y, z, w):
+    """The rotation about z [rad] of unit quaternions (x, y, z, w) (arrays or floats):
+    atan2(2(wz + xy), 1 − 2(y² + z²))."""
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 class RosLog(LogSource):
@@ -106,27 +108,39 @@ class RosLog(LogSource):
         finally:
             reader.close()
 
-    def _messages(self, reader, conns) -> Iterator[tuple[int, object]]:
-        """(time [ns], message) of ``conns``, in the bag's time order; a storage error -> LogError."""
+    def _raw_messages(self, reader, conns) -> Iterator[tuple[object, int, bytes]]:
+        """(connection, log time [ns], serialized message) of ``conns`` in the bag's time order; a
+        storage error -> LogError."""
         it = reader.messages(connections=conns)
         while True:
             try:
-                conn, t_log, raw = next(it)
-                msg = reader.deserialize(raw, conn.msgtype)
+                yield next(it)
             except StopIteration:
                 return
             except Exception as exc:  # noqa: BLE001
                 raise self.error(f"cannot be read to its end ({type(exc).__name__}: {exc}): a truncated or "
                                  "corrupt file?") from None
-            if self.time == "header":
-                stamp = msg.header.stamp
-                t = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-                if t == 0:
-                    raise self.error(f"a {conn.topic} message has no header stamp (0); pass time='log' "
-                                     "(--time log) to use the time the bag recorded it")
-            else:
-                t = int(t_log)
-            yield t, msg
+
+    def _deserialize(self, reader, conn, raw):
+        try:
+            return reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:  # noqa: BLE001
+            raise self.error(f"a {conn.topic} message cannot be decoded ({type(exc).__name__}: {exc})") from None
+
+    def _time(self, t_log: int, stamp_ns: int, topic: str) -> int:
+        if self.time == "log":
+            return int(t_log)
+        if stamp_ns == 0:
+            raise self.error(f"a {topic} message has no header stamp (0); pass time='log' (--time log) to use the "
+                             "time the bag recorded it")
+        return int(stamp_ns)
+
+    def _messages(self, reader, conns) -> Iterator[tuple[int, object]]:
+        """(time [ns], message) of ``conns``, in the bag's time order."""
+        for conn, t_log, raw in self._raw_messages(reader, conns):
+            msg = self._deserialize(reader, conn, raw)
+            stamp = msg.header.stamp
+            yield self._time(t_log, int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), conn.topic), msg
 
     def _check_topic(self, topics: dict, topic: str, types: tuple, what: str) -> None:
         if topic not in topics:
@@ -144,55 +158,78 @@ class RosLog(LogSource):
                                      f"{', '.join(msg.name)}); name the joints with --steer-joint/--drive-joint "
                                      "templates such as '{module}_steer'")
 
+    def _columns(self, names) -> tuple[list[int], list[int]]:
+        """The indices of the modules' steering and drive joints in a message's ``names`` (-1: absent)."""
+        index = {j: i for i, j in enumerate(names)}
+        return [index.get(j, -1) for j in self.steer_joints], [index.get(j, -1) for j in self.drive_joints]
+
     def chunks(self, size: int) -> Iterator[SampleChunk]:
-        n = self.geom.n
         with self._open() as reader:
             conns = [c for c in reader.connections if c.topic == self.topic]
-            buf_t, buf_q, buf_w, buf_bad, fill = _buffers(size, n)
-            names, steer_idx, drive_idx = None, None, None
-            for t, msg in self._messages(reader, conns):
-                if msg.name != names:
-                    names = msg.name
-                    index = {j: i for i, j in enumerate(names)}
-                    steer_idx = [index.get(j, -1) for j in self.steer_joints]
-                    drive_idx = [index.get(j, -1) for j in self.drive_joints]
-                buf_t[fill] = t
-                pos, vel = msg.position, msg.velocity
-                if min(steer_idx) < 0 or min(drive_idx) < 0 or len(pos) != len(names):
-                    buf_bad[fill] = BAD_MISSING_JOINT
-                elif len(vel) != len(names):
-                    buf_bad[fill] = BAD_NO_VELOCITY
-                else:
-                    buf_q[fill] = pos[steer_idx]
-                    buf_w[fill] = vel[drive_idx]
-                    buf_bad[fill] = 0
-                fill += 1
-                if fill == size:
-                    yield self._chunk(buf_t, buf_q, buf_w, buf_bad, fill)
-                    buf_t, buf_q, buf_w, buf_bad, fill = _buffers(size, n)
-            if fill:
-                yield self._chunk(buf_t, buf_q, buf_w, buf_bad, fill)
 
-    def _chunk(self, t, q, w, bad, m) -> SampleChunk:
-        q, w = q[:m], w[:m]
-        if self.steer_convention == "heading":
-            q = beta_from_heading(q, self.geom)
-        beta, phidot = fold_coaxial(q, w, self.geom)
-        return SampleChunk(t[:m].copy(), beta, phidot, bad[:m].copy())
+            def same_values(raw, layout) -> bool:  # rosbags' decoding of a new layout's first message
+                msg = self._deserialize(reader, conns[0], raw)
+                t, pos, vel = JointStateBatcher.decode([raw], layout)
+                stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+                return (tuple(msg.name) == layout.names and int(t[0]) == stamp
+                        and np.array_equal(msg.position, pos[0]) and np.array_equal(msg.velocity, vel[0]))
+
+            batcher = JointStateBatcher(same_values)
+            fill = _Fill(self, size)
+            for conn, t_log, raw in self._raw_messages(reader, conns):
+                layout = batcher.layout_of(raw)
+                if layout is not None:
+                    fill.add_raw(t_log, raw, layout)
+                else:
+                    fill.add_message(t_log, self._deserialize(reader, conn, raw))
+                if fill.count == size:
+                    yield fill.flush()
+            if fill.count:
+                yield fill.flush()
 
     def ground_truth(self) -> GroundTruth | None:
         if self.truth_topic is None:
             return None
         with self._open() as reader:
             conns = [c for c in reader.connections if c.topic == self.truth_topic]
-            ts, poses = [], []
-            for t, msg in self._messages(reader, conns):
-                pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose  # Odometry/WithCovariance, Stamped
-                o = pose.orientation
-                ts.append(t)
-                poses.append((pose.position.x, pose.position.y, yaw_from_quaternion(o.x, o.y, o.z, o.w)))
-        return GroundTruth(np.asarray(ts, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(-1, 3),
-                           f"topic {self.truth_topic}")
+            strings = POSE_STRINGS[conns[0].msgtype]
+            layouts: dict[tuple, bool] = {}
+            t_all, poses, groups = [], [], {}
+            for conn, t_log, raw in self._raw_messages(reader, conns):
+                k = len(t_all)
+                got = pose_offset(raw, strings)
+                ident = None if got is None else (got[0], len(raw), got[1])
+                if ident is not None and ident not in layouts:  # a new layout: rosbags must agree on its first message
+                    msg = self._deserialize(reader, conn, raw)
+                    stamp, pose = decode_poses([raw], len(raw), got[1])
+                    layouts[ident] = bool(np.array_equal(pose[0], _pose_values(msg))
+                                          and stamp[0] == _stamp_ns(msg))
+                if ident is not None and layouts[ident]:
+                    rows, raws = groups.setdefault(ident, ([], []))
+                    rows.append(k)
+                    raws.append(raw)
+                    t_all.append((t_log, 0))
+                    poses.append(None)
+                else:
+                    msg = self._deserialize(reader, conn, raw)
+                    t_all.append((t_log, _stamp_ns(msg)))
+                    poses.append(_pose_values(msg))
+        t_log = np.array([t for t, _ in t_all], dtype=np.int64).reshape(-1)
+        stamp = np.array([s for _, s in t_all], dtype=np.int64).reshape(-1)
+        values = np.zeros((len(poses), 7))
+        for k, v in enumerate(poses):
+            if v is not None:
+                values[k] = v
+        for (_, length, off), (rows, raws) in groups.items():
+            stamp[rows], values[rows] = decode_poses(raws, length, off)
+        if self.time == "header":
+            if np.any(stamp == 0):
+                self._time(0, 0, self.truth_topic)  # refuses the log
+            t = stamp
+        else:
+            t = t_log
+        yaw = yaw_from_quaternion(values[:, 3], values[:, 4], values[:, 5], values[:, 6])
+        return GroundTruth(t, np.column_stack([values[:, 0], values[:, 1], yaw]), f"topic {self.truth_topic}")
 
     def describe(self) -> dict:
         return {"format": self.format, "path": self.path, "topic": self.topic, "time": self.time,
@@ -200,9 +237,81 @@ class RosLog(LogSource):
                 "truth_topic": self.truth_topic, "steer_convention": self.steer_convention}
 
 
-def _buffers(size: int, n: int):
-    return (np.empty(size, np.int64), np.full((size, n), np.nan), np.full((size, n), np.nan),
-            np.zeros(size, np.int8), 0)
+def _stamp_ns(msg) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _pose_values(msg) -> np.ndarray:
+    """x, y, z, qx, qy, qz, qw of a reference-pose message (Odometry, Pose(WithCovariance)Stamped)."""
+    pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+    p, o = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z, o.x, o.y, o.z, o.w], dtype=np.float64)
+
+
+class _Fill:
+    """One chunk of JointState samples being filled: messages decoded by rosbags go in at once,
+    those of a known layout (:mod:`estimation.logs.ros_cdr`) are decoded together at the flush."""
+
+    def __init__(self, log: RosLog, size: int) -> None:
+        self.log, self.size = log, size
+        self._reset()
+
+    def _reset(self) -> None:
+        n = self.log.geom.n
+        self.t_log = np.empty(self.size, np.int64)
+        self.stamp = np.zeros(self.size, np.int64)
+        self.q = np.full((self.size, n), np.nan)
+        self.w = np.full((self.size, n), np.nan)
+        self.bad = np.zeros(self.size, np.int8)
+        self.groups: dict = {}
+        self.count = 0
+
+    def _put(self, rows, names, pos, vel) -> None:
+        """Positions and velocities (m, J) of messages with joint ``names`` into ``rows``."""
+        steer, drive = self.log._columns(names)
+        if min(steer + drive, default=0) < 0 or pos.shape[1] != len(names):
+            self.bad[rows] = BAD_MISSING_JOINT
+        elif vel.shape[1] != len(names):
+            self.bad[rows] = BAD_NO_VELOCITY
+        else:
+            self.q[rows] = pos[:, steer]
+            self.w[rows] = vel[:, drive]
+
+    def add_message(self, t_log: int, msg) -> None:
+        k = self.count
+        self.t_log[k] = t_log
+        self.stamp[k] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        self._put([k], list(msg.name), np.asarray(msg.position)[None], np.asarray(msg.velocity)[None])
+        self.count += 1
+
+    def add_raw(self, t_log: int, raw: bytes, layout) -> None:
+        k = self.count
+        self.t_log[k] = t_log
+        rows, raws = self.groups.setdefault(layout, ([], []))
+        rows.append(k)
+        raws.append(raw)
+        self.count += 1
+
+    def flush(self) -> SampleChunk:
+        for layout, (rows, raws) in self.groups.items():
+            stamp, pos, vel = JointStateBatcher.decode(raws, layout)
+            self.stamp[rows] = stamp
+            self._put(rows, list(layout.names), pos, vel)
+        m = self.count
+        if self.log.time == "header":
+            zero = np.flatnonzero(self.stamp[:m] == 0)
+            if zero.size:
+                self.log._time(0, 0, self.log.topic)  # refuses the log
+            t = self.stamp[:m].copy()
+        else:
+            t = self.t_log[:m].copy()
+        q = self.q[:m]
+        if self.log.steer_convention == "heading":
+            q = beta_from_heading(q, self.log.geom)
+        beta, phidot = fold_coaxial(q, self.w[:m], self.log.geom)
+        chunk = SampleChunk(t, beta, phidot, self.bad[:m].copy())
+        self._reset()
+        return chunk
 
 
 class BagWriter:
@@ -304,11 +413,15 @@ class BagWriter:
         w = self._writer
         w.open()
         try:
-            streams = []
-            for order, (topic, msgtype, t_ns, make) in enumerate(self._series):
-                conn = w.add_connection(topic, msgtype, typestore=self.ts)
-                streams.append(((int(t), order, i, conn, msgtype, make) for i, t in enumerate(t_ns)))
+            streams = [_stream(order, w.add_connection(topic, msgtype, typestore=self.ts), msgtype, t_ns, make)
+                       for order, (topic, msgtype, t_ns, make) in enumerate(self._series)]
             for t, _, i, conn, msgtype, make in heapq.merge(*streams):
                 w.write(conn, t, self.ts.serialize_cdr(make(i, t), msgtype))
         finally:
             w.close()
+
+
+def _stream(order: int, conn, msgtype: str, t_ns: np.ndarray, make) -> Iterator[tuple]:
+    """One series' messages as (time, series order, index, connection, type, maker), in its order."""
+    for i, t in enumerate(t_ns.tolist()):
+        yield t, order, i, conn, msgtype, make
