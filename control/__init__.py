@@ -1,27 +1,36 @@
-"""control: controllers for AZIMUT-3-like robots, and ``azimut eval``.
+"""control: controllers for AZIMUT-3-like robots, one interface for all of them, and the episode loop.
 
-Modules (the maths comes from ``estimation``; the robot from ``azimut_env``):
+The maths comes from ``estimation``; the robot from ``azimut_env`` (through its controller
+interface, :mod:`azimut_env.interface`).
 
-* ``icr_controller``: the ICR-based reference controller (coordinated, time-scaled H-state
-  motion with a RUNNING -> STOPPING -> RECONFIGURING state machine; derivations in
-  ``docs/icr-controller.md``), built from ``icr_config`` (modes, tuning), ``icr_state`` (the
-  batched state; one robot is a batch of one), ``feasibility`` (speed bounds, steering axes,
-  arcs, stops), ``motion`` (coordinated and in-place steps), ``icr_modes`` (mode transitions
-  and each mode's commands);
-* ``commands``: the set-points type shared by every controller;
-* ``swerve``: the WPILib-style twist baseline;
-* ``path_follower``: Track + pose -> twist / (λ_d, μ_d) targets, shared by both;
-* ``limits``: the commanded-limit checks (limits are ``azimut_env.params.ActuatorLimits``);
-* ``wrappers``: ICR-target and twist action spaces for RL;
-* ``episode``: one episode of a controller on a track (:func:`run_episode`) and its metrics;
-* ``evaluate`` (``azimut eval``), ``robustness`` (kick study), ``record_d2`` (``azimut record-d2``),
-  ``phenomenon`` (``azimut sim-paper``: qua while moving, motor lag vs compliance);
-* ``kinematic_model``: a rigid kinematic test bench.
+* ``controller``: :class:`Controller`, the protocol every controller implements (``name``,
+  ``reset(env, rows)``, ``act(env, obs) -> WheelCommand`` for the N robots of an env), and the
+  registry by name (:func:`register_controller`, :func:`make_controller`) that ``azimut eval
+  --controllers`` reads;
+* ``rollout``: the one episode loop (:func:`control.rollout.run_episodes`, N episodes as one
+  batch; :func:`control.rollout.run_episode`, one); ``episode``: its per-step log and metrics;
+* ``commands``: :class:`WheelCommand`, the set-points every controller returns;
+* ``path_controllers``: the controllers of ``azimut eval``, ``icr`` (path follower + ICR
+  controller) and ``twist`` (path follower + WPILib-style baseline); ``feedforward``: the
+  kinematic feed-forward of ``azimut sim-paper``;
+* ``icr/``: the ICR-based reference controller (``controller``: entry points; ``batch``: N
+  robots as one stateful object; ``config``, ``state``, ``feasibility``, ``motion``, ``modes``;
+  derivations in ``docs/icr-controller.md``);
+* ``twist/wpilib.py``: the WPILib-style twist baseline; ``follow/``: the path follower (Python
+  and compiled);
+* ``action_spaces/``: the RL action spaces (``controller``: the action-driven controller shared by
+  the single and vector wrappers and a trained policy's controller; ``single``, ``vector``,
+  ``shaping``);
+* ``limits``, ``checks``: commanded-limit checks and input checks; ``kinematic_model``: a rigid
+  kinematic test bench.
 """
 
+from control.commands import WheelCommand
+from control.controller import Controller, ControllerSpecError, make_controller, register_controller
 from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.icr.controller import ICRController, ICRControllerConfig, Mode
 from control.twist.wpilib import SwerveConfig, SwerveController
 
-__all__ = ["ICRController", "ICRControllerConfig", "Mode", "PathFollower", "PathFollowerConfig", "SwerveConfig",
-           "SwerveController"]
+__all__ = ["Controller", "ControllerSpecError", "ICRController", "ICRControllerConfig", "Mode", "PathFollower",
+           "PathFollowerConfig", "SwerveConfig", "SwerveController", "WheelCommand", "make_controller",
+           "register_controller"]

@@ -1,54 +1,56 @@
-"""The kinematic feed-forward driver (``azimut sim-paper --driver feedforward``).
+"""The kinematic feed-forward driver (``azimut sim-paper --driver feedforward``; controller name
+``feedforward``).
 
 β and φ̇ from the track's reference twist through the H representation (estimation paper
 eq. (16)–(17) for β; the wheel speeds of ``docs/icr-controller.md`` eq. (W)), with proportional
 pose correction. It ignores the actuator limits (steering jumps of up to 179°, flips across the
 stops), which is why it exists: it shows what motor lag alone does to qua. The rate-aware driver
-is the ICR reference controller (:func:`control.episode.run_episode`).
+is the ICR reference controller (:class:`control.path_controllers.ICRPathController`). It knows no
+β̇, β̈ or φ̈ of its own, so the commanded-limit check of an episode covers only its φ̇.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.env import AzimutEnv
-from azimut_env.task.core import nominal_duration
-from azimut_env.tracks import make_track
-from control.episode import EpisodeLog, record_step
-from control.icr.config import Mode
+from control.commands import WheelCommand
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
 
-__all__ = ["FeedForwardController", "run_feedforward"]
+__all__ = ["FeedForwardController"]
 
 
-@dataclass
 class FeedForwardController:
-    """Kinematic feed-forward with proportional pose correction (no actuator limits).
+    """Kinematic feed-forward with proportional pose correction (no actuator limits), for the N
+    robots of an env (a :class:`control.controller.Controller`; each robot computed on its own).
 
-    Attributes:
-        k_pos: position gain [1/s]; k_head: heading gain [1/s]; speed_scale: multiplies the
-        track's speed profile.
+    Args:
+        speed_scale: multiplies the track's speed profile. k_pos: position gain [1/s];
+        k_head: heading gain [1/s].
     """
 
-    k_pos: float = 1.5
-    k_head: float = 1.5
-    speed_scale: float = 1.0
+    name = "feedforward"
 
-    def __post_init__(self) -> None:
-        self._beta_prev = None
+    def __init__(self, speed_scale: float = 1.0, *, k_pos: float = 1.5, k_head: float = 1.5) -> None:
+        for key, value in (("speed_scale", speed_scale), ("k_pos", k_pos), ("k_head", k_head)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(value) or value < 0 or (key == "speed_scale" and value == 0):
+                raise ValueError(f"{key} must be a finite number {'> 0' if key == 'speed_scale' else '>= 0'}, "
+                                 f"got {value!r}")
+        self.speed_scale, self.k_pos, self.k_head = float(speed_scale), float(k_pos), float(k_head)
+        self._beta_prev: list[np.ndarray | None] = []
 
-    def reset(self) -> None:
-        self._beta_prev = None
+    def reset(self, env, rows) -> None:
+        num = int(np.shape(env.measured_beta)[0])
+        if len(self._beta_prev) != num:
+            self._beta_prev = [None] * num
+        for i in np.asarray(rows, dtype=np.intp):
+            self._beta_prev[i] = None
 
-    def __call__(self, env: AzimutEnv) -> tuple[np.ndarray, np.ndarray]:
-        """Set-points (β_c [rad], φ̇_c [rad/s]) for the env's current state (uses the env's pose
-        estimate, :attr:`AzimutEnv.estimated_pose`, the true pose unless ``pose_source="odometry"``)."""
-        track, geom = env.track, env.geometry
-        x, y, th = env.estimated_pose
-        s = env.progress
+    def _robot(self, track, s: float, pose: np.ndarray, beta_meas: np.ndarray, geom, dt: float, i: int):
+        """Set-points (β_c [rad], φ̇_c [rad/s]) of robot i at progress s and pose (x, y, θ)."""
+        x, y, th = pose
         ref = track.sample(s)
         tw = track.reference_twist(s) * self.speed_scale
         vx = tw[0] + self.k_pos * (ref[0] - x)
@@ -56,54 +58,25 @@ class FeedForwardController:
         w = tw[2] - self.k_head * math.remainder(th - ref[2], 2 * math.pi)
         c, sn = math.cos(th), math.sin(th)
         body = np.array([c * vx + sn * vy, -sn * vx + c * vy, w])
-        dt = env.control_period
+        prev = self._beta_prev[i]
         if np.linalg.norm(body) < 1e-6:
-            beta = env.measured_beta if self._beta_prev is None else self._beta_prev
+            beta = beta_meas if prev is None else prev
             phidot = np.zeros(geom.n)
         else:
             lam, mu = eta_from_twist(body)
             beta = steering_from_lambda(lam, geom)
-            rate = None if self._beta_prev is None else (beta - self._beta_prev) / dt
+            rate = None if prev is None else (beta - prev) / dt
             if rate is not None:
                 rate = np.where(np.abs(rate) > 5.0, 0.0, rate)  # a wheel flipping at its stop
             phidot = wheel_speeds(lam, mu, geom, beta_rate=rate, beta=beta)
-        self._beta_prev = np.asarray(beta, dtype=float)
+        self._beta_prev[i] = np.asarray(beta, dtype=float)
         return np.asarray(beta, dtype=float), np.asarray(phidot, dtype=float)
 
-
-def run_feedforward(track: str = "paper", seed: int = 0, speed_scale: float = 1.0, max_time: float | None = None,
-                    controller: FeedForwardController | None = None, env_kwargs: dict | None = None) -> EpisodeLog:
-    """Drive ``track`` with the feed-forward until it finishes, leaves the track or ``max_time``
-    [s] (default 3 × nominal + 10 s); the same :class:`~control.episode.EpisodeLog` as
-    :func:`control.episode.run_episode` (mode always RUNNING, no limit check)."""
-    env = AzimutEnv(track=make_track(track, rng=np.random.default_rng(seed)) if isinstance(track, str) else track,
-                    **(env_kwargs or {}))
-    ctrl = controller if controller is not None else FeedForwardController(speed_scale=speed_scale)
-    ctrl.reset()
-    _, info = env.reset(seed=seed)
-    dt = env.control_period
-    nominal = nominal_duration(env.track, ctrl.speed_scale)
-    steps = int(math.ceil((max_time if max_time is not None else 3.0 * nominal + 10.0) / dt))
-    rec: dict[str, list] = {}
-    log = EpisodeLog("feedforward", env.track, dt)
-    for _ in range(steps):
-        lam_hat, _ = env.estimated_eta
-        beta_c, phidot_c = ctrl(env)
-        _, _, terminated, _, info = env.step(env.action_from_setpoints(beta_c, phidot_c))
-        if "error" in info:
-            log.error = info["error"]
-            break
-        record_step(rec, env, info, lam_hat, beta_c, phidot_c)
-        if info.get("finished"):
-            log.completed = True
-            break
-        if info.get("off_track"):
-            log.error = "off track"
-            break
-    for key, values in rec.items():
-        setattr(log, key, np.asarray(values))
-    log.mode = np.full(log.qua.shape, int(Mode.RUNNING))
-    log.violations = np.zeros(log.qua.shape, dtype=bool)
-    log.t = dt * np.arange(1, log.qua.size + 1)
-    env.close()
-    return log
+    def act(self, env, obs) -> WheelCommand:
+        """Set-points for the env's current state (from its pose estimate,
+        ``estimated_pose``: the true pose unless ``pose_source="odometry"``)."""
+        poses, progress, beta_meas = env.estimated_pose, np.atleast_1d(env.progress), env.measured_beta
+        geom, dt, tracks = env.geometry, env.control_period, env.tracks
+        out = [self._robot(tracks[i], float(progress[i]), poses[i], beta_meas[i], geom, dt, i)
+               for i in range(len(self._beta_prev))]
+        return WheelCommand(beta=np.array([b for b, _ in out]), phidot=np.array([p for _, p in out]))

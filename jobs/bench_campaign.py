@@ -27,7 +27,7 @@ from azimut_env.tracks import TRACK_NAMES
 from jobs.campaign.args import arg_seeds
 from jobs.campaign.engine import EXECUTORS, resolve_executor, run_tasks
 from jobs.eval.campaign import episode_task, episode_tasks
-from jobs.eval.command import CONTROLLERS, DEFAULT_TRACKS
+from jobs.eval.command import DEFAULT_CONTROLLERS, DEFAULT_TRACKS
 
 __all__ = ["add_arguments", "check_args", "run"]
 
@@ -35,7 +35,8 @@ __all__ = ["add_arguments", "check_args", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from jobs.args import arg_choice_list, arg_float, arg_int
 
-    parser.add_argument("--controllers", type=arg_choice_list(CONTROLLERS), default=list(CONTROLLERS),
+    parser.add_argument("--controllers", type=arg_choice_list(("icr", "twist", "feedforward")),
+                        default=list(DEFAULT_CONTROLLERS),
                         help="comma-separated controllers (default: icr,twist)")
     parser.add_argument("--tracks", type=arg_choice_list(TRACK_NAMES), default=list(DEFAULT_TRACKS),
                         help="comma-separated tracks (default: all six)")

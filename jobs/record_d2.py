@@ -2,7 +2,10 @@
 
 The paper's D2 (§4) is the set of steering configurations measured while AZIMUT-3 drove a spiral,
 a circle and a rounded square under ICR-based control. This command drives the simulated robot on
-the ``paper`` track with :class:`~control.icr.controller.ICRController` and keeps the measured
+the ``paper`` track with the ICR controller (:class:`~control.path_controllers.ICRPathController`,
+its path follower not slowing down before the reference's stops; one episode of
+:func:`control.rollout.run_episode`, ended at the end of the track, off the track or after
+``max_time``) and keeps the measured
 steering angles (wheel side of the compliant steering, with the env's sensor noise and encoder
 quantisation) of every step where the controller is RUNNING and the robot moves (true speed above
 ``--min-speed``): the configurations of motion, off the constraining surface by the compliance.
@@ -26,9 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from azimut_env.env import AzimutEnv
-from control.follow.path_follower import PathFollower, PathFollowerConfig
-from control.icr.controller import ICRController, Mode
+from azimut_env.params import RobotParams
+from control.icr.config import Mode
+from control.path_controllers import ICRPathController
+from control.rollout import run_episode
 from jobs.args import arg_float, arg_int, arg_output_path
 
 __all__ = ["record_d2", "add_arguments", "run", "DEFAULT_OUT"]
@@ -48,25 +52,12 @@ def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_S
         raise ValueError(f"points must be >= 1, got {points}")
     if not (math.isfinite(speed_scale) and speed_scale > 0):
         raise ValueError(f"speed_scale must be > 0, got {speed_scale}")
-    env = AzimutEnv(track="paper")
-    _, info = env.reset(seed=seed)
-    ctl = ICRController(env.geometry, env.limits, env.control_period)
-    follower = PathFollower(env.track, PathFollowerConfig(speed_scale=speed_scale))
-    follower.reset(info["progress"])
-    kept = []
-    steps = 0
-    for _ in range(int(max_time / env.control_period)):
-        steps += 1
-        lam_hat, mu_hat = env.estimated_eta
-        target = follower.step(info["pose"])
-        cmd = ctl.step(lam_hat, mu_hat, env.measured_beta, env.measured_phidot, target.lam, target.mu)
-        _, _, terminated, _, info = env.step(env.action_from_setpoints(cmd.beta, cmd.phidot))
-        if "error" in info:
-            raise RuntimeError(f"simulation failed while recording D2: {info['error']}")
-        if cmd.info["mode"] == Mode.RUNNING and np.hypot(*info["twist"][:2]) > min_speed:
-            kept.append(env.measured_beta)
-        if info["progress"] >= env.track.length - 0.01 or info.get("off_track"):
-            break
+    log = run_episode(ICRPathController(speed_scale, follower_stops=False), "paper", seed=seed, max_time=max_time)
+    if log.error is not None and log.error != "off track":
+        raise RuntimeError(f"simulation failed while recording D2: {log.error}")
+    steps = int(log.qua.size)
+    moving = (log.mode == int(Mode.RUNNING)) & (np.hypot(log.twist_true[:, 0], log.twist_true[:, 1]) > min_speed)
+    kept = log.beta_meas[moving]
     q_all = np.asarray(kept)
     _, first = np.unique(q_all, axis=0, return_index=True)
     q_unique = q_all[np.sort(first)]
@@ -75,8 +66,8 @@ def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_S
     else:
         q = q_unique
     meta = dict(track="paper", seed=seed, speed_scale=speed_scale, min_speed=min_speed,
-                control_period=env.control_period, steps=steps, moving_steps=len(q_all),
-                unique=len(q_unique), points=len(q), completed=bool(info["progress"] >= env.track.length - 0.01),
+                control_period=log.dt, steps=steps, moving_steps=len(q_all),
+                unique=len(q_unique), points=len(q), completed=bool(log.completed),
                 controller="icr", command="azimut record-d2 " + " ".join(sys.argv[2:]))
     return np.ascontiguousarray(q), meta
 
@@ -103,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"azimut record-d2: error: {exc}", file=sys.stderr)
         return 2
-    geom = AzimutEnv().geometry
+    geom = RobotParams().geometry
     save_d2(Path(args.out), q, meta, geom)
     print(f"D2: {len(q)} configurations ({meta['unique']} unique of {meta['moving_steps']} moving steps, "
           f"{meta['steps']} steps) written to {args.out}")

@@ -46,12 +46,14 @@ import numpy as np
 from azimut_env.params import RobotParams
 from azimut_env.physics.stability import check_stability
 from azimut_env.tracks import TRACK_NAMES
-from control.episode import MOVING_MU, EpisodeLog, moving_mask, run_episode
-from control.feedforward import FeedForwardController, run_feedforward  # re-exported
+from control.controller import make_controller
+from control.episode import MOVING_MU, EpisodeLog, moving_mask
+from control.feedforward import FeedForwardController  # re-exported
+from control.rollout import run_episode
 from estimation import estimate_icr, quality, steering_from_lambda
 from jobs.args import add_robot_arguments, arg_float, arg_int, arg_output_path, robot_label, robot_params
 
-__all__ = ["DRIVERS", "FeedForwardController", "run_feedforward", "stiff_params", "stable_substeps",
+__all__ = ["DRIVERS", "FeedForwardController", "stiff_params", "stable_substeps",
            "qua_of_angles", "attribute", "run_phenomenon", "add_arguments", "check_args", "run"]
 
 DRIVERS = ("icr", "feedforward")
@@ -131,9 +133,7 @@ def _drive(driver: str, track: str, seed: int, speed: float, params: RobotParams
         env_kwargs["params"] = params
     if sensors is not None:
         env_kwargs["sensors"] = sensors
-    if driver == "icr":
-        return run_episode("icr", track, seed=seed, speed_scale=speed, env_kwargs=env_kwargs)
-    return run_feedforward(track, seed=seed, speed_scale=speed, env_kwargs=env_kwargs)
+    return run_episode(make_controller(driver, speed_scale=speed), track, seed=seed, env_kwargs=env_kwargs)
 
 
 def run_phenomenon(driver: str = "icr", track: str = "paper", speeds=DEFAULT_SPEEDS, seed: int = 0,

@@ -1,4 +1,5 @@
-"""Load a policy that ``azimut train`` wrote, with its observation normalisation, and act with it.
+"""Load a policy that ``azimut train`` wrote, with its observation normalisation, and act with it;
+:class:`PolicyController` drives an env with it as a :class:`control.controller.Controller`.
 
 A run folder holds ``model.zip`` (the SB3 model), ``vecnormalize.pkl`` (the ``VecNormalize``
 statistics, beside the model file; a checkpoint's ``*_vecnormalize_*`` file is found too) and
@@ -10,13 +11,23 @@ from __future__ import annotations
 
 import json
 import pickle
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["TrainedPolicy", "load_policy", "vecnormalize_path"]
+from azimut_env.validation import check_real_array
+from control.action_spaces.controller import ActionController
+from control.commands import WheelCommand
+from train.envs import ACTIONS
+
+__all__ = ["TrainedPolicy", "load_policy", "vecnormalize_path", "PolicyController", "policy_controller",
+           "policy_name", "model_file"]
+
+#: the spelling of a policy's short name in ``ppo:NAME=PATH``
+_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
 def vecnormalize_path(model_path: Path) -> Path | None:
@@ -93,3 +104,92 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
             obs_rms, clip_obs, eps = stats.obs_rms, float(stats.clip_obs), float(stats.epsilon)
     return TrainedPolicy(model=model, algo=algo, action=meta.get("action", "raw"),
                          env_kwargs=meta.get("env_kwargs", {}), obs_rms=obs_rms, clip_obs=clip_obs, epsilon=eps)
+
+
+def model_file(path: str | Path) -> Path:
+    """The model file of ``path`` (a model file, or a run folder holding ``model.zip``)."""
+    path = Path(path)
+    return path / "model.zip" if path.is_dir() else path
+
+
+def policy_name(arg: str) -> tuple[str, Path]:
+    """(name, path) of the ``ARG`` of ``ppo:ARG`` / ``sac:ARG``: ``NAME=PATH``, or ``PATH`` alone,
+    named after its run folder (the folder holding ``run.json``, else the model file's folder)."""
+    head, sep, tail = arg.partition("=")
+    if sep and _NAME.match(head) and tail:
+        return head, Path(tail)
+    path = Path(arg)
+    model = model_file(path)
+    run = next((p for p in (model.parent, model.parent.parent) if (p / "run.json").is_file()), model.parent)
+    name = run.resolve().name if run.name in ("", ".", "..") else run.name
+    return name or str(path), path
+
+
+class PolicyController:
+    """A trained policy as a :class:`control.controller.Controller` for the N robots of an env.
+
+    Each control period the policy's action for the (normalised) observation goes
+    through its action space: for ``raw`` the action is sent to the env as it is (the command's
+    ``action``; β̇, β̈ and φ̈ are finite differences of the set-points the env applies, from those
+    of its reset); for ``residual`` and ``icr-rate`` the action sets the target of the
+    :class:`~control.action_spaces.controller.ActionController` it was trained with, whose ICR
+    controller gives the set-points, their rates, the mode and the reconfigure events.
+
+    Args:
+        policy: a :class:`TrainedPolicy`. name: the short name of its rows, legends and files.
+        deterministic: act with the policy's mean action (default) or sample it.
+    """
+
+    def __init__(self, policy: TrainedPolicy, name: str, deterministic: bool = True) -> None:
+        if policy.action not in ACTIONS:
+            raise ValueError(f"unknown action space {policy.action!r} of the policy; choose from {', '.join(ACTIONS)}")
+        self.policy, self.name, self.deterministic = policy, str(name), bool(deterministic)
+        self.kind = ACTIONS[policy.action]
+        #: the env arguments the policy was trained with (the episode loop builds its env with them)
+        self.env_kwargs = dict(policy.env_kwargs)
+        self._action_controller: ActionController | None = None
+        self._prev: dict[str, np.ndarray] = {}
+
+    def reset(self, env, rows) -> None:
+        rows = np.asarray(rows, dtype=np.intp)
+        if self.kind is not None:
+            ctl = self._action_controller
+            if ctl is None or ctl.num != np.shape(env.measured_beta)[0]:
+                self._action_controller = ctl = ActionController(env, self.kind)
+            ctl.reset(env, rows)
+            return
+        # raw: the set-points the env holds after its reset (its previous action)
+        beta, phidot = env.setpoints_from_action(env.task.prev_action)
+        if not self._prev or self._prev["beta"].shape != beta.shape:
+            self._prev = {"beta": beta.copy(), "phidot": phidot.copy(), "rate": np.zeros_like(beta)}
+        self._prev["beta"][rows], self._prev["phidot"][rows], self._prev["rate"][rows] = beta[rows], phidot[rows], 0.0
+
+    def act(self, env, obs) -> WheelCommand:
+        action = self.policy.act(obs, deterministic=self.deterministic)
+        if self.kind is not None:
+            a = check_real_array("actions", action)
+            if a.shape != (np.shape(obs)[0], self._action_controller.action_size) or not np.all(np.isfinite(a)):
+                raise ValueError(f"policy {self.name!r}: actions must be a finite "
+                                 f"({np.shape(obs)[0]}, {self._action_controller.action_size}) array")
+            rows = np.arange(a.shape[0])
+            return self._action_controller.command(env, np.clip(a, -1.0, 1.0), rows)
+        applied = np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)  # what the env applies
+        beta, phidot = env.setpoints_from_action(applied)
+        dt, prev = env.control_period, self._prev
+        rate = (beta - prev["beta"]) / dt
+        accel, phiddot = (rate - prev["rate"]) / dt, (phidot - prev["phidot"]) / dt
+        self._prev = {"beta": beta, "phidot": phidot, "rate": rate}
+        return WheelCommand(beta=beta, phidot=phidot, beta_rate=rate, beta_accel=accel, phiddot=phiddot,
+                            action=action)
+
+
+def policy_controller(algo: str, arg: str, speed_scale: float = 1.0, deterministic: bool = True) -> PolicyController:
+    """The controller of spec ``ppo:ARG`` / ``sac:ARG`` (``ARG`` = ``NAME=PATH`` or ``PATH``, see
+    :func:`policy_name`): the policy loaded (:func:`load_policy`) and named.
+
+    ``speed_scale`` must be 1: a policy drives at the speed it learned (``--speed-scale`` scales
+    the path-following controllers' speed profile only)."""
+    if speed_scale != 1.0:
+        raise ValueError(f"a trained policy drives at the speed it learned; speed_scale must be 1, got {speed_scale!r}")
+    name, path = policy_name(arg)
+    return PolicyController(load_policy(path, algo), name, deterministic=deterministic)

@@ -42,7 +42,7 @@ from control.commands import WheelCommand
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 
-__all__ = ["SwerveConfig", "SwerveController", "discretize_twist", "module_states", "optimize_module",
+__all__ = ["SwerveConfig", "SwerveController", "SwerveBatch", "discretize_twist", "module_states", "optimize_module",
            "desaturate", "slew_limit", "slew_limit_twist"]
 
 
@@ -220,3 +220,49 @@ class SwerveController:
         self._beta, self._rate, self._phidot = beta, rate, phidot
         return WheelCommand(beta=beta.copy(), phidot=phidot.copy(), beta_rate=rate, beta_accel=accel,
                             phiddot=phiddot, info={"twist": tw_k})
+
+
+class SwerveBatch:
+    """N baselines, one :class:`SwerveController` per robot (each its own Python state), reset and
+    stepped by row, with the commands stacked into (M, n) arrays.
+
+    Args:
+        num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`.
+    """
+
+    def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
+                 config: SwerveConfig | None = None) -> None:
+        if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
+            raise ValueError(f"num must be an int >= 1, got {num!r}")
+        if config is not None and not isinstance(config, SwerveConfig):
+            raise TypeError(f"config must be a SwerveConfig or None, got {type(config).__name__}")
+        self.num, self.geom, self.limits, self.dt, self.config = int(num), geom, limits, float(dt), config
+        self.controllers: list[SwerveController | None] = [None] * self.num
+
+    @property
+    def ready(self) -> np.ndarray:
+        """(N,) bool: the robots reset at least once (only those can be stepped)."""
+        return np.array([c is not None for c in self.controllers], dtype=np.bool_)
+
+    def reset(self, rows, beta, phidot) -> None:
+        """A fresh controller for each robot of ``rows``, started from its measured β, φ̇ (M, n)."""
+        for k, i in enumerate(np.asarray(rows, dtype=np.intp)):
+            ctl = SwerveController(self.geom, self.limits, self.dt, self.config)
+            ctl.reset(beta[k], phidot[k])
+            self.controllers[i] = ctl
+
+    def step(self, rows, twists, beta_meas) -> WheelCommand:
+        """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
+        (M, 3) given their measured β (M, n); ``info["twist"]`` (M, 3) the discretised twists."""
+        rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.intp)
+        if any(self.controllers[i] is None for i in rows):
+            raise RuntimeError("a robot of this batch was never reset: call reset() first")
+        cmds = [self.controllers[i].step(twists[k], beta_meas[k]) for k, i in enumerate(rows)]
+        n = self.geom.n
+
+        def stack(name: str) -> np.ndarray:
+            return np.array([getattr(c, name) for c in cmds]).reshape(len(cmds), n)
+
+        return WheelCommand(beta=stack("beta"), phidot=stack("phidot"), beta_rate=stack("beta_rate"),
+                            beta_accel=stack("beta_accel"), phiddot=stack("phiddot"),
+                            info={"twist": np.array([c.info["twist"] for c in cmds]).reshape(len(cmds), 3)})

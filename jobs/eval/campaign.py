@@ -16,7 +16,6 @@ and per controller × track its row with its plots embedded; then the per-seed r
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import math
 import re
@@ -30,8 +29,11 @@ import numpy as np
 
 from azimut_env.task.core import nominal_duration
 from azimut_env.tracks import make_track
+from control.episode import episode_metrics
+from control.rollout import run_episode
 from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
+from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.plots import comparison_plots, write_plots
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick",
@@ -77,23 +79,14 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     return {"step": max(step, 1), "wheels": wheels, "impulse": impulse}
 
 
-@functools.lru_cache(maxsize=8)
-def _load_policy(algo: str, path: str):
-    """A trained policy, loaded once per process (``train.policy.load_policy``)."""
-    from train.policy import load_policy
-
-    return load_policy(path, algo=algo)
-
-
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
                  return_log: bool = False, robot: str | None = None, robot_file: str | None = None) -> dict:
-    """One campaign episode: ``{"metrics": row}`` (plus ``artifacts.log``, the
-    :class:`~control.episode.EpisodeLog`, with ``return_log``). ``robot`` (a preset's name) or
-    ``robot_file`` (a description file) pick the robot (default: azimut3)."""
-    from control.episode import episode_metrics, run_episode
+    """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
+    ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
+    ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
+    name) or ``robot_file`` (a description file) pick the robot (default: azimut3)."""
     from jobs.args import robot_env_kwargs
-    from jobs.eval.command import is_policy
 
     robot_kw = robot_env_kwargs(robot, robot_file)
     n_wheels = _robot_n(robot_kw["robot"]) if robot_kw else 4
@@ -101,15 +94,8 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
     if robot_kw:
         env_kwargs = {**(env_kwargs or {}), **robot_kw}
-    if is_policy(controller):  # a trained policy (train.rollout; the rl extra)
-        from train.rollout import run_policy_episode
-
-        algo, path = controller.split(":", 1)
-        log, _ = run_policy_episode(_load_policy(algo, path), track, seed=int(seed), label=controller, kick=kick,
-                                    max_time=max_time, env_kwargs=env_kwargs)
-    else:
-        log = run_episode(controller, track, seed=int(seed), speed_scale=speed_scale, kick=kick, max_time=max_time,
-                          env_kwargs=env_kwargs)
+    log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
+                      env_kwargs=env_kwargs)
     row = episode_metrics(log)
     row["track"] = track  # the name asked for (a random track's Track may carry another)
     row["seed"] = int(seed)
@@ -132,10 +118,12 @@ def _robot_n(robot: str) -> int:
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
-                  robot_file: str | None = None) -> list[Task]:
+                  robot_file: str | None = None, names: dict[str, str] | None = None) -> list[Task]:
     """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes return
-    their logs for the plots. The robot (``robot``, ``robot_file``) is in each task's key only
-    when it is not the default, so the default campaign's task ids are those of before."""
+    their logs for the plots; ``names`` (spec -> name) labels them. The robot (``robot``,
+    ``robot_file``) is in each task's key only when it is not the default, so the default
+    campaign's task ids are those of before."""
+    names = names or {}
     tasks = []
     for track in tracks:
         nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
@@ -152,7 +140,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": plot_seed is not None and seed == plot_seed},
-                                  label=f"{controller}-{track}-s{seed}", cost=cost))
+                                  label=f"{names.get(controller, controller)}-{track}-s{seed}", cost=cost))
     return tasks
 
 
@@ -307,13 +295,14 @@ def _seed_text(seeds: Sequence[int]) -> str:
 # ------------------------------------------------------------------------------------- run
 
 
-def _row_of(record: dict) -> dict:
+def _row_of(record: dict, names: dict[str, str]) -> dict:
     key = record["key"]
     if record["status"] == "ok":
         row = dict(record["result"]["metrics"])
         row["status"] = "ok"
     else:
-        row = {"controller": key["controller"], "track": key["track"], "seed": key["seed"], "status": "failed",
+        row = {"controller": names.get(key["controller"], key["controller"]), "track": key["track"],
+               "seed": key["seed"], "status": "failed",
                "error": record.get("error")}
     row["attempts"] = record.get("attempts", 1)
     return row
@@ -323,10 +312,14 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                       seeds: Sequence[int], stream=None) -> int:
     """Run the campaign ``args`` describes (``azimut eval``'s flags) and write the report.
 
-    Returns 0, or 1 when an episode failed (after its retries; the report lists it)."""
+    ``controllers`` are specs; the rows, cells and report carry their names
+    (``args.controller_names``, else made here). Returns 0, or 1 when an episode failed (after
+    its retries; the report lists it)."""
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
     from jobs.args import robot_env_kwargs, robot_label
+
+    names = getattr(args, "controller_names", None) or check_controllers(list(controllers), args.speed_scale)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -339,7 +332,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=seeds[0] if (plot_seed is not None or video) else None, robot=robot,
-                          robot_file=robot_file)
+                          robot_file=robot_file, names=names)
     executor = run_kwargs(args)["executor"]
     env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file))
     geom, limits = env0.geometry, env0.limits
@@ -371,7 +364,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                    f"{rec['elapsed_s']:.1f} s")
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
-        print(f"[{done}/{total}] {k['controller']:>6} {k['track']:<8} seed {k['seed']:<3} {msg}",
+        name = names.get(k["controller"], k["controller"])
+        print(f"[{done}/{total}] {name:>6} {k['track']:<8} seed {k['seed']:<3} {msg}",
               file=stream, flush=True)
 
     start = time.perf_counter()
@@ -382,7 +376,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         print(f"azimut eval: {exc}; run the same command with --resume", file=sys.stderr)
         return 130
     wall = time.perf_counter() - start
-    rows = [_row_of(r) for r in records]
+    rows = [_row_of(r, names) for r in records]
+    controllers = [names.get(c, c) for c in controllers]  # the report speaks of names
     ok_rows = [r for r in rows if r["status"] == "ok"]
     metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
                                                  if k not in {c[0] for c in SUMMARY_COLUMNS}
@@ -401,18 +396,19 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
             full.append(cell)
     plots: dict[tuple[str, str], list[str]] = {}
     compare: dict[str, list[str]] = {}
-    videos = {f"{rec['key']['controller']} on {rec['key']['track']}": rec["result"]["video"] for rec in records
+    videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
+              for rec in records
               if rec["status"] == "ok" and (rec.get("result") or {}).get("video")}
     if plot_seed is not None:
         for rec in records:
             if rec["status"] == "ok" and rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
-                plots[(rec["key"]["controller"], rec["key"]["track"])] = rec["result"]["plots"]
+                plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
         for track in tracks:
             traces = {}
             for task in tasks:
                 npz = store.folder / f"{task.id}.npz"
                 if task.key["track"] == track and task.key["seed"] == plot_seed and npz.is_file():
-                    traces[task.key["controller"]] = dict(np.load(npz))
+                    traces[names.get(task.key["controller"])] = dict(np.load(npz))
             if traces:
                 plot_dir.mkdir(exist_ok=True)
                 compare[track] = [f"plots/{f}" for f in comparison_plots(track, traces, plot_dir)]

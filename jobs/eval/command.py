@@ -1,10 +1,18 @@
 """``azimut eval``: run controllers on tracks in the simulator and write a report folder.
 
-Controllers (all fed by the same :class:`~control.follow.path_follower.PathFollower`, with the same
-actuator limits and control period):
+Controllers (``--controllers``, specs of :mod:`control.controller`, made by
+:mod:`jobs.eval.controllers`):
 
-* ``icr``: :class:`~control.icr.controller.ICRController` on the IT-estimated (λ̂, μ̂);
-* ``twist``: :class:`~control.twist.wpilib.SwerveController`, the WPILib-style baseline.
+* ``icr``: :class:`~control.icr.controller.ICRController` on the IT-estimated (λ̂, μ̂), fed by a
+  :class:`~control.follow.path_follower.PathFollower` (:class:`~control.path_controllers.ICRPathController`);
+* ``twist``: :class:`~control.twist.wpilib.SwerveController`, the WPILib-style baseline, fed by the
+  same follower (:class:`~control.path_controllers.TwistPathController`);
+* ``feedforward``: the kinematic feed-forward of ``azimut sim-paper`` (no actuator limits);
+* ``ppo:PATH``, ``sac:PATH`` (or ``ppo:NAME=PATH``): a policy ``azimut train`` wrote;
+* ``package.module:Class``: a controller of yours (a :class:`~control.controller.Controller`).
+
+All run with the same actuator limits and control period, through the one episode loop
+(:func:`control.rollout.run_episode`).
 
 Per controller and track (and seed: ``azimut eval`` runs a campaign of (controller, track, seed)
 episodes, see :mod:`jobs.eval.campaign`, whose ``report.md`` and ``metrics.json`` give the
@@ -29,50 +37,21 @@ import json
 import math
 import sys
 import time
-import zipfile
 from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
-
-# the episode runner lives in control.episode; its names stay importable from here
-from control.episode import CONTROLLERS, MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar, run_episode
+from control.episode import MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar
 from jobs.args import add_robot_arguments, arg_choice_list, arg_float, arg_int, arg_output_path, require_module
+from jobs.eval import campaign
+from jobs.eval.controllers import POLICY_PREFIXES, arg_controllers, check_controllers, is_policy
 from jobs.eval.plots import write_plots  # re-exported
 from jobs.eval.video import VIDEO_FORMATS, check_video_format
 
-__all__ = ["CONTROLLERS", "MOVING_MU", "EpisodeLog", "run_episode", "moving_mask", "episode_metrics", "write_plots",
-           "write_report", "add_arguments", "run"]
+__all__ = ["DEFAULT_CONTROLLERS", "POLICY_PREFIXES", "MOVING_MU", "EpisodeLog", "moving_mask", "episode_metrics",
+           "is_policy", "arg_controllers", "write_plots", "write_report", "add_arguments", "run"]
 
-#: prefixes of trained policies in ``--controllers`` (``ppo:PATH``, ``sac:PATH``; PATH the model file
-#: ``azimut train`` wrote, its VecNormalize statistics beside it; needs the ``rl`` extra)
-POLICY_PREFIXES = ("ppo", "sac")
-
-
-def is_policy(controller: str) -> bool:
-    """Whether a ``--controllers`` entry names a trained policy (``ppo:PATH`` or ``sac:PATH``)."""
-    return controller.split(":", 1)[0] in POLICY_PREFIXES and ":" in controller
-
-
-def arg_controllers(text: str) -> list[str]:
-    """``type=`` of ``--controllers``: built-in controllers and ``ppo:PATH`` / ``sac:PATH``
-    (the model file must exist)."""
-    items = [t.strip() for t in text.split(",") if t.strip()]
-    if not items:
-        raise argparse.ArgumentTypeError(f"give at least one of {', '.join(CONTROLLERS)}, ppo:PATH, sac:PATH")
-    if len(set(items)) != len(items):
-        raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
-    for item in items:
-        if is_policy(item):
-            path = Path(item.split(":", 1)[1])
-            if not (path.is_file() or (path / "model.zip").is_file()):
-                raise argparse.ArgumentTypeError(f"{item}: no model file {path}")
-            model = path if path.is_file() else path / "model.zip"
-            if not zipfile.is_zipfile(model):  # SB3 saves zip archives
-                raise argparse.ArgumentTypeError(f"{item}: {model} is not a saved model (not a zip archive)")
-        elif item not in CONTROLLERS:
-            raise argparse.ArgumentTypeError(f"unknown {item!r}; choose from {', '.join(CONTROLLERS)}, ppo:PATH, "
-                                             "sac:PATH")
-    return items
+#: the controllers ``azimut eval`` compares by default
+DEFAULT_CONTROLLERS = ("icr", "twist")
 #: Default evaluation order: the paper track first.
 DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
 
@@ -112,9 +91,10 @@ def write_report(rows: list[dict], out: Path, header: str = "") -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--controllers", default="icr,twist", type=arg_controllers,
-                        help=f"comma-separated controllers among {', '.join(CONTROLLERS)}, and trained policies "
-                             "ppo:PATH or sac:PATH (the model.zip azimut train wrote) (default: icr,twist)")
+    parser.add_argument("--controllers", default=",".join(DEFAULT_CONTROLLERS), type=arg_controllers,
+                        help="comma-separated controllers: icr, twist, feedforward, trained policies ppo:PATH or "
+                             "sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default the run "
+                             "folder's name), or package.module:Class, a controller of yours (default: icr,twist)")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_choice_list(TRACK_NAMES),
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
@@ -135,34 +115,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
                         help="also run the robustness study: N trials per controller on 'paper' with random "
                              "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
-    from jobs.eval.campaign import add_arguments as add_campaign_arguments
-
-    add_campaign_arguments(parser)  # --seeds, --workers, --executor, --ray-address, --resume, ...
+    campaign.add_arguments(parser)  # --seeds, --workers, --executor, --ray-address, --resume, ...
 
 
 def check_args(args: argparse.Namespace) -> None:
-    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra); the campaign flags
-    together (see :func:`jobs.eval.campaign.check_args`)."""
-    from jobs.eval.campaign import check_args as check_campaign_args
-
+    """What ``type=`` cannot see: plots need matplotlib (the [plot] extra); every controller made
+    once (trained policies loaded, user classes checked against the protocol, names distinct;
+    ``args.controller_names`` keeps spec -> name); the campaign flags together (see
+    :func:`jobs.eval.campaign.check_args`)."""
     if not args.no_plots:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
     if getattr(args, "video", None):
         check_video_format(args.video)
-    for item in args.controllers:  # load each trained policy once now, not after the other episodes
+    for item in args.controllers:
         if is_policy(item):
             require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
-            from train.policy import load_policy
-
-            algo, path = item.split(":", 1)
-            try:
-                load_policy(path, algo)
-            except Exception as exc:  # noqa: BLE001 (any failure to load is the user's file: say it in one line)
-                raise ValueError(f"argument --controllers: {item}: cannot load the model "
-                                 f"({type(exc).__name__}: {exc})") from None
-    if any(is_policy(c) for c in args.controllers):
-        require_module("stable_baselines3", "evaluating a trained policy (the rl extra)")
-    check_campaign_args(args)
+    args.controller_names = check_controllers(list(args.controllers), args.speed_scale)
+    campaign.check_args(args)
 
 
 def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
@@ -173,7 +142,8 @@ def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
     return items
 
 
-def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run_kwargs: dict | None = None) -> str:
+def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run_kwargs: dict | None = None,
+                  names: dict[str, str] | None = None) -> str:
     """Run the robustness study per controller (on the campaign's executor, ``run_kwargs`` of
     :func:`jobs.campaign.engine.run_tasks`; trials saved under ``out/kicks/``); write
     kicks_<controller>.json; return Markdown."""
@@ -184,13 +154,15 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
              "| wheels settled p50/p90/max [s] | max lateral after kick p50/p90/max [cm] "
              "| peak β error p50/max [deg] |",
              "|---|---|---|---|---|---|---|---|---|"]
-    for controller in [c for c in controllers if c in CONTROLLERS]:  # trained policies: not in this study yet
+    names = names or {}
+    for spec in [c for c in controllers if not is_policy(c)]:  # trained policies: not in this study yet
+        controller = names.get(spec, spec)
         start = time.time()
 
         def progress(i, n, *_, label=f"kicks/{controller}", t0=start):  # this iteration's label and start
             return progress_bar(label, i / n, t0)
 
-        trials = kick_study_campaign(n_runs, controller, seed0=1000 + 1000 * seed,
+        trials = kick_study_campaign(n_runs, spec, seed0=1000 + 1000 * seed,
                                      store=out / "kicks" / controller, **(run_kwargs or {}), progress=progress)
         if sys.stderr.isatty():
             sys.stderr.write("\n")
@@ -218,15 +190,16 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
         if args.kick_runs < 0:
             raise ValueError(f"--kick-runs must be >= 0, got {args.kick_runs}")
-    except ValueError as exc:
+        names = getattr(args, "controller_names", None) or check_controllers(controllers, args.speed_scale)
+    except (ValueError, argparse.ArgumentTypeError) as exc:
         print(f"azimut eval: error: {exc}", file=sys.stderr)
         return 2
-    from jobs.eval.campaign import run_eval_campaign, run_kwargs, seeds_of
-
+    args.controller_names = names
     out = Path(args.out)
-    rc = run_eval_campaign(args, controllers, tracks, seeds_of(args))
+    seeds = campaign.seeds_of(args)
+    rc = campaign.run_eval_campaign(args, controllers, tracks, seeds)
     if rc in (0, 1) and args.kick_runs > 0:
         with open(out / "report.md", "a") as fh:
-            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds_of(args)[0], out,
-                                           run_kwargs(args)) + "\n")
+            fh.write("\n" + _kick_section(controllers, args.kick_runs, seeds[0], out, campaign.run_kwargs(args),
+                                           names) + "\n")
     return rc

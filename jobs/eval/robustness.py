@@ -14,7 +14,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from azimut_env.tracks import make_track
-from control.episode import run_episode
+from control.rollout import run_episode
+from jobs.eval.controllers import build_controller
 
 __all__ = ["KickTrial", "kick_trial", "kick_study", "kick_trial_task", "kick_study_campaign", "summarize_kicks"]
 
@@ -49,15 +50,17 @@ class KickTrial:
 
 def kick_trial(seed: int, controller: str = "icr", track: str = "paper", kick_step: int = 100,
                after: float = 6.0, recover_tol: float = 0.05, recover_time: float = 3.0) -> KickTrial:
-    """One trial (see the module docstring); everything random is drawn from ``seed``."""
+    """One trial (see the module docstring) of the controller spec ``controller``
+    (:mod:`jobs.eval.controllers`); everything random is drawn from ``seed``."""
     rng = np.random.default_rng(seed)
     tr = make_track(track, rng=np.random.default_rng(seed))
     start = float(rng.uniform(0.1, 0.8) * tr.length)
     wheels = tuple(int(w) for w in np.sort(rng.choice(4, size=int(rng.integers(1, 5)), replace=False)))
     impulse = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
     dt = 0.02
-    log = run_episode(controller, tr, seed=seed, kick={"step": kick_step, "wheels": list(wheels), "impulse": impulse},
-                      max_time=kick_step * dt + after, env_kwargs=None, start_progress=start)
+    log = run_episode(build_controller(controller), tr, seed=seed,
+                      kick={"step": kick_step, "wheels": list(wheels), "impulse": impulse},
+                      max_time=kick_step * dt + after, start_progress=start)
     k0 = kick_step
     lat = np.abs(log.lateral[k0:]) if log.lateral.size > k0 else np.zeros(0)
     dbeta = np.abs(np.mod(log.beta_meas[k0:] - log.beta_cmd[k0:] + np.pi / 2, np.pi) - np.pi / 2)

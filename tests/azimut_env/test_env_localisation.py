@@ -118,7 +118,8 @@ def test_odometry_is_deterministic_and_noisy_fixes_differ_by_seed():
 
 
 def test_icr_controller_completes_circle_on_odometry():
-    from control.episode import episode_metrics, run_episode
+    from control.episode import episode_metrics
+    from control.rollout import run_episode
 
     log = run_episode("icr", "circle", seed=0, env_kwargs={"pose_source": "odometry"})
     m = episode_metrics(log)

@@ -16,7 +16,7 @@ import numpy as np
 from azimut_env.params import action_from_setpoints
 from azimut_env.task.core import TaskConfig
 from azimut_env.vector_env import AzimutVectorEnv
-from control.episode import run_episode
+from control.rollout import run_episode
 
 
 def _per_step_rewards(steps: int = 300) -> dict[str, float]:

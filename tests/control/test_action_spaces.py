@@ -78,7 +78,7 @@ def test_residual_zero_action_is_the_reference_and_random_residual_adds_no_stops
 
 def test_residual_zero_action_matches_azimut_eval_reference():
     """Sub-env 0 with zero residual follows the same trajectory as ``azimut eval``'s ICR run."""
-    from control.episode import run_episode
+    from control.rollout import run_episode
 
     log = run_episode("icr", "circle", seed=5, max_time=2.0)
     venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None),

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from azimut_env.tracks import Track
-from control.episode import episode_metrics, run_episode
+from control.episode import episode_metrics
+from control.rollout import run_episode
 from jobs.cli import main
 from jobs.eval.command import write_plots, write_report
 

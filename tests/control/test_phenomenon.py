@@ -12,7 +12,8 @@ import pytest
 from azimut_env.params import RobotParams
 from estimation import steering_from_lambda
 from jobs.cli import main
-from jobs.sim_paper import attribute, qua_of_angles, run_feedforward, run_phenomenon, stable_substeps, stiff_params
+from control.rollout import run_episode
+from jobs.sim_paper import attribute, qua_of_angles, run_phenomenon, stable_substeps, stiff_params
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +38,7 @@ def test_feedforward_phenomenon_is_motor_lag():
     rows = {}
     for name, params, sub in (("compliant", None, 8), ("stiff", stiff_params(), stable_substeps(stiff_params()))):
         kw = {"substeps": sub} | ({"params": params} if params is not None else {})
-        log = run_feedforward("paper", seed=0, env_kwargs=kw)
+        log = run_episode("feedforward", "paper", seed=0, env_kwargs=kw)
         rows[name] = attribute(log, geom)
     comp, stiff = rows["compliant"], rows["stiff"]
     assert comp["completed"] and comp["rms_lateral_m"] < 0.05

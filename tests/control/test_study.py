@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import pytest
 
-from control.episode import episode_metrics, run_episode
+from control.episode import episode_metrics
+from control.rollout import run_episode
 from jobs.eval.command import DEFAULT_TRACKS
 
 pytestmark = pytest.mark.slow

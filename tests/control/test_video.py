@@ -44,7 +44,7 @@ def test_video_format_refused_before_any_work(tmp_path, capsys, monkeypatch):
 
 
 def test_mp4_through_ffmpeg(tmp_path):
-    from control.episode import run_episode
+    from control.rollout import run_episode
     from jobs.eval.video import ffmpeg_executable, write_video
 
     if ffmpeg_executable() is None:

@@ -142,7 +142,14 @@ def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
     assert rc in (0, 1)
     episodes = json.loads((report / "metrics.json").read_text())["episodes"]
     by = {e["controller"]: e for e in episodes}
-    assert set(by) == {"icr", f"ppo:{out / 'model.zip'}"}
+    assert set(by) == {"icr", "run"}  # a policy is named after its run folder
     for row in by.values():
         assert row["status"] == "ok" and np.isfinite(row["return"]) and "mean_internal_force_N" in row
+    named = tmp_path / "named"
+    assert main(["eval", "--controllers", f"ppo:tiny={out}", "--tracks", "crab", "--max-time", "0.5", "--no-plots",
+                 "--out", str(named)]) in (0, 1)
+    rows = json.loads((named / "metrics.json").read_text())["episodes"]
+    assert [r["controller"] for r in rows] == ["tiny"] and rows[0]["return"] == by["run"]["return"]
     assert main(["eval", "--controllers", f"ppo:{tmp_path / 'missing.zip'}", "--out", str(report)]) == 2
+    assert main(["eval", "--controllers", f"ppo:{out}", "--speed-scale", "0.5", "--out", str(report)]) == 2
+    assert main(["eval", "--controllers", f"ppo:{out},ppo:run={out}", "--out", str(report)]) == 2

@@ -1,0 +1,144 @@
+"""The track-following controllers of ``azimut eval``: a path follower per robot feeding the ICR
+controller (``icr``) or the WPILib-style twist baseline (``twist``).
+
+Both implement :class:`control.controller.Controller` for the N robots of an env. Each robot has
+its own :class:`~control.follow.path_follower.PathFollower` (on its own track, from the pose the
+env's observation uses, ``estimated_pose``), so the two controllers get the same targets and a
+comparison isolates how the wheels are coordinated:
+
+* :class:`ICRPathController`: (λ_d, μ_d) of the follower's twist into the ICR controller
+  (:class:`~control.icr.batch.BatchICRController`, all robots in one batched step); the
+  follower slows down before the points where the reference motion needs a stop and
+  reconfiguration (its ``stop_mask``, :func:`~control.icr.controller.reference_stop_mask`);
+* :class:`TwistPathController`: the follower's twist into one
+  :class:`~control.twist.wpilib.SwerveController` per robot.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from control.commands import WheelCommand
+from control.follow.path_follower import PathFollower, PathFollowerConfig
+from control.icr.batch import BatchICRController
+from control.icr.config import ICRControllerConfig
+from control.icr.feasibility import reference_stop_mask
+from control.twist.wpilib import SwerveBatch, SwerveConfig
+
+__all__ = ["ICRPathController", "TwistPathController"]
+
+
+def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | None) -> PathFollowerConfig:
+    if follower_config is not None:
+        if not isinstance(follower_config, PathFollowerConfig):
+            raise TypeError(f"follower_config must be a PathFollowerConfig or None, got "
+                            f"{type(follower_config).__name__}")
+        return follower_config
+    if isinstance(speed_scale, bool) or not isinstance(speed_scale, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(speed_scale) and speed_scale > 0):
+        raise ValueError(f"speed_scale must be a finite number > 0, got {speed_scale!r}")
+    return PathFollowerConfig(speed_scale=float(speed_scale))
+
+
+class _PathFollowing:
+    """A path follower per robot (the part both controllers share)."""
+
+    def __init__(self, speed_scale: float, follower_config: PathFollowerConfig | None) -> None:
+        self.follower_config = _follower_config(speed_scale, follower_config)
+        #: the speed scale of the track's profile (a given ``follower_config``'s own)
+        self.speed_scale = self.follower_config.speed_scale
+        self.followers: list[PathFollower | None] = []
+
+    def _stop_mask(self, env):
+        return None
+
+    def _reset_followers(self, env, rows: np.ndarray) -> None:
+        num = int(np.shape(env.measured_beta)[0])
+        if len(self.followers) != num:
+            self.followers = [None] * num
+        tracks, progress, dt = env.tracks, np.atleast_1d(env.progress), env.control_period
+        for i in rows:
+            f = PathFollower(tracks[i], self.follower_config, stop_mask=self._stop_mask(env), dt=dt)
+            f.reset(float(progress[i]))
+            self.followers[i] = f
+
+    def _targets(self, env) -> list:
+        poses = env.estimated_pose  # the true pose unless the env's pose_source is "odometry"
+        return [f.step(poses[i]) for i, f in enumerate(self.followers)]
+
+
+class ICRPathController(_PathFollowing):
+    """``icr``: path followers + the ICR controller (see the module docstring).
+
+    Args:
+        speed_scale: multiplies the track's speed profile (ignored when ``follower_config`` is given).
+        follower_config: the followers' gains (default: ``PathFollowerConfig(speed_scale=speed_scale)``).
+        icr_config: the ICR controller's tuning.
+        follower_stops: the followers slow down before the reference's stops and reconfigurations
+            (default True; ``azimut record-d2`` records D2 without).
+    """
+
+    name = "icr"
+
+    def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
+                 icr_config: ICRControllerConfig | None = None, follower_stops: bool = True) -> None:
+        super().__init__(speed_scale, follower_config)
+        if icr_config is not None and not isinstance(icr_config, ICRControllerConfig):
+            raise TypeError(f"icr_config must be an ICRControllerConfig or None, got {type(icr_config).__name__}")
+        self.icr_config = icr_config or ICRControllerConfig()
+        self.follower_stops = bool(follower_stops)
+        self.controller: BatchICRController | None = None
+
+    def _stop_mask(self, env):
+        if not self.follower_stops:
+            return None
+        return functools.partial(reference_stop_mask, geom=env.geometry, axis_margin=self.icr_config.axis_margin)
+
+    def reset(self, env, rows) -> None:
+        rows = np.asarray(rows, dtype=np.intp)
+        self._reset_followers(env, rows)
+        if self.controller is None or self.controller.num != len(self.followers):
+            self.controller = BatchICRController(len(self.followers), env.geometry, env.limits, env.control_period,
+                                                 self.icr_config)
+        lam_hat, _ = env.estimated_eta
+        self.controller.reset(rows, lam_hat[rows], env.measured_beta[rows], env.measured_phidot[rows])
+
+    def act(self, env, obs) -> WheelCommand:
+        targets = self._targets(env)
+        lam_hat, mu_hat = env.estimated_eta
+        return self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
+                                    np.array([t.lam for t in targets]), np.array([t.mu for t in targets]))
+
+
+class TwistPathController(_PathFollowing):
+    """``twist``: path followers + the WPILib-style baseline (see the module docstring).
+
+    Args:
+        speed_scale, follower_config: as :class:`ICRPathController`.
+        swerve_config: the baseline's options.
+    """
+
+    name = "twist"
+
+    def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
+                 swerve_config: SwerveConfig | None = None) -> None:
+        super().__init__(speed_scale, follower_config)
+        if swerve_config is not None and not isinstance(swerve_config, SwerveConfig):
+            raise TypeError(f"swerve_config must be a SwerveConfig or None, got {type(swerve_config).__name__}")
+        self.swerve_config = swerve_config
+        self.controller: SwerveBatch | None = None
+
+    def reset(self, env, rows) -> None:
+        rows = np.asarray(rows, dtype=np.intp)
+        self._reset_followers(env, rows)
+        if self.controller is None or self.controller.num != len(self.followers):
+            self.controller = SwerveBatch(len(self.followers), env.geometry, env.limits, env.control_period,
+                                          self.swerve_config)
+        self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
+
+    def act(self, env, obs) -> WheelCommand:
+        twists = np.array([t.twist for t in self._targets(env)])
+        return self.controller.step(None, twists, env.measured_beta)
