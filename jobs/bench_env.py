@@ -67,8 +67,9 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
                             seed: int = 0, robot_kwargs: dict | None = None) -> dict[str, float]:
     """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
     same-step autoresets), with the time per control step split into the policy-action ->
-    controller-target stage (path followers, target shaping), the batched ICR controller, the
-    vector env's step and the rest (wrapper glue)."""
+    controller-target stage (path followers, target shaping), the controller (the batched ICR
+    controller, or the per-robot twist baselines), the vector env's step and the rest (wrapper
+    glue)."""
     from gymnasium.vector import AutoresetMode
 
     from azimut_env.vector_env import AzimutVectorEnv
@@ -93,20 +94,20 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
     for k in range(calls):
         wrapped.step(actions[20 + k])
     total = clock() - t0
-    if kind is not None:  # a second, instrumented loop for the split
-        saved = vw.icr_control_step_batch
-        vw.icr_control_step_batch = _timed(acc, saved, "controller")
-        wrapped._targets = _timed(acc, wrapped._targets, "targets")
-        venv_step = venv.step
-        venv.step = _timed(acc, venv_step, "env")
+    if kind is not None:  # a second, instrumented loop for the split (instance attributes shadow the methods)
+        ctl = wrapped.controller  # the action space's ActionController
+        inner = ctl.icr if ctl.icr is not None else ctl.swerve
+        inner.step = _timed(acc, inner.step, "controller")
+        ctl._targets = _timed(acc, ctl._targets, "targets")
+        venv.step = _timed(acc, venv.step, "env")
         try:
             t1 = clock()
             for k in range(calls):
                 wrapped.step(actions[20 + k])
             inst = clock() - t1
         finally:
-            vw.icr_control_step_batch = saved
-            venv.step = venv_step
+            for obj, name in ((inner, "step"), (ctl, "_targets"), (venv, "step")):
+                del obj.__dict__[name]
     else:
         acc["env"], inst = total, total
     per = 1e6 / (calls * num_envs)

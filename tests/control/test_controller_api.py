@@ -279,3 +279,12 @@ def test_the_loop_refuses_what_is_not_a_controller_or_a_command():
         run_episodes(Drive(), ["circle", "crab"], [0, 1, 2])
     with pytest.raises(TypeError, match="already made"):
         run_episode(Drive(), "circle", speed_scale=0.5)
+
+
+@pytest.mark.parametrize("action", ["residual", "twist"])
+def test_bench_env_times_the_action_controller(action):
+    """``azimut bench-env --action`` splits a step into the action controller's stages."""
+    from jobs.bench_env import bench_controller_action
+
+    r = bench_controller_action(action, num_envs=2, calls=5, track="circle")
+    assert r["steps_per_s"] > 0 and r["targets_us"] > 0 and r["controller_us"] > 0 and r["env_us"] > 0
