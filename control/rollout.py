@@ -22,9 +22,10 @@ gets a row. A robot's episode ends, and its log with it, at the first of:
 
 The others go on: a robot the env ended (terminated or truncated) is reset in place (its seed's
 generator goes on) and its controller restarted, so every robot the controller sees is in a
-running episode; what it does after its own episode ended is not logged. Sub-env i behaves as a single env seeded with ``seeds[i]`` and
-the robots' physics do not interact, so a batch gives each robot the episode it gets alone, as
-long as the controller treats its robots independently (the built-ins do;
+running episode; what it does after its own episode ended is not logged. Sub-env i behaves as a
+single env seeded with ``seeds[i]`` and the robots' physics do not interact, so a batch gives
+each robot the episode it gets alone, as long as the controller treats its robots independently
+(the built-ins do; a policy's network may round a batch differently;
 ``tests/control/test_controller_api.py`` checks it bit for bit).
 """
 

@@ -17,8 +17,8 @@ from azimut_env.task.config import TaskConfig
 from azimut_env.task.lap_time import REFERENCE_TURN_FRACTIONS, nominal_duration, reference_lap_time, steering_wraps
 from azimut_env.tracks import make_track
 from control.episode import episode_metrics
-from control.rollout import run_episode
 from control.icr.controller import ICRControllerConfig
+from control.rollout import run_episode
 
 slow = pytest.mark.slow
 

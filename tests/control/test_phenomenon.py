@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from azimut_env.params import RobotParams
+from control.rollout import run_episode
 from estimation import steering_from_lambda
 from jobs.cli import main
-from control.rollout import run_episode
 from jobs.sim_paper import attribute, qua_of_angles, run_phenomenon, stable_substeps, stiff_params
 
 
