@@ -95,16 +95,17 @@ def _check_command(cmd, num: int, n: int, name: str) -> None:
             raise ValueError(f"controller {name!r}: command {key} must have shape ({num},), got {np.shape(value)}")
 
 
-def _record(rec: dict, env: AzimutVectorEnv, info: dict, i: int, cmd: WheelCommand, lam_hat: np.ndarray,
-            beta_meas: np.ndarray, motor: np.ndarray, violation: bool) -> None:
-    """Append robot i's row (the keys of :class:`EpisodeLog`) after a step."""
-    sub = env.sub_env_info(i)
+def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, lam_hat: np.ndarray, beta_meas: np.ndarray,
+            motor: np.ndarray, violation: bool) -> None:
+    """Append robot i's row (the keys of :class:`EpisodeLog`) after a step, from the env's info
+    (the vector env's batched info, whose row i is the single env's info of that robot)."""
     row = [("pose", info["pose"][i]), ("lateral", info["lateral_error"][i]), ("heading", info["heading_error"][i]),
            ("slip_power", info["slip_power"][i]), ("internal_force", info["internal_force"][i]),
-           ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]), ("beta_true", sub["beta_true"]),
+           ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]), ("beta_true", info["beta_true"][i]),
            ("motor_true", motor[i]), ("beta_cmd", np.array(cmd.beta[i], dtype=np.float64)),
            ("phidot_cmd", np.array(cmd.phidot[i], dtype=np.float64)),
-           ("lam_hat", lam_hat[i]), ("mu_true", abs(float(sub["eta_true"][1]))), ("twist_true", sub["twist"].copy()),
+           ("lam_hat", lam_hat[i]), ("mu_true", abs(float(info["eta_true"][1][i]))),
+           ("twist_true", np.array(info["twist"][i], dtype=np.float64)),
            ("mode", int(cmd.mode[i]) if cmd.mode is not None else int(Mode.RUNNING)), ("violations", violation)]
     if cmd.beta_rate is not None:
         row.append(("beta_rate", np.array(cmd.beta_rate[i], dtype=np.float64)))
@@ -216,7 +217,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
                 logs[i].error = str(errors[i])
                 ended.append(i)
                 continue
-            _record(recs[i], env, info, i, cmd, lam_hat, beta_meas, motor, bool(viol[i]))
+            _record(recs[i], info, i, cmd, lam_hat, beta_meas, motor, bool(viol[i]))
             end = _end_of(info, i, lengths[i], terminated, truncated)
             if end is None and k + 1 >= horizons[i]:
                 end = (False, None)
