@@ -22,6 +22,7 @@ from estimation.logs.pipeline import (
 from estimation.logs.source import (
                                     BAD_REASONS,
                                     STEER_CONVENTIONS,
+                                    ArrayLog,
                                     GroundTruth,
                                     LogError,
                                     LogSource,
@@ -33,8 +34,8 @@ from estimation.logs.source import (
 
 __all__ = ["FORMATS", "detect_format", "open_log", "DEFAULT_METHODS", "LogEstimate", "estimate_log",
            "compare_estimators", "compose_increments", "odometry_drift", "BAD_REASONS", "STEER_CONVENTIONS",
-           "GroundTruth", "LogError", "LogSource", "SampleChunk", "beta_from_heading", "default_module_names",
-           "fold_coaxial"]
+           "ArrayLog", "GroundTruth", "LogError", "LogSource", "SampleChunk", "beta_from_heading",
+           "default_module_names", "fold_coaxial"]
 
 #: the formats :func:`open_log` reads
 FORMATS = ("csv", "ros", "wpilog")

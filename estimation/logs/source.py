@@ -18,7 +18,7 @@ import numpy as np
 
 from estimation.geometry import RobotGeometry
 
-__all__ = ["LogError", "SampleChunk", "GroundTruth", "LogSource", "BAD_REASONS", "BAD_NONFINITE",
+__all__ = ["LogError", "SampleChunk", "GroundTruth", "LogSource", "ArrayLog", "BAD_REASONS", "BAD_NONFINITE",
            "BAD_MISSING_JOINT", "BAD_NO_VELOCITY", "BAD_WRONG_SIZE", "STEER_CONVENTIONS",
            "beta_from_heading", "fold_coaxial", "default_module_names", "check_module_names"]
 
@@ -167,3 +167,29 @@ class LogSource:
     def error(self, what: str) -> LogError:
         """A :class:`LogError` naming this log."""
         return LogError(f"{self.format} {self.path}: {what}")
+
+
+class ArrayLog(LogSource):
+    """Samples already in memory as a log: ``t_ns`` (N,) int64 [ns], ``beta`` and ``phidot`` (N, n)
+    (the paper's β [rad], φ̇ [rad/s]), an optional reference ``truth`` (:class:`GroundTruth`)."""
+
+    format = "arrays"
+
+    def __init__(self, t_ns, beta, phidot, geom: RobotGeometry, modules=None, truth: GroundTruth | None = None) -> None:
+        super().__init__("<arrays>", geom, default_module_names(geom.n) if modules is None else modules)
+        self._t = np.asarray(t_ns, dtype=np.int64)
+        self._beta = np.asarray(beta, dtype=np.float64)
+        self._phidot = np.asarray(phidot, dtype=np.float64)
+        if self._t.ndim != 1 or self._beta.shape != (self._t.size, geom.n) or self._phidot.shape != self._beta.shape:
+            raise ValueError(f"t_ns (N,), beta and phidot (N, {geom.n}) expected, got {self._t.shape}, "
+                             f"{self._beta.shape}, {self._phidot.shape}")
+        self._truth = truth
+        self.n_samples = int(self._t.size)
+
+    def chunks(self, size: int) -> Iterator[SampleChunk]:
+        for a in range(0, self._t.size, size):
+            b = min(self._t.size, a + size)
+            yield SampleChunk(self._t[a:b].copy(), self._beta[a:b].copy(), self._phidot[a:b].copy())
+
+    def ground_truth(self) -> GroundTruth | None:
+        return self._truth
