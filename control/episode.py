@@ -35,9 +35,11 @@ class EpisodeLog:
         t: [s] the time at the end of each step; pose: (T, 3) true pose (x, y, θ) [m, m, rad];
         lateral, heading: the track errors [m], [rad]; slip_power [W], internal_force [N], qua:
         as the env's info; beta_meas, beta_true, motor_true: (T, n) measured and true steering
-        angles and the true motor angles [rad]; beta_cmd, phidot_cmd: (T, n) the commands
+        angles and the true motor angles [rad]; phidot_meas: (T, n) the measured wheel spin
+        rates [rad/s]; beta_cmd, phidot_cmd: (T, n) the commands
         [rad], [rad/s]; beta_rate, phiddot: (T, n) their rates where the controller gave them
-        (else empty); lam_hat: (T, 3) the estimate λ̂ the controller read; mu_true: (T,) |μ| of
+        (else empty); lam_hat, mu_hat: (T, 3), (T,) the estimate (λ̂, μ̂ [m/s]) the controller read
+        (made from the previous row's measurements; the first from the reset's); mu_true: (T,) |μ| of
         the true motion [m/s]; twist_true: (T, 3) the true chassis-frame twist (ẋ, ẏ, θ̇);
         mode: (T,) the controller's :class:`~control.icr.config.Mode`; violations: (T,) a
         commanded limit exceeded; events: the stop-and-reconfigure sequences; completed: the
@@ -56,6 +58,7 @@ class EpisodeLog:
     internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
     qua: np.ndarray = field(default_factory=lambda: np.zeros(0))
     beta_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    phidot_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     beta_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     motor_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     beta_cmd: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
@@ -63,6 +66,7 @@ class EpisodeLog:
     beta_rate: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     phiddot: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     lam_hat: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mu_hat: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mu_true: np.ndarray = field(default_factory=lambda: np.zeros(0))
     twist_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))

@@ -95,16 +95,18 @@ def _check_command(cmd, num: int, n: int, name: str) -> None:
             raise ValueError(f"controller {name!r}: command {key} must have shape ({num},), got {np.shape(value)}")
 
 
-def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, lam_hat: np.ndarray, beta_meas: np.ndarray,
-            motor: np.ndarray, violation: bool) -> None:
+def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, beta_meas: np.ndarray,
+            phidot_meas: np.ndarray, motor: np.ndarray, violation: bool) -> None:
     """Append robot i's row (the keys of :class:`EpisodeLog`) after a step, from the env's info
     (the vector env's batched info, whose row i is the single env's info of that robot)."""
     row = [("pose", info["pose"][i]), ("lateral", info["lateral_error"][i]), ("heading", info["heading_error"][i]),
            ("slip_power", info["slip_power"][i]), ("internal_force", info["internal_force"][i]),
-           ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]), ("beta_true", info["beta_true"][i]),
-           ("motor_true", motor[i]), ("beta_cmd", np.array(cmd.beta[i], dtype=np.float64)),
+           ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]), ("phidot_meas", phidot_meas[i]),
+           ("beta_true", info["beta_true"][i]), ("motor_true", motor[i]),
+           ("beta_cmd", np.array(cmd.beta[i], dtype=np.float64)),
            ("phidot_cmd", np.array(cmd.phidot[i], dtype=np.float64)),
-           ("lam_hat", lam_hat[i]), ("mu_true", abs(float(info["eta_true"][1][i]))),
+           ("lam_hat", eta_hat[0][i]), ("mu_hat", float(eta_hat[1][i])),
+           ("mu_true", abs(float(info["eta_true"][1][i]))),
            ("twist_true", np.array(info["twist"][i], dtype=np.float64)),
            ("mode", int(cmd.mode[i]) if cmd.mode is not None else int(Mode.RUNNING)), ("violations", violation)]
     if cmd.beta_rate is not None:
@@ -199,7 +201,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
     label, start = f"{name}/{env.tracks[0].name}" + (f" x{num}" if num > 1 else ""), time.time()
     k = 0
     while alive.any():
-        lam_hat, _ = env.estimated_eta
+        eta_hat = env.estimated_eta  # (λ̂, μ̂) the controller reads
         cmd = controller.act(env, obs)
         _check_command(cmd, num, n, name)
         action = cmd.action if cmd.action is not None else env.action_from_setpoints(cmd.beta, cmd.phidot)
@@ -207,7 +209,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
         obs, reward, terminated, truncated, info = env.step(action)
         if cmd.events is not None:
             events = np.asarray(cmd.events, dtype=np.int64)
-        beta_meas, motor = env.measured_beta, env.physics.motor_angles()
+        beta_meas, phidot_meas, motor = env.measured_beta, env.measured_phidot, env.physics.motor_angles()
         errors = info.get("error")
         ended = []
         for i in np.flatnonzero(alive):
@@ -217,7 +219,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
                 logs[i].error = str(errors[i])
                 ended.append(i)
                 continue
-            _record(recs[i], info, i, cmd, lam_hat, beta_meas, motor, bool(viol[i]))
+            _record(recs[i], info, i, cmd, eta_hat, beta_meas, phidot_meas, motor, bool(viol[i]))
             end = _end_of(info, i, lengths[i], terminated, truncated)
             if end is None and k + 1 >= horizons[i]:
                 end = (False, None)

@@ -118,11 +118,12 @@ def _robot_n(robot: str) -> int:
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
-                  robot_file: str | None = None, names: dict[str, str] | None = None) -> list[Task]:
-    """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes return
-    their logs for the plots; ``names`` (spec -> name) labels them. The robot (``robot``,
-    ``robot_file``) is in each task's key only when it is not the default, so the default
-    campaign's task ids are those of before."""
+                  robot_file: str | None = None, names: dict[str, str] | None = None,
+                  all_logs: bool = False) -> list[Task]:
+    """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes (every
+    episode with ``all_logs``: the export) return their logs; ``names`` (spec -> name) labels
+    them. The robot (``robot``, ``robot_file``) is in each task's key only when it is not the
+    default, so the default campaign's task ids are those of before."""
     names = names or {}
     tasks = []
     for track in tracks:
@@ -139,7 +140,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 cost = min(nominal, max_time) if max_time else nominal
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
-                                  extra={"return_log": plot_seed is not None and seed == plot_seed},
+                                  extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
                                   label=f"{names.get(controller, controller)}-{track}-s{seed}", cost=cost))
     return tasks
 
@@ -192,6 +193,21 @@ def seeds_of(args: argparse.Namespace) -> list[int]:
 
 
 # ------------------------------------------------------------------------------------ plots
+
+
+def _export(log, folder: Path, label: str, robot: str | None, storage: str) -> str:
+    """Write one episode as a ROS 2 bag ``folder/<label>`` (replacing an earlier one); returns its
+    path relative to the report folder."""
+    import shutil
+
+    from control.export import export_episode
+
+    target = folder / re.sub(r"[^A-Za-z0-9_.-]+", "_", label)
+    if target.exists():
+        shutil.rmtree(target)
+    folder.mkdir(parents=True, exist_ok=True)
+    export_episode(log, target, robot=robot or "azimut3", storage=storage)
+    return f"{folder.name}/{target.name}"
 
 
 def _save_trace(path: Path, log) -> None:
@@ -281,6 +297,10 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
         lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
                   "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
         lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
+    if campaign.get("exports"):
+        lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
+                  "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
+        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
     lines += ["", "## Per-seed rows", ""] + _seed_table(rows) + [""]
     (out / "report.md").write_text("\n".join(lines))
 
@@ -332,7 +352,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=seeds[0] if (plot_seed is not None or video) else None, robot=robot,
-                          robot_file=robot_file, names=names)
+                          robot_file=robot_file, names=names, all_logs=bool(getattr(args, "export", None)))
     executor = run_kwargs(args)["executor"]
     env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file))
     geom, limits = env0.geometry, env0.limits
@@ -340,8 +360,12 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         for p in plot_dir.glob("*.png"):
             p.unlink()
 
+    export = getattr(args, "export", None)
+
     def on_result(task: Task, rec: dict) -> None:
         art = (rec.get("result") or {}).get("artifacts")
+        if art and "log" in art and export:
+            rec["result"]["export"] = _export(art["log"], out / "exports", task.label, robot_file or robot, export)
         if art and "log" in art and video:
             from jobs.eval.video import write_video
 
@@ -399,6 +423,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
               for rec in records
               if rec["status"] == "ok" and (rec.get("result") or {}).get("video")}
+    exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}":
+               rec["result"]["export"] for rec in records
+               if rec["status"] == "ok" and (rec.get("result") or {}).get("export")}
     if plot_seed is not None:
         for rec in records:
             if rec["status"] == "ok" and rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
@@ -417,7 +444,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
                 "limits": str(limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
-                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args)}
+                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args),
+                "exports": exports}
     write_campaign_report(out, rows, full, campaign, plots, compare)
     n_failed = len(rows) - len(ok_rows)
     print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")

@@ -112,6 +112,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write a video of each (controller, track) episode of the first seed to "
                              "OUT/videos/ (gif, the default, or mp4 with an ffmpeg executable; needs pygame, the "
                              "render extra), listed in report.md")
+    parser.add_argument("--export", choices=("mcap", "sqlite3"), default=None, metavar="FORMAT",
+                        help="also write every episode as a ROS 2 bag to OUT/exports/ (mcap, which Foxglove "
+                             "opens, or sqlite3): joint states, the estimated ICR, the true pose, odometry; azimut "
+                             "estimate reads it back (docs/logs.md; needs rosbags, the logs extra)")
     parser.add_argument("--kick-runs", type=arg_int(0, 100_000), default=0,
                         help="also run the robustness study: N trials per controller on 'paper' with random "
                              "wheels kicked to random angles mid-track (default 0: skip; the study uses 200)")
@@ -127,6 +131,8 @@ def check_args(args: argparse.Namespace) -> None:
         require_module("matplotlib", "writing plots (pass --no-plots to skip them)")
     if getattr(args, "video", None):
         check_video_format(args.video)
+    if getattr(args, "export", None):
+        require_module("rosbags", "--export (the logs extra: pip install 'azimut[logs]')")
     for item in args.controllers:
         if is_policy(item):
             require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")

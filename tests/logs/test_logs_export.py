@@ -6,44 +6,28 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from azimut_env.env import AzimutEnv
+from azimut_env.params import RobotParams
 from control.episode import EpisodeLog
 from control.export import episode_stamps, export_episode, robot_description
+from control.rollout import run_episode
 from estimation.logs import estimate_log, open_log
 
 pytest.importorskip("rosbags")
 
 
-def _episode(robot: str = "azimut3", steps: int = 120) -> tuple[EpisodeLog, AzimutEnv]:
-    """An episode driven by open-loop wheel commands (turning while crabbing), logged as the
-    episode loop logs it: λ̂, μ̂ read before each step, the measurements and the pose after it."""
-    env = AzimutEnv("circle", robot=robot)
-    _, info = env.reset(seed=3)
-    geom = env.geometry
-    rec = {k: [] for k in ("lam_hat", "mu_hat", "beta_meas", "phidot_meas", "pose")}
-    for k in range(steps):
-        lam, mu = env.estimated_eta
-        rec["lam_hat"].append(lam)
-        rec["mu_hat"].append(mu)
-        beta_cmd = np.full(geom.n, 0.3 * np.sin(0.05 * k))
-        _, _, terminated, truncated, info = env.step(env.action_from_setpoints(beta_cmd, np.full(geom.n, 6.0)))
-        rec["beta_meas"].append(env.measured_beta)
-        rec["phidot_meas"].append(env.measured_phidot)
-        rec["pose"].append(info["pose"])
-        assert not (terminated or truncated)
-    log = EpisodeLog("open-loop", env.track, env.control_period)
-    for key, values in rec.items():
-        setattr(log, key, np.asarray(values))
-    log.t = env.control_period * np.arange(1, steps + 1)
-    return log, env
+def _episode(controller: str = "icr", steps_s: float = 4.0) -> tuple[EpisodeLog, None]:
+    """An episode of the episode loop (``control.rollout.run_episode``) on ``circle``."""
+    log = run_episode(controller, "circle", seed=3, max_time=steps_s)
+    assert log.error is None and log.beta_meas.shape[0] == round(steps_s / log.dt)
+    return log, None
 
 
-@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
-def test_simulate_export_estimate_reproduces_the_simulators_estimates_bit_for_bit(tmp_path, storage):
-    log, env = _episode()
+@pytest.mark.parametrize("controller, storage", [("icr", "mcap"), ("twist", "sqlite3")])
+def test_simulate_export_estimate_reproduces_the_simulators_estimates_bit_for_bit(tmp_path, controller, storage):
+    log, _ = _episode(controller)
     path = export_episode(log, tmp_path / "episode", robot="azimut3", storage=storage)
     geom, modules = robot_description("azimut3")
-    assert geom == env.geometry
+    assert geom == RobotParams().geometry
     r = estimate_log(open_log(path, geom, modules, truth_topic="/ground_truth/pose"))
     stamps = episode_stamps(log)
     assert np.array_equal(r.t_ns, stamps[1:]) and r.skipped == {}
@@ -57,7 +41,7 @@ def test_every_topic_holds_the_log(tmp_path):
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    log, env = _episode(steps=40)
+    log, _ = _episode(steps_s=0.8)
     path = export_episode(log, tmp_path / "episode")
     stamps = episode_stamps(log)
     got: dict[str, list] = {}
@@ -89,7 +73,7 @@ def test_every_topic_holds_the_log(tmp_path):
 
 
 def test_export_refusals(tmp_path):
-    log, _ = _episode(steps=5)
+    log, _ = _episode(steps_s=0.1)
     export_episode(log, tmp_path / "a")
     with pytest.raises(ValueError, match="exists already"):
         export_episode(log, tmp_path / "a")
@@ -100,3 +84,17 @@ def test_export_refusals(tmp_path):
     empty = EpisodeLog("x", log.track, log.dt)
     with pytest.raises(ValueError, match="phidot_meas|no logged step"):
         export_episode(empty, tmp_path / "d")
+
+
+def test_eval_export_then_estimate(tmp_path, capsys):
+    from jobs.cli import main
+
+    out = tmp_path / "eval"
+    assert main(["eval", "--tracks", "circle", "--controllers", "twist", "--max-time", "1", "--no-plots",
+                 "--export", "mcap", "--out", str(out)]) == 0
+    bag = out / "exports" / "twist-circle-s0"
+    assert any(bag.glob("*.mcap")) and "exports/twist-circle-s0" in (out / "report.md").read_text()
+    capsys.readouterr()
+    assert main(["estimate", str(bag), "--truth-topic", "/ground_truth/pose", "--no-plots", "--out",
+                 str(tmp_path / "est")]) == 0
+    assert "estimated 50 samples of 50 (0 skipped)" in capsys.readouterr().out
