@@ -101,7 +101,7 @@ class HeldOutEvalCallback(BaseCallback):
                 vn.save(str(self.out / "best_vecnormalize.pkl"))
         summary = ", ".join(f"{r['track']} ret {r['return']:.0f} lat {100 * r['rms_lateral_m']:.2f} cm "
                             f"F {r['mean_internal_force_N']:.1f} N"
-                            f"{'' if r['completed'] else ' (' + str(r['error']) + ')'}"
+                            f"{'' if r['completed'] else ' (' + (r['error'] or 'not finished') + ')'}"
                             for r in entry["rows"])
         print(f"[eval @ {self.num_timesteps}] {summary}", flush=True)
         return True

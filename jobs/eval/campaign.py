@@ -16,7 +16,6 @@ and per controller × track its row with its plots embedded; then the per-seed r
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
@@ -35,31 +34,14 @@ from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
 from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.plots import comparison_plots, write_plots
+from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
+from jobs.records import provenance
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick",
            "episode_tasks", "run_eval_campaign", "write_campaign_report", "comparison_plots"]
 
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
 DEFAULT_DT = 0.02
-#: the metrics of the summary table, in order: (key, header, format, scale)
-SUMMARY_COLUMNS = [
-    ("completed", "done share", "{:.2f}", 1.0),
-    ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100.0),
-    ("max_lateral_m", "max lat [cm]", "{:.2f}", 100.0),
-    ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180.0 / math.pi),
-    ("completion_time_s", "time [s]", "{:.1f}", 1.0),
-    ("slip_energy_J", "slip energy [J]", "{:.2f}", 1.0),
-    ("mean_internal_force_N", "mean int. force [N]", "{:.2f}", 1.0),
-    ("mean_qua", "mean qua (all)", "{:.4f}", 1.0),
-    ("mean_qua_moving", "mean qua moving", "{:.4f}", 1.0),
-    ("min_qua_moving", "min qua moving", "{:.4f}", 1.0),
-    ("standstill_share", "standstill share", "{:.2f}", 1.0),
-    ("limit_violation_steps", "limit-exceeded steps", "{:.1f}", 1.0),
-    ("reconfigure_events", "stop+reconfig", "{:.1f}", 1.0),
-    ("return", "return", "{:.1f}", 1.0),
-]
-
-
 def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
               dt: float = DEFAULT_DT, n_wheels: int = 4) -> dict:
     """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
@@ -215,103 +197,6 @@ def _save_trace(path: Path, log) -> None:
                         internal_force=log.internal_force, lateral=log.lateral, track_xy=log.track.xy)
 
 
-def _cell(stats: dict, fmt: str, scale: float) -> str:
-    if not stats or stats.get("n", 0) == 0 or not math.isfinite(stats["mean"]):
-        return "-"
-    m, lo, hi = (scale * stats[k] for k in ("mean", "lo", "hi"))
-    if stats["n"] == 1 or lo == hi:
-        return fmt.format(m)
-    return f"{fmt.format(m)} [{fmt.format(lo)}, {fmt.format(hi)}]"
-
-
-def _summary_table(cells: list[dict]) -> list[str]:
-    lines = ["| controller | track | episodes ok/failed | " + " | ".join(c[1] for c in SUMMARY_COLUMNS) + " |",
-             "|---|---|---|" + "---|" * len(SUMMARY_COLUMNS)]
-    for cell in cells:
-        stats = cell["metrics"]
-        lines.append(f"| {cell['controller']} | {cell['track']} | {cell['ok']}/{cell['failed']} | "
-                     + " | ".join(_cell(stats.get(k, {}), fmt, scale) for k, _, fmt, scale in SUMMARY_COLUMNS) + " |")
-    return lines
-
-
-def _seed_table(rows: list[dict]) -> list[str]:
-    cols = [c for c in SUMMARY_COLUMNS if c[0] != "completed"]
-    lines = ["| controller | track | seed | status | done | " + " | ".join(c[1] for c in cols) + " |",
-             "|---|---|---|---|---|" + "---|" * len(cols)]
-    for r in rows:
-        if r.get("status") != "ok":
-            lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | failed: {r.get('error', '')[:80]} | - | "
-                         + " | ".join("-" for _ in cols) + " |")
-            continue
-        vals = []
-        for k, _, fmt, scale in cols:
-            v = r.get(k)
-            vals.append("-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(scale * v))
-        lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | ok | {r.get('completed')} | "
-                     + " | ".join(vals) + " |")
-    return lines
-
-
-def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
-                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]]) -> None:
-    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``)."""
-    (out / "metrics.json").write_text(json.dumps({"campaign": campaign, "summary": cells, "episodes": rows},
-                                                 indent=1, allow_nan=True))
-    seeds = campaign["seeds"]
-    lines = ["# azimut eval", "",
-             f"Controllers {', '.join(campaign['controllers'])}; tracks {', '.join(campaign['tracks'])}; "
-             f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
-             f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
-             + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
-             f"Robot {campaign.get('robot', 'azimut3')}; control period {campaign['control_period']} s; limits "
-             f"{campaign['limits']}.",
-             f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
-             f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.", "",
-             "## Summary", "",
-             f"Mean over seeds and, in brackets, the {100 * campaign['level']:.0f}% percentile-bootstrap interval "
-             f"of the mean ({campaign['n_resamples']} resamples, seeded); failed episodes are left out of the "
-             "statistics and counted in 'episodes ok/failed'.", ""]
-    lines += _summary_table(cells)
-    failed = [r for r in rows if r.get("status") != "ok"]
-    if failed:
-        lines += ["", "Failed episodes (after a retry):", ""]
-        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')}" for r in failed]
-    by_cell = {(c["controller"], c["track"]): c for c in cells}
-    if plots or compare:
-        lines += ["", "## Plots", "",
-                  f"Plots are of seed {campaign['plot_seed']}; the comparison plots overlay the controllers on "
-                  "the same track."]
-        for track in campaign["tracks"]:
-            lines += ["", f"### {track}", ""]
-            for f in compare.get(track, []):
-                lines.append(f"![{Path(f).stem}]({f})")
-            for controller in campaign["controllers"]:
-                cell = by_cell.get((controller, track))
-                lines += ["", f"#### {controller} on {track}", ""]
-                if cell is not None:
-                    lines += _summary_table([cell])
-                lines.append("")
-                for f in plots.get((controller, track), []):
-                    lines.append(f"![{Path(f).stem}]({f})")
-    if campaign.get("videos"):
-        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
-                  "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
-        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
-    if campaign.get("exports"):
-        lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
-                  "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
-        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
-    lines += ["", "## Per-seed rows", ""] + _seed_table(rows) + [""]
-    (out / "report.md").write_text("\n".join(lines))
-
-
-def _seed_text(seeds: Sequence[int]) -> str:
-    seeds = list(seeds)
-    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}-{seeds[-1]}"
-    return ",".join(map(str, seeds))
-
-
 # ------------------------------------------------------------------------------------- run
 
 
@@ -442,10 +327,10 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     campaign = {"controllers": list(controllers), "tracks": list(tracks), "seeds": list(seeds),
                 "speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
-                "limits": str(limits), "executor": executor, "workers": args.workers, "level": 0.95,
+                "limits": limits_text(limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
                 "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args),
-                "exports": exports}
+                "exports": exports, "provenance": provenance()}
     write_campaign_report(out, rows, full, campaign, plots, compare)
     n_failed = len(rows) - len(ok_rows)
     print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")

@@ -154,6 +154,7 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
     :func:`jobs.campaign.engine.run_tasks`; trials saved under ``out/kicks/``); write
     kicks_<controller>.json; return Markdown."""
     from jobs.eval.robustness import kick_study_campaign, summarize_kicks
+    from jobs.records import write_json
 
     lines = ["## Robustness: random wheels kicked to random angles mid-track (paper track)", "",
              "| controller | runs | recovered | failed | limit-exceeded steps | recovery time p50/p90/max [s] "
@@ -173,7 +174,7 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
         if sys.stderr.isatty():
             sys.stderr.write("\n")
         summ = summarize_kicks(trials)
-        (out / f"kicks_{controller}.json").write_text(json.dumps(summ, indent=2, allow_nan=True))
+        write_json(out / f"kicks_{controller}.json", summ)
         rt, lat, pb = summ["recovery_time_s"], summ["max_lateral_after_m"], summ["peak_beta_error_rad"]
         st = summ["settle_time_s"]
         lines.append(f"| {controller} | {summ['runs']} | {summ['recovered']} | {summ['failed_runs']} | "
@@ -184,7 +185,9 @@ def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run
                      f"{100 * lat['p50']:.2f}/{100 * lat['p90']:.2f}/"
                      f"{100 * lat['p100']:.2f} | {math.degrees(pb['p50']):.0f}/{math.degrees(pb['p100']):.0f} |")
         print(f"kicks {controller}: {summ['recovered']}/{summ['runs']} recovered", flush=True)
-    return "\n".join(lines)
+    from jobs.glossary import KICK_GLOSSARY, glossary_lines
+
+    return "\n".join(lines + [""] + glossary_lines(KICK_GLOSSARY, KICK_GLOSSARY, "### Columns of the kick study"))
 
 
 def run(args: argparse.Namespace) -> int:

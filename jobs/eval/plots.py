@@ -48,10 +48,24 @@ def _surface_samples(geom, n: int = 4000, seed: int = 0) -> np.ndarray:
     return steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), geom)
 
 
+def _shade_stops(ax, log: EpisodeLog) -> None:
+    """Grey bands over the steps where the controller was not RUNNING (stopping, or turning wheels
+    in place), labelled once."""
+    if log.mode.size != log.t.size or not log.t.size:
+        return
+    stopped = np.asarray(log.mode) != int(Mode.RUNNING)
+    edges = np.flatnonzero(np.diff(np.r_[False, stopped, False].astype(np.int8)))
+    half = 0.5 * log.dt
+    for j, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(log.t[a] - half, log.t[b - 1] + half, color="0.85", lw=0,
+                   label="controller stopped or turning wheels in place" if j == 0 else "_nolegend_")
+
+
 def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     """The five PNG plots of one run; returns their file names."""
     plt = _pyplot()
-    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # ppo:PATH -> a file name
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # a file name
+    what = f"{log.controller} on {log.track.name}"
     files = []
     # 1. trajectory over the track (Fig. 9)
     fig, ax = plt.subplots(figsize=(6, 6))
@@ -63,58 +77,67 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
         if len(ev):
             ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
     ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"trajectory: {stem}")
+    ax.set_title(f"trajectory: {what}")
     _save(fig, out, f"{stem}_trajectory.png", files, 110)
     # 2. pairwise β projections against the constraining surface (Fig. 10)
     surf = _surface_samples(geom)
     pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
     fig, axes = plt.subplots(2, 3, figsize=(11, 7))
     for ax, (i, j) in zip(axes.ravel(), pairs):
-        ax.plot(np.degrees(surf[:, i]), np.degrees(surf[:, j]), ".", color="0.75", ms=1, label="surface S(λ)")
+        ax.plot(np.degrees(surf[:, i]), np.degrees(surf[:, j]), ".", color="0.75", ms=1,
+                label="S(λ): the angles of a rigid motion (samples)")
         if log.beta_meas.size:
             ax.plot(np.degrees(log.beta_meas[:, i]), np.degrees(log.beta_meas[:, j]), ".", ms=1.5, color="C3",
                     label="measured β")
         ax.set_xlabel(f"β{i + 1} [deg]")
         ax.set_ylabel(f"β{j + 1} [deg]")
     axes[0, 0].legend(fontsize=7, markerscale=5)
-    fig.suptitle(f"measured steering vs constraining surface: {stem}")
+    fig.suptitle(f"measured steering angles against the constraining surface S(λ): {what}")
     fig.tight_layout()
     _save(fig, out, f"{stem}_beta_pairs.png", files, 110)
-    # 3. qua over time (Fig. 11)
+    # 3. qua over time (Fig. 11), the stops shaded
     fig, ax = plt.subplots(figsize=(8, 3))
-    ax.plot(log.t, log.qua, lw=0.8)
+    _shade_stops(ax, log)
+    ax.plot(log.t, log.qua, lw=0.8, color="C0", label="qua (eq. 28–29): 1 = wheels agree on one ICR")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("qua")
     ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
-    ax.set_title(f"quality of the measured steering configuration: {stem}")
+    ax.legend(fontsize=7, loc="lower left")
+    ax.set_title(f"quality of the measured steering configuration: {what}")
     _save(fig, out, f"{stem}_qua.png", files, 110)
     # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
     fig, ax = plt.subplots(figsize=(5, 5))
     th = np.linspace(0, 2 * np.pi, 200)
-    ax.plot(np.cos(th), np.sin(th), "k", lw=0.8)
+    ax.plot(np.cos(th), np.sin(th), "k", lw=0.8, label="w = 0: translation (ICR at infinity)")
+    ax.plot([0.0], [0.0], "k+", ms=8, label="(0, 0, 1): rotation about the centre")
     ax.plot(*geom.s_unit[:, :2].T, "k^", label="steering axes ŝ_k")
     if log.lam_hat.size:
         lam = log.lam_hat * np.where(log.lam_hat[:, 2:3] < 0, -1.0, 1.0)
-        ax.scatter(lam[:, 0], lam[:, 1], c=log.t, s=2, cmap="viridis", label="λ̂ (colour: time)")
+        points = ax.scatter(lam[:, 0], lam[:, 1], c=log.t, s=2, cmap="viridis", label="estimated ICR λ̂")
+        fig.colorbar(points, ax=ax, shrink=0.8, label="t [s]")
     ax.set_aspect("equal")
-    ax.set_xlabel("u")
-    ax.set_ylabel("v")
-    ax.legend(fontsize=7, loc="lower left")
-    ax.set_title(f"ICR on the sphere (w ≥ 0): {stem}")
+    ax.set_xlabel("u (first component of λ̂)")
+    ax.set_ylabel("v (second component of λ̂)")
+    ax.legend(fontsize=6, loc="lower left")
+    ax.set_title(f"estimated ICR λ̂ = (u, v, w), unit sphere seen from above (w ≥ 0):\n{what}", fontsize=9)
     _save(fig, out, f"{stem}_icr_sphere.png", files, 110)
     # 5. wheel commands against their limits
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "β̇_c [rad/s]"),
-                                (axes[1], log.phidot_cmd, limits.wheel_speed_max, "φ̇_c [rad/s]"),
-                                (axes[2], log.phiddot, limits.wheel_accel_max, "φ̈_c [rad/s²]")):
+    for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "steering rate β̇_c [rad/s]"),
+                                (axes[1], log.phidot_cmd, limits.wheel_speed_max, "wheel speed φ̇_c [rad/s]"),
+                                (axes[2], log.phiddot, limits.wheel_accel_max, "wheel accel. φ̈_c [rad/s²]")):
         if data.size:
-            ax.plot(log.t, data, lw=0.6)
-        ax.axhline(lim, color="r", ls="--", lw=0.8)
+            for k in range(data.shape[1]):
+                ax.plot(log.t, data[:, k], lw=0.6, color=f"C{k}", label=f"wheel {k + 1}")
+        else:
+            ax.text(0.5, 0.5, "not given by this controller", ha="center", va="center", transform=ax.transAxes)
+        ax.axhline(lim, color="r", ls="--", lw=0.8, label="limit")
         ax.axhline(-lim, color="r", ls="--", lw=0.8)
         ax.set_ylim(-2 * lim, 2 * lim)
-        ax.set_ylabel(name)
+        ax.set_ylabel(name, fontsize=8)
+    axes[0].legend(fontsize=7, loc="upper right", ncol=5)
     axes[-1].set_xlabel("t [s]")
-    axes[0].set_title(f"wheel commands and limits (dashed): {stem}")
+    axes[0].set_title(f"wheel commands and their limits: {what}")
     _save(fig, out, f"{stem}_commands.png", files, 110)
     return files
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 __all__ = ["plot_runs", "training_returns", "evaluation_history", "training_label", "evaluation_label",
-           "write_learning_curve"]
+           "write_learning_curve", "learning_curve_figure"]
 
 
 def training_label(track: str) -> str:
@@ -87,29 +87,39 @@ def write_learning_curve(out: Path, record: dict) -> Path | None:
               file=sys.stderr)
         return None
     out = Path(out)
+    fig = learning_curve_figure(out, record, plt)
+    path = out / "learning_curve.png"
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def learning_curve_figure(out: Path, record: dict, plt):
+    """The figure of :func:`write_learning_curve` (``plt``: ``matplotlib.pyplot``)."""
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     pts = training_returns(out)
     if pts:
         ax.plot(*zip(*pts), color="C0",
                 label=f"training: mean return of the last 100 episodes, on {training_label(record['track'])}")
     ev = evaluation_history(out)
-    if ev:
-        ax.plot([e["timesteps"] for e in ev], [e["mean_return"] for e in ev], "o-", color="C1",
-                label="evaluation: deterministic episode, mean over "
-                      + evaluation_label(record["track"], record["eval_tracks"]))
-    if not pts and not ev:
-        ax.text(0.5, 0.5, "no finished training episode and no evaluation yet", ha="center", va="center",
-                transform=ax.transAxes)
+    periodic = [e for e in ev if not e.get("final")]
+    final = [e for e in ev if e.get("final")]
+    tracks = list(record["eval_tracks"])
+    what = ("one deterministic episode on " if len(tracks) == 1 else
+            "mean of one deterministic episode per track on ") + evaluation_label(record["track"], tracks)
+    if periodic:
+        ax.plot([e["timesteps"] for e in periodic], [e["mean_return"] for e in periodic], "o-", color="C1",
+                label=f"evaluation: {what}")
+    if final:
+        ax.plot([e["timesteps"] for e in final], [e["mean_return"] for e in final], "*", color="C3", ms=11,
+                label="the final policy (model.zip), evaluated the same way" + ("" if periodic else f": {what}"))
     ax.set_xlabel("environment steps (all robots)")
     ax.set_ylabel("episode return (sum of rewards)")
     if pts or ev:
-        ax.legend(fontsize=7, loc="lower right")
-    ax.set_title(f"{record['algo'].upper()}, {record['action']} actions, seed {record['seed']}: {out.name}",
-                 fontsize=10)
-    path = out / "learning_curve.png"
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return path
+        ax.legend(fontsize=7, loc="best")
+    ax.set_title(f"{record['algo'].upper()}, {record['action']} actions, seed {record['seed']}: {out.name}"
+                 + ("" if pts else "\n(no training episode finished yet: no training curve)"), fontsize=10)
+    return fig
 
 
 if __name__ == "__main__":

@@ -3,9 +3,10 @@
 
 Each seed trains into ``OUT/seed_<n>/`` exactly as ``azimut train --seed n --out OUT/seed_<n>``
 would (the task's key holds every argument that changes the result; SB3 and the env are seeded
-from it). ``OUT/seeds.json`` holds the per-seed run records and the aggregates, ``OUT/report.md``
-the final held-out metrics (mean and 95% bootstrap interval over seeds per track) and
-``OUT/learning_curves.png`` the held-out mean return against environment steps, mean over seeds
+from it). ``OUT/seeds.json`` (strict JSON) holds the per-seed run records, the aggregates and the
+provenance, ``OUT/report.md`` the final evaluation metrics (mean over seeds per track, with a 95%
+bootstrap interval where several seeds differ) and a definition of every column, and
+``OUT/learning_curves.png`` the evaluation mean return against environment steps, mean over seeds
 with its interval (the practice of Agarwal et al., *Deep Reinforcement Learning at the Edge of
 the Statistical Precipice*, NeurIPS 2021).
 
@@ -25,11 +26,9 @@ from typing import Any
 
 __all__ = ["train_seed_task", "seed_tasks", "learning_curve_stats", "check_seed_args", "run_seeds"]
 
-#: metrics of the final held-out evaluation summarised over seeds: (key, header, format, scale)
-FINAL_COLUMNS = [("return", "return", "{:.1f}", 1.0), ("completed", "done share", "{:.2f}", 1.0),
-                 ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100.0),
-                 ("mean_internal_force_N", "mean int. force [N]", "{:.2f}", 1.0),
-                 ("slip_energy_J", "slip energy [J]", "{:.2f}", 1.0)]
+#: metrics of the final evaluation summarised over seeds: (key, format, scale); headers from jobs.glossary
+FINAL_COLUMNS = [("return", "{:.1f}", 1.0), ("completed", "{:.2f}", 1.0), ("rms_lateral_m", "{:.2f}", 100.0),
+                 ("mean_internal_force_N", "{:.2f}", 1.0), ("slip_energy_J", "{:.2f}", 1.0)]
 
 
 def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, num_robots: int,
@@ -87,7 +86,8 @@ def learning_curve_stats(histories: Sequence[Sequence[dict]], n_resamples: int =
             for t in common]
 
 
-def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict]], seeds: Sequence[int]) -> str | None:
+def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict]], seeds: Sequence[int],
+                 evaluated_on: str) -> str | None:
     try:
         import matplotlib
 
@@ -95,19 +95,23 @@ def _plot_curves(out: Path, curve: list[dict], histories: Sequence[Sequence[dict
         import matplotlib.pyplot as plt
     except ImportError:
         return None
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for _seed, h in zip(seeds, histories):
-        if h:
-            ax.plot([e["timesteps"] for e in h], [e["mean_return"] for e in h], color="0.7", lw=0.8)
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    n = len(histories)
+    for j, (_seed, h) in enumerate(zip(seeds, histories)):
+        if h and n > 1:  # as the statistics read them: the final evaluation replaces one at the same step
+            pts = sorted({int(e["timesteps"]): float(e["mean_return"]) for e in h}.items())
+            ax.plot(*zip(*pts), color="0.7", lw=0.8, label="each seed" if j == 0 else "_nolegend_")
     if curve:
         t = [c["timesteps"] for c in curve]
-        ax.plot(t, [c["mean"] for c in curve], "C0o-", label=f"mean over {len(histories)} seeds")
-        ax.fill_between(t, [c["lo"] for c in curve], [c["hi"] for c in curve], color="C0", alpha=0.25,
-                        label="95% bootstrap interval")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("held-out mean episode return")
+        ax.plot(t, [c["mean"] for c in curve], "C0o-", label=f"mean over {n} seeds" if n > 1 else "the one seed")
+        if len(histories) > 1:
+            ax.fill_between(t, [c["lo"] for c in curve], [c["hi"] for c in curve], color="C0", alpha=0.25,
+                            label="95% bootstrap interval of the mean")
+    ax.set_xlabel("environment steps (all robots)")
+    ax.set_ylabel("evaluation return (mean over its tracks)")
     ax.legend(fontsize=8)
-    ax.set_title(f"learning curves ({len(histories)} seeds; grey: each seed)")
+    ax.set_title(f"learning curves, {n} seed{'s' if n != 1 else ''}: evaluated on {evaluated_on}\n(the last point: "
+                 "the final policy)", fontsize=9)
     fig.savefig(out / "learning_curves.png", dpi=100, bbox_inches="tight")
     plt.close(fig)
     return "learning_curves.png"
@@ -130,6 +134,10 @@ def check_seed_args(args: argparse.Namespace) -> None:
 def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict | None = None) -> int:
     """Train every seed (see the module docstring) and write the aggregate report."""
     from jobs.campaign.engine import CampaignInterrupted, resolve_executor, run_tasks, summarize
+    from jobs.eval.report import format_value, interval_shown
+    from jobs.glossary import GLOSSARY, glossary_lines
+    from jobs.records import provenance, provenance_text, write_json
+    from jobs.training.plots import evaluation_label, training_label
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -139,7 +147,7 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
     def progress(done: int, total: int, task, rec: dict) -> None:
         if rec["status"] == "ok":
             run = rec["result"]["run"]
-            msg = (f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, held-out mean return "
+            msg = (f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, evaluation mean return "
                    f"{rec['result']['evaluations'][-1]['mean_return']:.1f}")
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
@@ -162,42 +170,60 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
         for row in r["result"]["run"]["final_eval"]:
             final_rows.append({**row, "seed": r["key"]["seed"]})
     cells = summarize(final_rows, ("track",), [c[0] for c in FINAL_COLUMNS])
-    plot = _plot_curves(out, curve, histories, [r["key"]["seed"] for r in ok])
-    (out / "seeds.json").write_text(json.dumps(
-        {"seeds": list(seeds), "executor": executor, "workers": args.workers, "wall_s": wall, "learning_curve": curve,
-         "final_summary": cells, "runs": [{"seed": r["key"]["seed"], "status": r["status"], "error": r.get("error"),
-                                           "run": (r.get("result") or {}).get("run")} for r in records]},
-        indent=1, allow_nan=True, default=str))
+    evaluated_on = evaluation_label(args.track, args.eval_tracks)
+    plot = _plot_curves(out, curve, histories, [r["key"]["seed"] for r in ok], evaluated_on)
+    prov = provenance()
+    write_json(out / "seeds.json",
+               {"seeds": list(seeds), "executor": executor, "workers": args.workers, "wall_s": wall,
+                "provenance": prov, "learning_curve": curve, "final_summary": cells,
+                "runs": [{"seed": r["key"]["seed"], "status": r["status"], "error": r.get("error"),
+                          "run": (r.get("result") or {}).get("run")} for r in records]})
+    intervals = any(interval_shown(c["metrics"][k]) for c in cells for k, _, _ in FINAL_COLUMNS)
+    stats = ("mean over seeds and, in brackets, the 95% bootstrap interval of the mean (no bracket where every seed "
+             "gave the same value)" if intervals else
+             "one seed: its values, no interval" if len(ok) == 1 else "mean over seeds, which all gave the same values")
     lines = [f"# azimut train: {args.algo}, action {args.action}, track {args.track}, seeds "
              f"{','.join(map(str, seeds))}", "",
              f"{len(ok)} of {len(records)} seeds trained ({executor}, {args.workers} worker(s)); "
-             f"{args.steps} steps each; wall time {wall:.0f} s.",
-             "", "## Final held-out evaluation (mean [95% bootstrap interval] over seeds)", "",
-             "| track | seeds | " + " | ".join(c[1] for c in FINAL_COLUMNS) + " |",
+             f"{args.steps} steps each on {training_label(args.track)}; wall time {wall:.0f} s.",
+             f"Produced by {provenance_text(prov)}.",
+             "", f"## Final evaluation on {evaluated_on}", "",
+             f"One deterministic episode per seed and track with the final policy; {stats}.", "",
+             "| track | seeds | " + " | ".join(GLOSSARY[k].header for k, _, _ in FINAL_COLUMNS) + " |",
              "|---|---|" + "---|" * len(FINAL_COLUMNS)]
     for cell in cells:
         vals = []
-        for k, _, fmt, scale in FINAL_COLUMNS:
-            s = cell["metrics"][k]
-            if s["n"] == 0 or not math.isfinite(s["mean"]):
+        for k, fmt, scale in FINAL_COLUMNS:
+            st = cell["metrics"][k]
+            if st["n"] == 0 or not math.isfinite(st["mean"]):
                 vals.append("-")
-            elif s["lo"] == s["hi"]:
-                vals.append(fmt.format(scale * s["mean"]))
+            elif not interval_shown(st):
+                vals.append(format_value(k, st["mean"], fmt, scale))
             else:
-                vals.append(f"{fmt.format(scale * s['mean'])} [{fmt.format(scale * s['lo'])}, "
-                            f"{fmt.format(scale * s['hi'])}]")
+                vals.append(f"{format_value(k, st['mean'], fmt, scale)} [{format_value(k, st['lo'], fmt, scale)}, "
+                            f"{format_value(k, st['hi'], fmt, scale)}]")
         lines.append(f"| {cell['track']} | {cell['n']} | " + " | ".join(vals) + " |")
     lines += ["", "## Learning curves", ""]
     if plot:
         lines.append(f"![learning curves]({plot})")
-    if len(ok) < 5:
-        lines += ["", f"With {len(ok)} seed(s) the bootstrap interval is only indicative (with 2 it is the range of "
-                  "the two); use 5 or more seeds for a claim."]
-    lines += ["", "| steps | seeds | mean return | 95% interval |", "|---|---|---|---|"]
-    lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} | [{c['lo']:.1f}, {c['hi']:.1f}] |" for c in curve]
+    if len(ok) > 1:
+        if len(ok) < 5:
+            lines += ["", f"With {len(ok)} seeds the bootstrap interval is only indicative (with 2 it is the range of "
+                      "the two); use 5 or more seeds for a claim."]
+        lines += ["", "| steps | seeds | mean return | 95% interval |", "|---|---|---|---|"]
+        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} | [{c['lo']:.1f}, {c['hi']:.1f}] |"
+                  for c in curve]
+    else:
+        lines += ["", "| steps | seeds | mean return |", "|---|---|---|"]
+        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} |" for c in curve]
     failed = [r for r in records if r["status"] != "ok"]
     if failed:
         lines += ["", "Failed seeds:", ""] + [f"- seed {r['key']['seed']}: {r.get('error')}" for r in failed]
+    lines += [""] + glossary_lines(["track", "seeds", *(k for k, _, _ in FINAL_COLUMNS)])
+    lines += ["- **steps**: environment steps of training (all robots together) at the evaluation.",
+              "- **mean return**: the evaluation return averaged over the evaluation tracks, then over the seeds."]
+    if len(ok) > 1:
+        lines.append("- **95% interval**: the percentile-bootstrap interval of the mean over seeds.")
     (out / "report.md").write_text("\n".join(lines) + "\n")
     print(f"{len(ok)} of {len(records)} seeds trained; report written to {out}/report.md", flush=True)
     return 0 if not failed else 1

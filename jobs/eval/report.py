@@ -1,0 +1,183 @@
+"""``azimut eval``'s report: ``report.md`` and ``metrics.json``, readable without the README.
+
+``report.md`` says what ran (controllers, tracks, seeds, robot, limits in words), which code ran
+it (package version and git commit, :func:`jobs.records.provenance`), the summary table (mean
+over seeds, with the bootstrap interval in brackets only where one is shown), the plots per track
+and controller, the per-seed rows when there are several seeds, and a "Columns" section that
+defines every column (:mod:`jobs.glossary`). Counts print as integers. ``metrics.json`` holds the
+same as strict JSON (``null`` for undefined values; :func:`jobs.records.write_json`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+from jobs.glossary import COUNT_METRICS, GLOSSARY
+from jobs.glossary import glossary_lines as _glossary_lines
+from jobs.records import provenance_text, write_json
+
+__all__ = ["SUMMARY_COLUMNS", "write_campaign_report", "limits_text", "format_value", "interval_shown"]
+
+#: the metrics of the summary table, in order: (key, format, scale); headers from jobs.glossary
+SUMMARY_COLUMNS = [
+    ("completed", "{:.2f}", 1.0),
+    ("rms_lateral_m", "{:.2f}", 100.0),
+    ("max_lateral_m", "{:.2f}", 100.0),
+    ("rms_heading_rad", "{:.2f}", 180.0 / math.pi),
+    ("completion_time_s", "{:.1f}", 1.0),
+    ("slip_energy_J", "{:.2f}", 1.0),
+    ("mean_internal_force_N", "{:.2f}", 1.0),
+    ("mean_qua", "{:.4f}", 1.0),
+    ("mean_qua_moving", "{:.4f}", 1.0),
+    ("min_qua_moving", "{:.4f}", 1.0),
+    ("standstill_share", "{:.2f}", 1.0),
+    ("limit_violation_steps", "{:.1f}", 1.0),
+    ("reconfigure_events", "{:.1f}", 1.0),
+    ("return", "{:.1f}", 1.0),
+]
+
+
+def format_value(key: str, value, fmt: str, scale: float = 1.0) -> str:
+    """One table cell: ``-`` for a missing or non-finite value, a count as an integer when it is
+    one (a mean over seeds keeps its decimal), otherwise ``fmt`` of ``scale·value``."""
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    v = scale * value
+    if key in COUNT_METRICS and float(v).is_integer():
+        return str(int(v))
+    return fmt.format(v)
+
+
+def interval_shown(stats: dict) -> bool:
+    """Whether a summary cell shows a bootstrap interval: several seeds that did not all agree."""
+    return (bool(stats) and stats.get("n", 0) >= 2 and math.isfinite(stats.get("mean", math.nan))
+            and stats["lo"] != stats["hi"])
+
+
+def _cell(key: str, stats: dict, fmt: str, scale: float) -> str:
+    if not stats or stats.get("n", 0) == 0 or not math.isfinite(stats["mean"]):
+        return "-"
+    mean = format_value(key, stats["mean"], fmt, scale)
+    if not interval_shown(stats):
+        return mean
+    return f"{mean} [{format_value(key, stats['lo'], fmt, scale)}, {format_value(key, stats['hi'], fmt, scale)}]"
+
+
+def _summary_table(cells: list[dict]) -> list[str]:
+    heads = [GLOSSARY[k].header for k, _, _ in SUMMARY_COLUMNS]
+    lines = ["| controller | track | episodes ok/failed | " + " | ".join(heads) + " |",
+             "|---|---|---|" + "---|" * len(SUMMARY_COLUMNS)]
+    for cell in cells:
+        stats = cell["metrics"]
+        lines.append(f"| {cell['controller']} | {cell['track']} | {cell['ok']}/{cell['failed']} | "
+                     + " | ".join(_cell(k, stats.get(k, {}), fmt, scale) for k, fmt, scale in SUMMARY_COLUMNS) + " |")
+    return lines
+
+
+def _seed_table(rows: list[dict]) -> list[str]:
+    cols = [c for c in SUMMARY_COLUMNS if c[0] != "completed"]
+    lines = ["| controller | track | seed | status | done | " + " | ".join(GLOSSARY[k].header for k, _, _ in cols)
+             + " |", "|---|---|---|---|---|" + "---|" * len(cols)]
+    for r in rows:
+        if r.get("status") != "ok":
+            lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | failed: {str(r.get('error', ''))[:80]} "
+                         "| - | " + " | ".join("-" for _ in cols) + " |")
+            continue
+        vals = [format_value(k, r.get(k), fmt, scale) for k, fmt, scale in cols]
+        done = format_value("done", r.get("completed"), "{}")
+        lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | ok | {done} | " + " | ".join(vals) + " |")
+    return lines
+
+
+def limits_text(limits) -> str:
+    """The actuator limits in words (an ``ActuatorLimits``): steering range, rates, torques."""
+    lo, hi = limits.steer_min, limits.steer_max
+    steer = ("steering unlimited (no stops)" if not (math.isfinite(lo) and math.isfinite(hi))
+             else f"steering range [{math.degrees(lo):.0f}°, {math.degrees(hi):.0f}°]")
+    return (f"{steer}; steering rate ≤ {limits.steer_rate_max:g} rad/s, acceleration ≤ {limits.steer_accel_max:g} "
+            f"rad/s², torque ≤ {limits.steer_torque_max:g} N·m; wheel speed ≤ {limits.wheel_speed_max:g} rad/s, "
+            f"acceleration ≤ {limits.wheel_accel_max:g} rad/s², torque ≤ {limits.wheel_torque_max:g} N·m")
+
+
+def _statistics_sentence(cells: list[dict], campaign: dict) -> str:
+    n_seeds = len(campaign["seeds"])
+    failed = ("; failed episodes are left out of the statistics and counted in 'episodes ok/failed'")
+    if any(interval_shown(s) for c in cells for s in c["metrics"].values() if isinstance(s, dict)):
+        return (f"Mean over the {n_seeds} seeds and, in brackets, the {100 * campaign['level']:.0f}% "
+                f"percentile-bootstrap interval of the mean ({campaign['n_resamples']} resamples, seeded; no bracket "
+                f"where every seed gave the same value){failed}.")
+    if n_seeds == 1:
+        return f"One seed: each cell is that episode's value (no interval: run several seeds with --seeds){failed}."
+    return f"Mean over the {n_seeds} seeds, which gave the same value in every cell (no interval){failed}."
+
+
+_PLOT_GUIDE = ("Per track, the controllers overlaid: their trajectories, and their slip power and internal force "
+               "over time. Per controller and track: the trajectory over the track (the paper's Fig. 9; red crosses: "
+               "stops to turn wheels in place), the measured steering angles in pairs against the surface S(λ) of "
+               "consistent configurations (Fig. 10), qua over time (Fig. 11; grey bands: the controller stopped or "
+               "turning wheels in place), the estimated ICR λ̂ on the unit sphere seen from above (colour: time), "
+               "and each wheel's commands against their limits.")
+
+
+def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
+                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]]) -> None:
+    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``)."""
+    write_json(out / "metrics.json", {"campaign": campaign, "summary": cells, "episodes": rows})
+    seeds = campaign["seeds"]
+    prov = campaign.get("provenance") or {}
+    lines = ["# azimut eval", "",
+             f"Controllers {', '.join(campaign['controllers'])}; tracks {', '.join(campaign['tracks'])}; "
+             f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
+             f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
+             + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
+             f"Robot {campaign.get('robot', 'azimut3')}; control period {campaign['control_period']} s; "
+             f"{campaign['limits']}.",
+             f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
+             f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
+             f"Produced by {provenance_text(prov)}.", "",
+             "## Summary", "", _statistics_sentence(cells, campaign), ""]
+    lines += _summary_table(cells)
+    failed = [r for r in rows if r.get("status") != "ok"]
+    if failed:
+        lines += ["", "Failed episodes (after a retry):", ""]
+        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')}" for r in failed]
+    by_cell = {(c["controller"], c["track"]): c for c in cells}
+    if plots or compare:
+        lines += ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}. {_PLOT_GUIDE}"]
+        for track in campaign["tracks"]:
+            lines += ["", f"### {track}", ""]
+            for f in compare.get(track, []):
+                lines.append(f"![{Path(f).stem}]({f})")
+            for controller in campaign["controllers"]:
+                cell = by_cell.get((controller, track))
+                lines += ["", f"#### {controller} on {track}", ""]
+                if cell is not None:
+                    lines += _summary_table([cell])
+                lines.append("")
+                for f in plots.get((controller, track), []):
+                    lines.append(f"![{Path(f).stem}]({f})")
+    if campaign.get("videos"):
+        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
+                  "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
+        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
+    if campaign.get("exports"):
+        lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
+                  "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
+        lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
+    columns = ["controller", "track", "episodes"] + [k for k, _, _ in SUMMARY_COLUMNS]
+    if len(seeds) > 1:
+        lines += ["", "## Per-seed rows", ""] + _seed_table(rows)
+        columns += ["seed", "status", "done"]
+    lines += [""] + _glossary_lines(columns) + [""]
+    (out / "report.md").write_text("\n".join(lines))
+
+
+def _seed_text(seeds: Sequence[int]) -> str:
+    seeds = list(seeds)
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))

@@ -1,0 +1,119 @@
+"""What every column of the jobs' reports means, in one place: the metrics of an episode
+(:func:`control.episode.episode_metrics`) and the other columns of ``azimut eval``'s and
+``azimut train --seeds``' tables.
+
+:data:`GLOSSARY` maps a metric key (or a column name) to its table header and definition;
+:func:`glossary_lines` writes the Markdown section a report ends with, for the columns it shows.
+Definitions cite the estimation paper where they use it: L. Clavien, M. Lauria, F. Michaud,
+"Estimation of the Instantaneous Centre of Rotation with Nonholonomic Omnidirectional Mobile
+Robots" (its equations (28)–(29) define qua).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import NamedTuple
+
+__all__ = ["Column", "GLOSSARY", "KICK_GLOSSARY", "COUNT_METRICS", "glossary_lines"]
+
+
+class Column(NamedTuple):
+    """One column of a report table."""
+
+    header: str
+    definition: str
+
+
+_QUA = ("qua, the estimation quality of the paper's eq. (28)–(29): qua = 1 − ln(500·m + 1)/ln(501) with "
+        "m = Σ_k (q_k − β_k)² / (n·π²) the squared distance, scaled to [0, 1], between the measured steering angles "
+        "q of the n wheels and the angles β = S(λ̂) they would have if they all turned about the estimated ICR λ̂; "
+        "1 when the measured wheels agree with one instantaneous centre of rotation, lower as they disagree")
+_MOVING = ("the moving steps: the controller in its RUNNING mode (not stopping, not turning wheels in place; a "
+           "controller without modes always is) and the true chassis speed μ = ‖(ẋ, ẏ, θ̇)‖ above 0.05 m/s")
+
+#: metric key or column name -> (header, definition)
+GLOSSARY: dict[str, Column] = {
+    "controller": Column("controller", "the controller driving the robot: icr (the ICR-based controller on the IT "
+                                       "estimate), twist (the WPILib-style swerve baseline), or a trained policy by "
+                                       "its short name"),
+    "track": Column("track", "the reference path with its heading and speed profiles (random: a track drawn from "
+                             "the episode's seed)"),
+    "seed": Column("seed", "the episode's seed: sensor noise, start noise, the random track, domain randomisation "
+                           "and kicks are drawn from it"),
+    "episodes": Column("episodes ok/failed", "episodes that ran to their end (finished or not) / episodes whose "
+                                             "run raised an error, after a retry (left out of every statistic)"),
+    "status": Column("status", "ok, or failed with the error"),
+    "seeds": Column("seeds", "the number of trained seeds with a final evaluation on the track"),
+    "completed": Column("done share", "the share of episodes that finished the track (one lap of a closed track, "
+                                      "the end of an open one) before the time limit, without leaving the track"),
+    "done": Column("done", "yes when the episode finished the track (see done share)"),
+    "rms_lateral_m": Column("RMS lat [cm]", "root mean square over the episode's steps of the lateral error: the "
+                                            "true distance from the chassis centre to the track's path"),
+    "max_lateral_m": Column("max lat [cm]", "the largest lateral error of the episode"),
+    "rms_heading_rad": Column("RMS head [deg]", "root mean square of the heading error θ − θ_ref (the chassis "
+                                                "heading against the track's heading profile)"),
+    "completion_time_s": Column("time [s]", "the simulated time to finish the track; - when it was not finished"),
+    "slip_energy_J": Column("slip energy [J]", "the energy the tires dissipated by slipping, ∫ Σ_k |F_k · v_slip,k| "
+                                               "dt over the episode (tire force times slip velocity, all wheels)"),
+    "mean_internal_force_N": Column(
+        "mean int. force [N]", "the mean over steps of the internal force: the norm of the part of the tire forces "
+                               "that cancels out on the chassis (the forces minus the least-norm forces giving the "
+                               "same net force and moment): wheels pushing against each other, 0 when their "
+                               "propulsion axes meet in one instantaneous centre of rotation"),
+    "mean_qua": Column("mean qua (all)", f"the mean over all steps of {_QUA}"),
+    "min_qua": Column("min qua (all)", "the smallest qua of the episode"),
+    "mean_qua_moving": Column("mean qua moving", f"the mean of qua over {_MOVING}; stops and in-place "
+                                                 "reconfigurations, where the wheels turn with the chassis at rest, "
+                                                 "are left out"),
+    "min_qua_moving": Column("min qua moving", "the smallest qua over the moving steps"),
+    "standstill_share": Column("standstill share", "the share of steps that are not moving steps (stopped, or "
+                                                   "turning wheels in place)"),
+    "limit_violation_steps": Column(
+        "limit-exceeded steps", "the number of control steps whose wheel commands exceeded an actuator limit "
+                                "(steering rate or acceleration, wheel speed or acceleration) by more than 1e-6 "
+                                "relative"),
+    "reconfigure_events": Column("stop+reconfig", "the number of times the ICR controller stopped the robot to turn "
+                                                  "its wheels in place (a steering stop or axis on the way, or a "
+                                                  "knocked wheel); 0 for controllers that never stop"),
+    "return": Column("return", "the sum of the env's per-step rewards over the episode (Azimut-v1's reward: "
+                               "progress minus the tracking, overspeed, slip, internal-force, action-rate and "
+                               "off-track costs), what the RL agents maximise"),
+}
+
+#: the columns of the kick study's table (``azimut eval --kick-runs N``, :mod:`jobs.eval.robustness`)
+KICK_GLOSSARY: dict[str, Column] = {
+    "runs": Column("runs", "trials: the robot starts at rest at a random progress on the paper track and, 2 s later, "
+                           "1–4 random wheels get an angular impulse of ±0.2–1.0 N·m·s about their steering axes "
+                           "(like a collision); each trial runs 6 s after the kick"),
+    "recovered": Column("recovered", "trials that ran without an error and without a command over a limit, whose "
+                                     "lateral error was back under 5 cm for good within 3 s of the kick"),
+    "failed": Column("failed", "trials whose run ended on an error (a physics failure, off the track)"),
+    "limit_violation_steps": Column("limit-exceeded steps", "control steps whose commands exceeded an actuator "
+                                                            "limit, summed over the trials"),
+    "recovery": Column("recovery time p50/p90/max [s]", "from the kick until the lateral error is under 5 cm for "
+                                                        "good: median, 90th percentile and largest over the trials "
+                                                        "that got there"),
+    "settle": Column("wheels settled p50/p90/max [s]", "from the kick until every measured steering angle is within "
+                                                       "5° of its command (modulo π) for good"),
+    "lateral": Column("max lateral after kick p50/p90/max [cm]", "the largest lateral error after the kick"),
+    "peak_beta": Column("peak β error p50/max [deg]", "the largest difference between a measured and a commanded "
+                                                      "steering angle (modulo π) after the kick"),
+}
+
+#: metrics that count something: printed as integers (a mean over seeds with its decimal)
+COUNT_METRICS = frozenset({"limit_violation_steps", "reconfigure_events"})
+
+
+def glossary_lines(keys: Iterable[str], glossary: dict[str, Column] | None = None,
+                   title: str = "## Columns") -> list[str]:
+    """The Markdown lines of a section (``title``) defining the columns ``keys`` (each once, in
+    order) from ``glossary`` (default :data:`GLOSSARY`)."""
+    glossary = GLOSSARY if glossary is None else glossary
+    lines, seen = [title, ""], set()
+    for key in keys:
+        if key in seen:
+            continue
+        seen.add(key)
+        col = glossary[key]
+        lines.append(f"- **{col.header}**: {col.definition}.")
+    return lines
