@@ -2,15 +2,16 @@
 
 Importing this package only registers the environment (by entry-point string); the physics,
 pymunk and numba load when the env is made. Modules: ``params`` (physical parameters, actuator
-limits, action <-> set-point map), ``physics`` (N robots in one pymunk Space), ``tire``,
-``actuators``, ``sensors`` (models and ``SensorState``), ``tracks``, ``config`` (``TaskConfig``),
-``task`` (the task over N robots: the step's data flow) with its stages ``actions``,
-``termination``, ``reward``, ``observation`` and ``reset_options``, ``localisation`` (the pose
-source), ``frontend`` and ``interface`` (what both envs share; the controller ``Protocol``),
-``env`` (the single env, N = 1), ``vector_env`` (``AzimutVectorEnv``: N robots in one Space, also what
-``gymnasium.make_vec("Azimut-v1", num_envs=N, vectorization_mode="vector_entry_point")`` returns),
-``sb3`` (an SB3 ``VecEnv`` over it), ``rendering``, ``bench``. (``azimut sim-paper`` drives the
-ICR controller, so it lives in ``jobs.sim_paper``.)
+limits, action <-> set-point map), ``physics`` (N robots in one pymunk Space: ``engine``,
+``kernels``, ``layout``, ``tire``, ``actuators``, ``stability``, ...), ``tracks``, ``task`` (the
+task over N robots: ``core`` with the step's data flow, ``config`` (``TaskConfig``) and the stages
+``actions``, ``sensors``, ``termination``, ``reward``, ``observation``, ``reset_options``,
+``localisation`` (the pose source), ``lap_time``), ``frontend`` and ``interface`` (what both envs
+share; the controller ``Protocol``), ``env`` (the single env, N = 1), ``vector_env``
+(``AzimutVectorEnv``: N robots in one Space, also what ``gymnasium.make_vec("Azimut-v1",
+num_envs=N, vectorization_mode="vector_entry_point")`` returns), ``rendering``, ``validation``.
+(The SB3 adapter is ``train.sb3_vec_env``; ``azimut bench-env`` and ``azimut sim-paper`` are in
+``jobs``.)
 """
 
 from gymnasium.envs.registration import register, registry

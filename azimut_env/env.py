@@ -75,7 +75,8 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     measured steering angles and wheel speeds with ``estimation``.
 
     ## Action Space
-    ``Box(-1, 1, (2n,), float32)``, n = 4 wheels. ``action[:n]`` are steering set-points
+    ``Box(-1, 1, (2n,), float32)``, n = 4 wheels in the order of ``geometry.alpha`` (AZIMUT-3:
+    front-left, rear-left, rear-right, front-right). ``action[:n]`` are steering set-points
     β_cmd = a · β_max (β_max = π/2, the hard stop); ``action[n:]`` are propulsion set-points
     φ̇_cmd = a · φ̇_max (``limits.wheel_speed_max``). Out-of-range values are clipped; NaN or inf
     raise ``ValueError`` without changing the state. :meth:`setpoints_from_action` and
@@ -132,8 +133,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     | action_rate    | 0.05   | -    | −w·‖a − a_prev‖² (normalised actions)                      |
     | off_track      | 10     | -    | −w on the step that leaves the track or stalls             |
 
-    * progress: about w per step at the reference speed, nothing more for going faster, and a
-      backward jump of the track projection costs at most one step's worth;
+    * progress: w · v_ref / v_max per step at the reference speed (w at the track's top speed),
+      nothing more for going faster, and a backward jump of the track projection costs at most
+      one step's worth;
     * lateral and heading: bounded (a lost robot costs at most w) and steepest at zero error, so
       centimetres matter (lateral, default weight: 1 cm −0.09, 5 cm −0.32);
     * overspeed: going faster than the reference is penalised (finishing early would otherwise
@@ -143,31 +145,8 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     * off_track: also charged on the step that stalls (below); a physics blow-up gets −w as its
       reward.
 
-    Typical per-step means, measured with default weights (one run, seed 0, the v2 physics with
-    the brush tire): the ICR reference controller (``control``'s path follower + ICR controller)
-    and uniformly random raw actions (4 robots, 500 steps):
-
-    | term           | ICR, circle | ICR, paper | random, circle | random, paper |
-    |----------------|-------------|------------|----------------|---------------|
-    | progress       | +2.961      | +1.515     | −0.012         | +0.006        |
-    | lateral        | −0.006      | −0.063     | −0.264         | −0.252        |
-    | heading        | −0.002      | −0.037     | −0.224         | −0.235        |
-    | overspeed      | −0.0001     | −0.0004    | 0              | −0.006        |
-    | slip           | −0.0003     | −0.005     | −0.376         | −0.377        |
-    | internal_force | −0.012      | −0.133     | −1.21          | −1.22         |
-    | action_rate    | −0.00002    | −0.00002   | −0.265         | −0.265        |
-    | reward         | +2.941      | +1.277     | −2.36          | −2.35         |
-
-    (the paper track's reference slows down and stops to turn its wheels in place at its corners,
-    hence its lower progress per step). A policy that fights its wheels (mean internal force
-    120 N, slip 40 W, as a raw-action PPO agent trained on ``Azimut-v0`` did) loses about 2 per
-    step, two thirds of the 3 that driving at the reference speed earns. The progress weight is 3
-    (it was 1 in the first ``Azimut-v1``): with 1, a policy exploring around a good constant raw
-    action on ``circle`` (per-step Gaussian noise σ = 0.135 on the set-points, which alone makes
-    the wheels fight: about 97 N) earned −0.58 per step, so standing still or leaving the track
-    paid, and raw-action PPO agents learned to stand still at the start; with 3 it earns about
-    +1.1 per step and the same noise with the wheels stopped −1.2
-    (``tests/azimut_env/test_reward_incentives.py``).
+    Each term's typical size under the reference controller and under random actions, and why
+    the progress weight is 3, are measured in the documentation (``docs/results/rl.md``).
 
     ## Starting State
     At rest at the start of the track (progress ``options["start_progress"]``, default 0), with
@@ -183,11 +162,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     nominal lap of the ICR reference controller on the episode's track
     (``lap_time.reference_lap_time``: the time of the track's speed profile plus, for each wheel that
     must stop and turn in place across its steering stops along the reference ICR path, the
-    time to turn it, up to 1.79 s; ``0`` turns the limit off); the registration adds no other
-    limit (``gymnasium.make(..., max_episode_steps=K)`` does). The limit is 1.38–1.69× the
-    reference controller's measured lap on every built-in track (steps: circle 1 442, crab
-    1 440, square 3 084, figure8 4 057, paper 4 513; was 3 × the speed profile's time, up to
-    3× the lap on circle); ``random`` tracks get theirs from the same formula at each reset.
+    time to turn it, 1.79 s for a swing of π with the default limits; ``0`` turns the limit
+    off); the registration adds no other limit (``gymnasium.make(..., max_episode_steps=K)``
+    does). ``random`` tracks get theirs from the same formula at each reset.
 
     ## Info
     ``reset`` and ``step`` return the info dict of the table ``info.INFO_FIELDS`` (the vector env's
@@ -221,8 +198,8 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
       ``figure8``, ``square``, ``crab``, ``random``: a new seeded track per reset). Default ``paper``.
     * ``control_period``: seconds per step (default 0.02). ``substeps``: physics substeps per step
-      (default 8: a 2.5 ms substep). ``solver_iterations``: pymunk solver iterations per substep
-      (default 20; 10 gives the same motion to ~1e-8 and runs ~15% faster, see ``AzimutPhysics``).
+      (default 8: a 2.5 ms substep). ``solver_iterations``: pymunk solver iterations per substep,
+      for obstacle contacts (default 20, see ``AzimutPhysics``).
     * ``robot``: a preset by name (``"azimut3"``, the default robot; ``"swerve"``, four coaxial
       modules with unlimited steering; ``"tri"``; ``"hex"``: ``docs/robots.md``) or the path of a
       robot description file (``"my_robot.toml"``), or ``params``:
@@ -263,13 +240,12 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
 
     ## Version History
     * v1: a reward that prices what the paper measures: bounded exponential tracking terms (were
-      quadratic: 1 cm cost 0.0005 per step, and a lost heading up to 4.9), overspeed penalised,
-      slip power and internal force priced (a raw-action agent fighting its wheels with 150× the
-      reference controller's internal force lost only 2% of its return), backward projection
+      quadratic), overspeed penalised, slip power and internal force priced, backward projection
       jumps clipped, optional stall termination, a per-track time limit (1.5 × the reference
       controller's nominal lap, ``time_limit_factor``) instead of 6000 steps; ``info["stalled"]``.
-      The same release changes the simulated vehicle dynamics (see the README).
-      ``gymnasium.make("Azimut-v0")`` raises ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
+      The same release changes the simulated vehicle dynamics (physics v2: steering modules as
+      joint coordinates, a brush tire; ``docs/physics.md``). ``gymnasium.make("Azimut-v0")``
+      raises ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
     * v0: initial version.
     """
 

@@ -3,8 +3,8 @@
 
 β and φ̇ from the track's reference twist through the H representation (estimation paper
 eq. (16)–(17) for β; the wheel speeds of ``docs/icr-controller.md`` eq. (W)), with proportional
-pose correction. It ignores the actuator limits (steering jumps of up to 179°, flips across the
-stops), which is why it exists: it shows what motor lag alone does to qua. The rate-aware driver
+pose correction. It ignores the actuator limits (its steering set-points jump and flip across
+the stops), which is why it exists: it shows what motor lag alone does to qua. The rate-aware driver
 is the ICR reference controller (:class:`control.path_controllers.ICRPathController`). It knows no
 β̇, β̈ or φ̈ of its own, so the commanded-limit check of an episode covers only its φ̇.
 """

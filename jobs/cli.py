@@ -6,7 +6,7 @@ and optionally ``check_args(args)``, which raises ``ValueError`` for argument co
 ``azimut bench-estimators`` does not pay for pymunk or torch.
 
 Every argument and output path is checked before a command starts work (``type=`` converters of
-:mod:`azimut_env.validation`, then ``check_args``): a mistake is one line on stderr,
+:mod:`jobs.args`, then ``check_args``): a mistake is one line on stderr,
 ``azimut CMD: error: ...``, and exit status 2, never a traceback.
 """
 

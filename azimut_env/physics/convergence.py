@@ -1,7 +1,6 @@
 """Convergence of the physics in the substep count (``azimut bench-env --convergence``): an
 open-loop replay of smooth kinematic set-points at several substep counts, against a fine
-reference (the figures of the "Convergence in the substep" paragraph of
-:mod:`azimut_env.physics.kernels`)."""
+reference (the measured figures are in the documentation, ``docs/results/bench-env.md``)."""
 
 from __future__ import annotations
 

@@ -55,12 +55,10 @@ L = ``RobotParams.load_map()`` (least-norm loads on the axes: M g / 4 for four s
 and h = ``ChassisParams.com_height`` (0: static loads; h > 0: load transfer from the chassis
 acceleration a, in R, of the previous substep), clipped at 0 (a lifted wheel).
 
-Convergence in the substep (``azimut bench-env --convergence``: an open-loop replay of 30 s of
-smooth kinematic set-points, 11.5 m of path, against 256 substeps): first order, as expected of
-symplectic Euler with velocity-dependent forces; observed order 1.0–1.2 between 6 and 64
-substeps. At the default 8 substeps the chassis path is off by 23 mm at most (12.7 mm at the end,
-0.25° of heading) and β by 2.3° at most (in the steering transients). v1 (pymunk joints, viscous
-tire), same replay: 38 mm and 2.3°.
+Convergence in the substep: first order, as expected of symplectic Euler with velocity-dependent
+forces. ``azimut bench-env --convergence`` measures it (an open-loop replay of smooth kinematic
+set-points against 256 substeps, :mod:`azimut_env.physics.convergence`); its figures are in the
+documentation (``docs/results/bench-env.md``).
 """
 
 from __future__ import annotations

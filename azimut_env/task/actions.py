@@ -54,8 +54,8 @@ def _shift_fifo_kernel(fifo, new, cmd, rows):
 
 def float32_copy(a: np.ndarray) -> np.ndarray:
     """A float32 copy of the real array ``a``; values beyond float32 become ±inf silently (the
-    callers refuse them). The overflow guard (``np.errstate``, ~10 µs) is entered only for wider
-    floats: integers and float16/32 cannot overflow float32."""
+    callers refuse them). The overflow guard (``np.errstate``, costly next to the copy) is entered
+    only for wider floats: integers and float16/32 cannot overflow float32."""
     if a.dtype.kind == "f" and a.dtype.itemsize > 4:
         with np.errstate(over="ignore"):
             return np.array(a, dtype=np.float32)

@@ -51,10 +51,8 @@ def reference_lap_time(track: Track, geometry: RobotGeometry, limits: ActuatorLi
     along the reference ICR path (:func:`steering_wraps`), the time to turn it in place by its
     swing on a trapezoidal profile at the reference controller's fractions
     (:data:`REFERENCE_TURN_FRACTIONS`) of the steering rate and acceleration limits of ``limits``
-    (1.79 s for a swing of π with the default limits). Within 8% of the reference controller's
-    measured lap (``azimut eval``, seed 0) on the built-in tracks but crab: circle 19.2 s vs
-    19.5 s, paper 60.2 vs 61.8, figure8 54.1 vs 58.7, square 41.1 vs 43.8, crab 19.2 vs 17.1
-    (there the wheels that wrap at one point turn together)."""
+    (1.79 s for a swing of π with the default limits). How it compares with the reference
+    controller's measured laps: ``docs/results/eval.md``, "Time limit"."""
     rate = REFERENCE_TURN_FRACTIONS[0] * limits.steer_rate_max
     accel = REFERENCE_TURN_FRACTIONS[1] * limits.steer_accel_max
     swing = steering_wraps(track, geometry)

@@ -174,8 +174,8 @@ def query_tracks(packs, closed, length, rho, poses, s_hints, lookahead_count: in
         packs: a ``numba.typed.List`` of the robots' :meth:`Track.packed` arrays.
         closed (N,) bool, length (N,) [m], rho (N,) [m]: each track's ``closed``, ``length`` and
             ``progress_radius``. poses (N, 3), s_hints (N,): as :meth:`Track.query_batch`.
-        n_packs: ``len(packs)`` when the caller keeps it (``len`` of a typed list costs ~7 µs,
-            per step on the env's path); None: taken here.
+        n_packs: ``len(packs)`` when the caller keeps it (``len`` of a numba typed list is a slow
+            call, on the env's per-step path); None: taken here.
 
     Returns ``(scalars (N, 5) = (s, lateral error, heading error, v_ref, ψ), lookahead (N, K, 3))``,
     the same numbers as :meth:`Track.query` robot by robot.

@@ -3,8 +3,8 @@
 An RL policy that commands an absolute ICR target (λ_d, μ_d) changes it at random while it
 explores. The ICR controller (:mod:`control.icr.controller`) must stop and turn the wheels in place
 whenever the great-circle arc λ -> λ_d crosses a steering stop or axis, so a target that jumps
-across the sphere every step keeps it in RECONFIGURING for good and the robot never moves (the
-issue that motivated this module measured 100% of the steps reconfiguring under random targets).
+across the sphere every step keeps it in RECONFIGURING for good and the robot never moves (under
+random targets, nearly every step; ``docs/results/rl.md``).
 
 The shaped target is a state (λ_s, μ_s) per robot that the action *moves*:
 
@@ -39,9 +39,8 @@ __all__ = ["shape_target", "advance_target", "step_toward", "exp_step", "transpo
 #: time scaling (``mu_own_scale``) and ramps at 0.95 of the wheel acceleration limit (instead of
 #: 0.7, the rest kept for λ; the φ̇ and φ̈ limits are enforced at the chosen λ either way). A
 #: target that changes every step has a zero-mean μ_d, so μ is a mean-reverting walk whose size
-#: grows with its acceleration. In 500 uniformly random steps on ``circle`` (4 robots × seeds 1, 2)
-#: random twists went 0.62–2.11 m with the reference tuning and 1.37–2.09 m with this one, random
-#: ICR targets 0.73–1.05 m and 0.92–1.28 m (``tests/control/test_action_spaces.py``).
+#: grows with its acceleration: random policies travel farther with this tuning
+#: (``docs/results/rl.md``, "Action spaces under random actions").
 SHAPED_TARGET_CONFIG = ICRControllerConfig(mu_own_scale=True, mu_accel_fraction=0.95)
 
 

@@ -9,7 +9,7 @@ with a motion target that a controller turns into coordinated wheel set-points e
   speed, the canonical representative (as the observation's λ̂, μ̂ ≥ 0). With ``signed_mu=True``
   μ_d = action[3] · ``mu_max`` and λ_d is a point of Λ (λ ~ −λ), the behaviour before 2026-11;
   under random actions the sign of μ_d then flips at random, μ does a zero-mean walk and the robot
-  barely moves (0.5–1.2 m in 500 steps against 2–4.7 m unsigned). The
+  moves a fraction of the unsigned default's distance (``docs/results/rl.md``). The
   :class:`~control.icr.controller.ICRController` does the rest (limits, singularities,
   stop-and-reconfigure).
 * :class:`TwistAction`: ``Box(-1, 1, (3,))``: chassis-frame twist (v_x, v_y, ω) = action ·

@@ -236,9 +236,9 @@ def ray_available() -> bool:
 
 def resolve_executor(executor: str, workers: int, ray_address: str | None) -> str:
     """``auto``: ``ray`` with an address (a cluster); else ``serial`` for one worker; else local
-    processes (on one machine they are lighter than a local Ray instance: 1.76x against Ray's
-    1.58x for 2 workers in the same ``azimut bench-campaign`` run on 2 cores). ``ray`` on one
-    machine starts a local instance. Raises ``ValueError`` for impossible choices."""
+    processes (on one machine they are lighter than a local Ray instance: ``azimut
+    bench-campaign`` compares them; ``docs/results/campaigns.md``). ``ray`` on one machine starts a
+    local instance. Raises ``ValueError`` for impossible choices."""
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     if ray_address and executor not in ("auto", "ray"):
