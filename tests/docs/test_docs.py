@@ -25,24 +25,49 @@ def _rel(page: Path) -> str:
     return str(page.relative_to(ROOT))
 
 
-def python_blocks() -> list[tuple[str, int, str]]:
-    out = []
-    for page in PAGES:
-        if page.name == "README.md":
-            continue  # tests/docs/test_readme_example.py runs it (with a shorter loop)
-        for i, block in enumerate(re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), flags=re.S)):
-            out.append((_rel(page), i, block))
-    return out
+FENCE_RE = re.compile(r"```(\w*)\n(.*?)```", flags=re.S)
+#: the file a ``toml`` block is: the last backticked ``*.toml`` name in the prose just above it
+TOML_NAME_RE = re.compile(r"`([\w.-]+\.toml)`")
 
 
-@pytest.mark.parametrize("page,index,code", python_blocks(), ids=lambda v: v if isinstance(v, (str, int)) else "")
-def test_docs_python_examples_run(page, index, code):
-    namespace: dict = {}
-    exec(compile(code, f"{page} (python block {index})", "exec"), namespace)
-    for value in namespace.values():  # close what the example made and left open
-        close = getattr(value, "close", None)
-        if callable(close) and type(value).__module__.startswith(("azimut_env", "gymnasium")):
-            close()
+def pages_with_examples() -> list[Path]:
+    """The docs pages with Python blocks (the README's is run by test_readme_example.py, with a
+    shorter loop)."""
+    return [p for p in PAGES if p.name != "README.md" and "```python\n" in p.read_text(encoding="utf-8")]
+
+
+def page_examples(page: Path) -> tuple[dict[str, str], list[str]]:
+    """(files, python blocks) of a page: each ``toml`` block that the prose above it names
+    (\"a robot file (`my_robot.toml`, ...)\") is that file, for the examples that read it."""
+    text = page.read_text(encoding="utf-8")
+    files, blocks, last_end = {}, [], 0
+    for m in FENCE_RE.finditer(text):
+        lang, body = m.group(1), m.group(2)
+        if lang == "toml":
+            names = TOML_NAME_RE.findall(text[last_end:m.start()])
+            if names:
+                files[names[-1]] = body
+        elif lang == "python":
+            blocks.append(body)
+        last_end = m.end()
+    return files, blocks
+
+
+@pytest.mark.parametrize("page", pages_with_examples(), ids=_rel)
+def test_docs_python_examples_run(page, tmp_path, monkeypatch):
+    """A page's Python blocks run in order, in a fresh folder holding the page's named TOML files
+    (what a reader following the page has)."""
+    monkeypatch.chdir(tmp_path)
+    files, blocks = page_examples(page)
+    for name, body in files.items():
+        (tmp_path / name).write_text(body, encoding="utf-8")
+    for index, code in enumerate(blocks):
+        namespace: dict = {}
+        exec(compile(code, f"{_rel(page)} (python block {index})", "exec"), namespace)
+        for value in namespace.values():  # close what the example made and left open
+            close = getattr(value, "close", None)
+            if callable(close) and type(value).__module__.startswith(("azimut_env", "gymnasium")):
+                close()
 
 
 def test_every_repository_path_named_in_the_docs_exists():
