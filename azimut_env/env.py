@@ -1,4 +1,4 @@
-"""The Gymnasium task: drive a simulated AZIMUT-3 along a track (``Azimut-v1``).
+"""The Gymnasium task: drive a simulated AZIMUT-3 along a track (``Azimut-v2``).
 
 The physics lives in :mod:`azimut_env.physics.engine`, the task over N robots at once in
 :mod:`azimut_env.task.core` (which runs the stages: :mod:`~azimut_env.task.actions`,
@@ -204,13 +204,22 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       modules with unlimited steering; ``"tri"``; ``"hex"``: ``docs/robots.md``) or the path of a
       robot description file (``"my_robot.toml"``), or ``params``:
       :class:`~azimut_env.params.RobotParams` (e.g. ``RobotParams.preset("swerve")`` changed with
-      ``dataclasses.replace``); not both. ``sensors``: ``SensorParams`` or
+      ``dataclasses.replace``); not both. ``imperfections``: ``"paper"`` (the imperfections the
+      paper names: steering friction with stiction, the module's centre of mass off its axis, the
+      drive's torque–speed line, steering-axis zero offsets and rolling-radius errors, finer wheel
+      encoders, and a 20 N·m/rad steering spring identified from the paper's Fig. 11;
+      :mod:`azimut_env.imperfections`) or ``"ideal"`` (none: ``Azimut-v1``'s physics), applied on
+      top of the robot; default ``None``: ``"paper"`` for the default AZIMUT-3 robot, and the
+      robot as given for ``params``, description files and the other presets. ``sensors``: ``SensorParams`` or
       ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
       standard deviations (0: noise-free, quantisation kept).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering
       stiffness and damping, chassis mass (the normal loads follow), tire slip stiffness (with its
       relaxation lengths, so the contact stiffness stays) and contact patch size are scaled by
-      factors uniform in [1 − d, 1 + d].
+      factors uniform in [1 − d, 1 + d]; with ``"paper"`` imperfections a new robot's
+      steering-axis zero offsets and rolling-radius errors are drawn too (N(0, 0.5°), N(0, 0.3%))
+      and the steering friction scaled by one more factor
+      (:func:`~azimut_env.physics.wheel_params.randomized_wheel_params`).
     * ``reward_weights``: the weights by term name (see Rewards), e.g. ``{"slip": 0.05}``; the
       terms not named keep their defaults, an unknown name is refused. (The keywords
       ``progress_weight``, ..., ``off_track_penalty`` of earlier versions still work, with a
@@ -239,6 +248,14 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     immediately. A physics blow-up gives the reward −``reward_weights["off_track"]``.
 
     ## Version History
+    * v2: physics v3, the imperfections the paper names (``imperfections="paper"`` by default):
+      steering joint friction (Coulomb, stiction, Stribeck), the module's centre of mass off the
+      steering axis, the drive's torque–speed line, per-wheel steering-axis zero offsets and
+      rolling-radius errors (drawn anew under domain randomisation), 36,000-count wheel encoders,
+      and a 20 N·m/rad steering spring (was 60); observation, action, reward and termination are
+      unchanged. ``gymnasium.make("Azimut-v1")`` still makes v1 (this env with
+      ``imperfections="ideal"``, bit for bit the v1 trajectories), with Gymnasium's warning that
+      it is out of date.
     * v1: a reward that prices what the paper measures: bounded exponential tracking terms (were
       quadratic), overspeed penalised, slip power and internal force priced, backward projection
       jumps clipped, optional stall termination, a per-track time limit (1.5 × the reference
@@ -253,12 +270,13 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     _robots = 0  # the controller interface reads row 0 of the task's arrays
 
     def __init__(self, track: str | Track = "paper", *, robot: str | os.PathLike | None = None,
-                 params: RobotParams | None = None,
+                 params: RobotParams | None = None, imperfections: str | None = None,
                  sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
                  render_mode: str | None = None, **config: Any) -> None:
         # **config: the TaskConfig fields (see "Arguments"; __signature__ below spells them out)
-        self._build(1, track, obstacles, render_mode, dict(robot=robot, params=params, sensors=sensors,
-                                                             noise_scale=noise_scale, **config))
+        self._build(1, track, obstacles, render_mode, dict(
+            robot=robot, params=params, imperfections=imperfections, sensors=sensors, noise_scale=noise_scale,
+            **config))
         self.action_space = self._single_action_space
         self.observation_space = self._single_observation_space
         self._done_error: str | None = None

@@ -183,7 +183,7 @@ class AzimutFrontEnd:
         if self.render_mode is None:
             gym.logger.warn("You are calling render method without specifying any render mode. "
                             "You can specify the render_mode at initialization, "
-                            'e.g. gym.make("Azimut-v1", render_mode="rgb_array")')
+                            'e.g. gym.make("Azimut-v2", render_mode="rgb_array")')
             return None
         i = self._render_robot()
         if not 0 <= i < self.task.n_robots:

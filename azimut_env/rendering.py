@@ -151,7 +151,7 @@ class Renderer:
             if self.window is None:
                 pg.display.init()  # display only: pygame.init() would also open audio
                 self.window = pg.display.set_mode((self.size, self.size))
-                pg.display.set_caption("Azimut-v1")
+                pg.display.set_caption("Azimut-v2")
                 self.clock = pg.time.Clock()
             pg.event.pump()
             self.window.blit(surf, (0, 0))

@@ -129,7 +129,7 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     _robots = slice(None)  # the controller interface reads the task's arrays over all robots
 
     def __init__(self, num_envs: int = 1, track: str | Track = "paper", *, robot: str | os.PathLike | None = None,
-                 params: RobotParams | None = None,
+                 params: RobotParams | None = None, imperfections: str | None = None,
                  sensors: SensorParams | str | None = None, noise_scale: float = 1.0, obstacles=(),
                  render_mode: str | None = None, max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, render_index: int = 0,
@@ -143,8 +143,9 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
             autoreset_mode = AutoresetMode(autoreset_mode)
         except (ValueError, TypeError):
             raise ValueError(f"autoreset_mode must be an AutoresetMode, got {autoreset_mode!r}") from None
-        self._build(num_envs, track, obstacles, render_mode, dict(robot=robot, params=params, sensors=sensors,
-                                                                   noise_scale=noise_scale, **config))
+        self._build(num_envs, track, obstacles, render_mode, dict(
+            robot=robot, params=params, imperfections=imperfections, sensors=sensors, noise_scale=noise_scale,
+            **config))
         self.num_envs = N = int(num_envs)
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self.autoreset_mode = autoreset_mode

@@ -114,17 +114,23 @@ class TaskConfig:
 
 
 def resolve_params(params: RobotParams | None, sensors: SensorParams | str | None, noise_scale: float,
-                   robot: str | None = None) -> RobotParams:
-    """The robot parameters with the ``sensors`` override and the ``noise_scale`` applied.
+                   robot: str | None = None, imperfections: str | None = None) -> RobotParams:
+    """The robot parameters with the imperfections preset, the ``sensors`` override and the
+    ``noise_scale`` applied.
 
     ``robot`` is a preset's name (``RobotParams.preset``); giving it with ``params`` raises
-    ``ValueError`` (a preset with parameters of its own is two robots)."""
-    from azimut_env.robot_file import resolve_robot
+    ``ValueError`` (a preset with parameters of its own is two robots). ``imperfections``
+    (:mod:`azimut_env.imperfections`): ``"paper"`` or ``"ideal"`` applied on top of the robot;
+    ``None`` means ``"paper"`` for the default AZIMUT-3 robot (no ``params``, ``robot`` None or
+    ``"azimut3"``) and the robot as given otherwise (``params``, description files and the other
+    presets carry their own)."""
+    from azimut_env.imperfections import check_imperfections, resolve_imperfections
+    from azimut_env.robot_file import DEFAULT_PRESET, resolve_robot
 
-    params = resolve_robot(robot, params, RobotParams)
-    params = params if params is not None else RobotParams()
-    if not isinstance(params, RobotParams):
-        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
+    if imperfections is not None:
+        check_imperfections(imperfections)  # before the robot file is read
+    default_robot = params is None and robot in (None, DEFAULT_PRESET)
+    params = resolve_imperfections(resolve_robot(robot, params, RobotParams), imperfections, default_robot)
     if sensors is not None:
         if isinstance(sensors, str):
             if sensors != "ideal":
@@ -147,18 +153,21 @@ TASK_CONFIG_FIELDS = tuple(f.name for f in fields(TaskConfig))
 
 
 def task_settings(params: RobotParams | None = None, sensors: SensorParams | str | None = None,
-                  noise_scale: float = 1.0, robot: str | None = None, **config: Any) -> tuple[RobotParams, TaskConfig]:
+                  noise_scale: float = 1.0, robot: str | None = None, imperfections: str | None = None,
+                  **config: Any) -> tuple[RobotParams, TaskConfig]:
     """The robot parameters and the task settings of an env from its keyword arguments.
 
-    ``robot``, ``params``, ``sensors`` and ``noise_scale`` go through :func:`resolve_params`; every other
+    ``robot``, ``params``, ``imperfections``, ``sensors`` and ``noise_scale`` go through
+    :func:`resolve_params`; every other
     keyword must be a :class:`TaskConfig` field (``localisation=None`` means the default
     :class:`~azimut_env.task.localisation.LocalisationParams`). Raises ``TypeError`` naming an unknown
     keyword, and the field checks' ``ValueError``/``TypeError`` otherwise."""
-    params = resolve_params(params, sensors, noise_scale, robot)
+    params = resolve_params(params, sensors, noise_scale, robot, imperfections)
     config = _legacy_weights(config)
     unknown = sorted(set(config) - set(TASK_CONFIG_FIELDS))
     if unknown:
-        raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, robot, params, sensors, "
+        raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, robot, params, "
+                        f"imperfections, sensors, "
                         f"noise_scale, obstacles, render_mode and the TaskConfig fields {list(TASK_CONFIG_FIELDS)}")
     config["localisation"] = config.get("localisation") or LocalisationParams()
     return params, TaskConfig(**config)

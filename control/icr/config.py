@@ -61,6 +61,13 @@ class ICRControllerConfig:
             the RUNNING mode then takes the remaining motion).
         reconfig_timeout: time [s] after which RECONFIGURING resumes even if a measured wheel
             angle has not settled within ``reconfig_tol`` (commands have).
+        reconfig_hold_tol, reconfig_still_tol: a wheel also counts as settled (once the commands
+            have) when it is within ``reconfig_hold_tol`` [rad] of its target and its measured
+            angle moved less than ``reconfig_still_tol`` [rad] in the last period: it has stopped
+            where the steering's stiction and the tread's grip hold it at rest (the dead band
+            τ_s/k_s of a compliant steering with friction, 1.9° for the ``"paper"`` robot, plus
+            the scrub torque's deflection), and rolling will bring it the rest of the way; the
+            robot need not wait for ``reconfig_timeout``.
         coupling_from_measurement: in RECONFIGURING, compute the steer-to-drive coupling
             r φ̇ = −b β̇ from the measured steering rate (finite difference of the measured β)
             instead of the commanded one: the compliant steering lags its set-point.
@@ -96,6 +103,8 @@ class ICRControllerConfig:
     reconfig_tol: float = np.deg2rad(2.0)
     reconfig_freeze: float = np.deg2rad(5.0)
     reconfig_timeout: float = 2.0
+    reconfig_hold_tol: float = np.deg2rad(6.0)
+    reconfig_still_tol: float = np.deg2rad(0.5)
     stop_timeout: float = 0.5
     stop_hysteresis: float = np.deg2rad(6.0)
     stop_hold_time: float = 0.1
@@ -108,7 +117,7 @@ class ICRControllerConfig:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
         for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
-                     "stop_hysteresis", "stop_hold_time"):
+                     "stop_hysteresis", "stop_hold_time", "reconfig_hold_tol", "reconfig_still_tol"):
             fix(name, check_positive(f"ICRControllerConfig.{name}", getattr(self, name)))
         for name in ("mu_headroom", "reconfig_rate_fraction", "reconfig_accel_fraction"):  # fractions of a limit
             fix(name, check_range(f"ICRControllerConfig.{name}", getattr(self, name), 0.0, 1.0, lo_open=True))

@@ -133,7 +133,12 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
         beta_target[r] = bt
         settled_cmd = (np.max(np.abs(state.beta[r] - bt), axis=-1) < 1e-6) & (
             np.max(np.abs(state.beta_rate[r]), axis=-1) < 1e-9)
-        settled_meas = np.max(np.abs(wrap_half(beta_meas[r] - bt)), axis=-1) < config.reconfig_tol
+        err = np.abs(wrap_half(beta_meas[r] - bt))
+        # a wheel within reconfig_tol, or stopped near its target where stiction and the tread hold it
+        still = state.has_beta_meas[r, None] & (np.abs(wrap_half(beta_meas[r] - state.beta_meas[r]))
+                                                < config.reconfig_still_tol)
+        held_at_rest = (err < config.reconfig_hold_tol) & still
+        settled_meas = np.all((err < config.reconfig_tol) | held_at_rest, axis=-1)
         resume = settled_cmd & (settled_meas | (mode_time[r] > config.reconfig_timeout)) & ~zero_cmd[r]
         if np.any(resume):
             rr = r[resume]

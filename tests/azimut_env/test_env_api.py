@@ -33,7 +33,7 @@ def test_registered_with_per_track_time_limit():
 
 
 def test_retired_version_names_the_new_one():
-    with pytest.raises(gym.error.DeprecatedEnv, match="Azimut-v1"), pytest.warns(DeprecationWarning):
+    with pytest.raises(gym.error.DeprecatedEnv, match="Azimut-v2"), pytest.warns(DeprecationWarning):
         gym.make("Azimut-v0")
 
 

@@ -357,3 +357,18 @@ def test_time_scaled_wheel_acceleration_includes_the_coupling_terms():
     np.testing.assert_allclose(analytic, fd, rtol=2e-3, atol=2e-3)
     path_form = ((s2b @ (mu * dlam + dmu * lam)) - GEOM.b * bpp) * sdot
     assert np.max(np.abs(path_form - fd)) > 1e-2
+
+
+def test_reconfigurations_end_when_wheels_stop_where_stiction_holds_them():
+    """On the default ("paper") robot the steering's stiction and the tread hold a wheel at rest
+    up to a few degrees from its target, beyond reconfig_tol: the controller resumes once the
+    measured wheels have stopped within reconfig_hold_tol instead of waiting for the timeout."""
+    from control.rollout import run_episode
+    from control.icr.config import ICRControllerConfig, Mode
+
+    log = run_episode("icr", "figure8", seed=0, max_time=25.0)
+    recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
+    edges = np.flatnonzero(np.diff(recon))
+    lengths = (edges[1::2] - edges[::2]) * log.dt
+    assert lengths.size >= 3
+    assert np.all(lengths < ICRControllerConfig().reconfig_timeout - 0.1), lengths

@@ -1,63 +1,96 @@
-"""The paper's phenomenon, attributed (``azimut sim-paper``): qua while moving under the ICR
-controller is a compliance effect (the motor angles stay on the surface, a stiff spring removes
-it); under the limit-blind feed-forward it is motor lag (the stiff spring changes nothing)."""
+"""The paper's phenomenon, attributed (``azimut sim-paper``, :mod:`jobs.phenomenon`): the departure
+of the steering configuration from the constraining surface while moving, with one counterfactual
+per cause (compliance, friction, quantisation, geometric imperfections, motor lag); under the
+limit-blind feed-forward it is motor lag."""
 
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
 
+from azimut_env.imperfections import with_imperfections
 from azimut_env.params import RobotParams
 from control.rollout import run_episode
 from estimation import steering_from_lambda
 from jobs.cli import main
-from jobs.sim_paper import attribute, qua_of_angles, run_phenomenon, stable_substeps, stiff_params
+from jobs.phenomenon import (
+    COUNTERFACTUALS,
+    attribute,
+    counterfactual,
+    default_robot,
+    departures_deg,
+    it_over_ns,
+    qua_of_angles,
+    run_phenomenon,
+    stable_substeps,
+    stiff_params,
+    sweep,
+)
+
+GEOM = RobotParams().geometry
 
 
 @pytest.fixture(scope="module")
 def icr_crab():
-    return {r["steering"]: r for r in run_phenomenon("icr", "crab", speeds=(1.0,))["rows"]}
+    return {r["case"]: r for r in run_phenomenon("icr", "crab", speeds=(1.0,))["rows"]}
 
 
-def test_icr_phenomenon_is_compliance(icr_crab):
-    comp, stiff = icr_crab["compliant"], icr_crab["stiff x100"]
-    for row in (comp, stiff):
+def test_every_cause_has_a_counterfactual_and_the_robot_departs_most(icr_crab):
+    robot = icr_crab["robot"]
+    assert set(icr_crab) == {"robot", "stiff x100", *[v for k, v in COUNTERFACTUALS.items() if k != "compliance"]}
+    for row in icr_crab.values():
         assert row["completed"] and row["error"] is None
         assert 0.0 < row["standstill_share"] < 1.0  # crab stops to reconfigure
-        assert row["qua_motor_mean"] > 0.9995  # the motors alone stay on the surface
-    assert comp["qua_true_mean"] < stiff["qua_true_mean"]
-    assert comp["qua_true_min"] < stiff["qua_true_min"]
-    assert stiff["deflection_rms_deg"] < 0.1 * comp["deflection_rms_deg"]
-    assert 0.05 < comp["deflection_rms_deg"] < 5.0
+        assert row["departure_motor_mean_deg"] < 0.1  # the motors alone stay on the surface
+    stiff = icr_crab["stiff x100"]
+    assert stiff["departure_meas_mean_deg"] < 0.3 * robot["departure_meas_mean_deg"]  # compliance dominates
+    assert stiff["deflection_rms_deg"] < 0.1 * robot["deflection_rms_deg"]
+    assert robot["departure_drop_deg"] == 0.0 and stiff["departure_drop_deg"] > 0.0
+    assert icr_crab["no friction"]["departure_meas_mean_deg"] < robot["departure_meas_mean_deg"]
+    assert 0.1 < robot["departure_meas_mean_deg"] < 5.0
+    assert len(robot["departure_meas_p95_deg"]) == 4
+
+
+def test_counterfactuals_remove_one_cause_each():
+    p = default_robot()
+    assert p == with_imperfections(RobotParams(), "paper")
+    assert counterfactual(p, "friction").steering.friction_static == 0.0
+    q = counterfactual(p, "quantisation").sensors
+    assert q.steer_resolution == 0.0 and q.wheel_cpr == 0 and q.steer_noise == p.sensors.steer_noise
+    assert counterfactual(p, "imperfections").imperfections.steer_offset == ()
+    assert counterfactual(p, "motor lag").steering.position_gain == 10 * p.steering.position_gain
+    assert counterfactual(p, "compliance") == stiff_params(p)
+    with pytest.raises(ValueError, match="unknown cause"):
+        counterfactual(p, "gravity")
 
 
 def test_feedforward_phenomenon_is_motor_lag():
-    geom = RobotParams().geometry
-    rows = {}
-    for name, params, sub in (("compliant", None, 8), ("stiff", stiff_params(), stable_substeps(stiff_params()))):
-        kw = {"substeps": sub} | ({"params": params} if params is not None else {})
-        log = run_episode("feedforward", "paper", seed=0, env_kwargs=kw)
-        rows[name] = attribute(log, geom)
-    comp, stiff = rows["compliant"], rows["stiff"]
-    assert comp["completed"] and comp["rms_lateral_m"] < 0.05
-    assert 0.95 < comp["qua_meas_mean"] < 0.9999 and comp["qua_meas_min"] < 0.8  # off the surface in transitions
-    assert abs(comp["qua_motor_mean"] - comp["qua_true_mean"]) < 2e-3  # ... because the motors are
-    assert abs(stiff["qua_true_mean"] - comp["qua_true_mean"]) < 2e-3  # and a stiff spring does not help
-    assert comp["motor_lag_max_deg"] > 20.0
+    """The limit-blind feed-forward commands steering jumps: its departures come with motor lag
+    (tens of degrees), and the motor angles depart as much as the wheels."""
+    log = run_episode("feedforward", "paper", seed=0)
+    row = attribute(log, GEOM)
+    assert row["completed"] and row["rms_lateral_m"] < 0.05
+    assert row["motor_lag_max_deg"] > 20.0
+    assert row["qua_meas_min"] < 0.8  # off the surface in transitions
+    assert row["departure_motor_mean_deg"] > 0.5 * row["departure_true_mean_deg"]
 
 
-def test_qua_of_angles_is_one_on_the_surface():
-    geom = RobotParams().geometry
+def test_departures_and_qua_are_zero_and_one_on_the_surface():
     lam = np.random.default_rng(0).normal(size=(50, 3))
-    q = steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), geom)
-    np.testing.assert_allclose(qua_of_angles(q, geom), 1.0, atol=1e-9)
-    assert np.all(qua_of_angles(q + np.deg2rad([5.0, -5.0, 5.0, -5.0]), geom) < 1.0)
+    q = steering_from_lambda(lam / np.linalg.norm(lam, axis=1, keepdims=True), GEOM)
+    np.testing.assert_allclose(qua_of_angles(q, GEOM), 1.0, atol=1e-9)
+    np.testing.assert_allclose(departures_deg(q, GEOM), 0.0, atol=1e-6)
+    off = q + np.deg2rad([5.0, -5.0, 5.0, -5.0])
+    assert np.all(qua_of_angles(off, GEOM) < 1.0)
+    assert np.all(departures_deg(off, GEOM).max(axis=1) > 1.0)
+    assert it_over_ns(q, GEOM) == 0.0 and math.isnan(it_over_ns(q[:0], GEOM))
 
 
 def test_stiff_params_keep_the_damping_ratio():
-    p = RobotParams()
+    p = default_robot()
     s = stiff_params(p, 100.0)
     assert s.steering.stiffness == pytest.approx(100 * p.steering.stiffness)
     ratio = lambda q: q.steering.damping / np.sqrt(q.steering.stiffness * q.steering.module_inertia)  # noqa: E731
@@ -67,8 +100,16 @@ def test_stiff_params_keep_the_damping_ratio():
     assert stable_substeps(p) == 8 and stable_substeps(s) > 8
 
 
+def test_sweep_rejects_unknown_parameters():
+    with pytest.raises(ValueError, match="unknown sweep"):
+        sweep("mass", [1.0])
+
+
 @pytest.mark.parametrize("argv", [["--driver", "pid"], ["--speeds", "0"], ["--speeds", "nan"], ["--track", "nope"],
-                                  ["--stiffness-factor", "0.5"], ["--json", "/nonexistent/dir/x.json"]])
+                                  ["--stiffness-factor", "0.5"], ["--json", "/nonexistent/dir/x.json"],
+                                  ["--causes", "gravity"], ["--sweep", "stiffness"], ["--values", "1"],
+                                  ["--sweep", "stiffness", "--values", "0"], ["--causes", "none", "friction"],
+                                  ["--imperfections", "real"]])
 def test_cli_rejects_bad_arguments(argv, capsys):
     try:
         code = main(["sim-paper", *argv])
@@ -79,9 +120,9 @@ def test_cli_rejects_bad_arguments(argv, capsys):
     assert err and "Traceback" not in "".join(err)
 
 
-def test_cli_feedforward_json(tmp_path, capsys):
+def test_cli_json(tmp_path, capsys):
     out = tmp_path / "ph.json"
-    assert main(["sim-paper", "--driver", "feedforward", "--track", "circle", "--speeds", "1", "--json", str(out)]) == 0
+    assert main(["sim-paper", "--track", "circle", "--speeds", "1", "--causes", "friction", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
-    assert [r["steering"] for r in data["rows"]] == ["compliant", "stiff x100"]
-    assert "qua θ_m mean" in capsys.readouterr().out
+    assert [r["case"] for r in data["rows"]] == ["robot", "no friction"]
+    assert "dep. β_meas mean" in capsys.readouterr().out
