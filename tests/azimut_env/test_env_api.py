@@ -19,7 +19,7 @@ from estimation import canonical_eta, estimate_icr, mu_from_wheel_speeds, qualit
 
 
 def test_registered_with_per_track_time_limit():
-    env = gym.make("Azimut-v1", track="crab")
+    env = gym.make("Azimut-v2", track="crab")
     assert env.spec.max_episode_steps is None  # the env truncates per track (time_limit_factor)
     assert isinstance(env.unwrapped, AzimutEnv)
     assert env.metadata["render_fps"] == 50
@@ -40,7 +40,7 @@ def test_retired_version_names_the_new_one():
 def test_gymnasium_check_env_without_warnings():
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("Azimut-v1").unwrapped
+    env = gym.make("Azimut-v2").unwrapped
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env)
@@ -173,7 +173,7 @@ def test_h_state_matches_estimation(geom):
 
 def test_rgb_array_rendering_headless():
     pytest.importorskip("pygame")
-    env = gym.make("Azimut-v1", render_mode="rgb_array")
+    env = gym.make("Azimut-v2", render_mode="rgb_array")
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (640, 640, 3) and frame.dtype == np.uint8 and frame.std() > 0
@@ -185,7 +185,7 @@ def test_record_video(tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(gym.make("Azimut-v1", render_mode="rgb_array"), str(tmp_path / "videos"),
+    env = RecordVideo(gym.make("Azimut-v2", render_mode="rgb_array"), str(tmp_path / "videos"),
                       episode_trigger=lambda e: True,
                       disable_logger=True)
     env.reset(seed=0)

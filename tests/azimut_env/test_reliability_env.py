@@ -240,7 +240,7 @@ def test_refused_first_reset_through_gym_make_leaves_the_next_good_episode_intac
     """Through ``gymnasium.make`` (the documented path), a refused first reset changes nothing:
     the next good reset and step replay an env that never saw it (Gymnasium's passive checker
     used to be left without data by the refused reset and raised a TypeError at the first step)."""
-    env, ref = gym.make("Azimut-v1"), gym.make("Azimut-v1")
+    env, ref = gym.make("Azimut-v2"), gym.make("Azimut-v2")
     with pytest.raises(ValueError):
         env.reset(**bad)
     obs, _ = env.reset(seed=0)

@@ -72,7 +72,7 @@ def test_equivalence_many_envs_paper_track():
 
 
 def test_make_vec_returns_the_vector_env():
-    venv = gym.make_vec("Azimut-v1", num_envs=3, vectorization_mode="vector_entry_point", track="circle")
+    venv = gym.make_vec("Azimut-v2", num_envs=3, vectorization_mode="vector_entry_point", track="circle")
     assert isinstance(venv.unwrapped, AzimutVectorEnv)
     assert venv.num_envs == 3 and venv.unwrapped.max_episode_steps is None  # per-track limit (time_limit_factor)
     assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP

@@ -11,7 +11,7 @@ from control.action_spaces.single import ICRTargetAction, TwistAction
 
 
 def _rollout(wrapper_cls, actions, seed=0, **kw):
-    env = wrapper_cls(gym.make("Azimut-v1", track="circle"), **kw)
+    env = wrapper_cls(gym.make("Azimut-v2", track="circle"), **kw)
     obs, _ = env.reset(seed=seed)
     out = [obs]
     infos = []
@@ -38,7 +38,7 @@ def test_wrappers_step_deterministically(wrapper_cls, kw, dim):
 
 
 def test_icr_target_moves_the_robot_along_the_target():
-    env = ICRTargetAction(gym.make("Azimut-v1", track="circle"), mu_max=0.5)
+    env = ICRTargetAction(gym.make("Azimut-v2", track="circle"), mu_max=0.5)
     env.reset(seed=0)
     base = env.unwrapped
     start = base.true_pose.copy()
@@ -51,12 +51,12 @@ def test_icr_target_moves_the_robot_along_the_target():
 
 
 def test_wrappers_reject_bad_actions():
-    env = TwistAction(gym.make("Azimut-v1", track="circle"))
+    env = TwistAction(gym.make("Azimut-v2", track="circle"))
     env.reset(seed=0)
     with pytest.raises(ValueError):
         env.step(np.array([np.nan, 0, 0], dtype=np.float32))
     with pytest.raises(ValueError):
-        TwistAction(gym.make("Azimut-v1"), controller="pid")
+        TwistAction(gym.make("Azimut-v2"), controller="pid")
 
 
 @pytest.mark.parametrize("k", range(4))
@@ -66,7 +66,7 @@ def test_singular_icr_targets_in_the_simulator(k):
     from estimation import RobotGeometry
 
     s = RobotGeometry.azimut3().s_unit[k]
-    env = ICRTargetAction(gym.make("Azimut-v1", track="circle"), mu_max=5.0)
+    env = ICRTargetAction(gym.make("Azimut-v2", track="circle"), mu_max=5.0)
     env.reset(seed=k)
     for a in [np.r_[s, 0.2]] * 60 + [np.r_[-s, -0.2]] * 30 + [np.r_[s, 1.0]] * 60:
         obs, r, term, trunc, info = env.step(a.astype(np.float32))

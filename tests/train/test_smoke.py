@@ -109,7 +109,7 @@ def test_core_imports_and_runs_without_torch():
         import numpy as np, gymnasium as gym
         import azimut_env, estimation, control, train
         import jobs.eval.command, control.action_spaces.vector, train.envs, train.hyperparams
-        env = gym.make("Azimut-v1", track="crab")
+        env = gym.make("Azimut-v2", track="crab")
         env.reset(seed=0)
         for _ in range(5):
             env.step(env.action_space.sample())
