@@ -32,22 +32,29 @@ def action_key(action: str) -> str:
 
 
 def make_vector_env(action: str, num_envs: int, track: str = "random",
-                    autoreset_mode: AutoresetMode = AutoresetMode.SAME_STEP, env_kwargs: dict[str, Any] | None = None):
-    """An ``AzimutVectorEnv`` of ``num_envs`` robots on ``track``, behind ``action``'s wrapper."""
+                    autoreset_mode: AutoresetMode = AutoresetMode.SAME_STEP, env_kwargs: dict[str, Any] | None = None,
+                    correction_cost: float = 0.0):
+    """An ``AzimutVectorEnv`` of ``num_envs`` robots on ``track``, behind ``action``'s wrapper
+    (``correction_cost``: the residual's correction cost weight, see
+    :class:`~control.action_spaces.vector.VectorControllerAction`)."""
     from azimut_env.vector_env import AzimutVectorEnv
 
     action_key(action)
     venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=autoreset_mode, **(env_kwargs or {}))
     kind = ACTIONS[action]
+    if correction_cost and kind != "residual":
+        raise ValueError(f"correction_cost applies to the residual action space only, not {action!r}")
     if kind is None:
         return venv
     from control.action_spaces.vector import VectorControllerAction
 
-    return VectorControllerAction(venv, action=kind)
+    return VectorControllerAction(venv, action=kind, correction_cost=correction_cost)
 
 
-def make_sb3_env(action: str, num_envs: int, track: str = "random", env_kwargs: dict[str, Any] | None = None):
+def make_sb3_env(action: str, num_envs: int, track: str = "random", env_kwargs: dict[str, Any] | None = None,
+                 correction_cost: float = 0.0):
     """:func:`make_vector_env` as an SB3 ``VecEnv`` (same-step autoreset)."""
     from train.sb3_vec_env import AzimutSB3VecEnv
 
-    return AzimutSB3VecEnv(venv=make_vector_env(action, num_envs, track, AutoresetMode.SAME_STEP, env_kwargs))
+    return AzimutSB3VecEnv(venv=make_vector_env(action, num_envs, track, AutoresetMode.SAME_STEP, env_kwargs,
+                                                correction_cost))

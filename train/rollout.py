@@ -9,6 +9,8 @@ them.
 
 from __future__ import annotations
 
+import numpy as np
+
 from azimut_env.tracks import Track
 from control.episode import EpisodeLog, episode_metrics
 from control.rollout import run_episode
@@ -31,8 +33,31 @@ def run_policy_episode(policy: TrainedPolicy, track: str | Track, seed: int = 0,
     return log, log.ret
 
 
+class _ActionRecorder:
+    """A :class:`TrainedPolicy` that also sums the squares of its clipped actions (for
+    ``mean_sq_action``)."""
+
+    def __init__(self, policy: TrainedPolicy) -> None:
+        self._policy, self.sum_sq, self.count = policy, 0.0, 0
+
+    def __getattr__(self, name):
+        return getattr(self._policy, name)
+
+    def act(self, obs, deterministic: bool = True):
+        action = self._policy.act(obs, deterministic=deterministic)
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        self.sum_sq += float(np.sum(np.mean(a ** 2, axis=-1)))
+        self.count += a.shape[0]
+        return action
+
+
 def policy_metrics(policy: TrainedPolicy, track: str | Track, seed: int = 0, label: str | None = None,
                    max_time: float | None = None) -> tuple[dict, EpisodeLog]:
-    """(``azimut eval`` metrics row, with its ``return``, EpisodeLog) of one episode of ``policy``."""
-    log, _ = run_policy_episode(policy, track, seed=seed, label=label, max_time=max_time)
-    return episode_metrics(log), log
+    """(``azimut eval`` metrics row, with its ``return``, EpisodeLog) of one episode of ``policy``;
+    the row also holds ``mean_sq_action``, the mean over the episode's steps of mean_k(a_k²) of
+    the clipped action a ∈ [−1, 1] (for a residual policy: how far it corrects the reference)."""
+    recorder = _ActionRecorder(policy)
+    log, _ = run_policy_episode(recorder, track, seed=seed, label=label, max_time=max_time)
+    row = episode_metrics(log)
+    row["mean_sq_action"] = recorder.sum_sq / recorder.count if recorder.count else float("nan")
+    return row, log

@@ -40,9 +40,15 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
           eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
           resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
           env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None,
-          record_extra: dict[str, Any] | None = None) -> dict:
+          record_extra: dict[str, Any] | None = None, correction_cost: float = 0.0) -> dict:
     """Train and save (see the module docstring); returns the run record (``run.json``), to which
     ``record_extra`` (e.g. the caller's provenance: package version, commit) is added.
+
+    The budget is ``steps`` environment steps (all robots together; PPO rounds up to whole
+    rollouts). ``time_limit_min`` > 0 is a safety guard only: learning stops after that many
+    minutes of wall time and the record says ``"complete": false`` (a run that did not reach its
+    step budget, which reports leave out). ``correction_cost`` is the residual action space's cost
+    on the correction's size (:class:`~control.action_spaces.vector.VectorControllerAction`).
 
     ``track`` is the training track (``random``: a new track per episode); ``eval_tracks`` the
     tracks of the periodic deterministic evaluations (every ``eval_every`` steps, and at the end);
@@ -63,7 +69,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     hp.update(overrides or {})
     env_kwargs = dict(env_kwargs or {})
     cls = PPO if algo == "ppo" else SAC
-    venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs))
+    venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs, correction_cost))
     venv.seed(seed)
     ckpt = latest_checkpoint(out) if resume else None
     gamma = float(hp.get("gamma", 0.99))
@@ -105,9 +111,11 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     final["final"] = True
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
-    record = {"time_limit_min": time_limit_min, "algo": algo, "action": action, "track": track, "seed": seed,
+    complete = int(model.num_timesteps) >= int(steps)
+    record = {"complete": complete, "time_limit_min": time_limit_min, "algo": algo, "action": action,
+              "track": track, "seed": seed,
               "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
-              "eval_tracks": list(eval_tracks),
+              "correction_cost": float(correction_cost), "eval_tracks": list(eval_tracks),
               "hyperparams": hp, "hyperparams_version": hp_version, "env_id": "Azimut-v1", "env_kwargs": env_kwargs,
               "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
               "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,

@@ -36,6 +36,14 @@ one batched ``step`` of the vector env with all set-points):
   Twists may also go to the WPILib-style baseline (``controller="swerve"``, a per-robot Python
   object).
 
+Residual agents can be kept near the reference controller with ``correction_cost`` (w ≥ 0, default 0):
+the wrapper subtracts w · mean_k(a_k²) from each robot's reward (a ∈ [−1, 1]³ the clipped action; so
+at most w per step), an L2 cost on the correction's size. Without it nothing in ``Azimut-v1``'s reward
+ties the correction to zero where the reference is already near the reward's optimum (on a lap at the
+track's speed the reward is nearly flat in small corrections), and the policy's mean drifts with the
+noise of the advantage estimates. Residual RL: Johannink et al., *Residual Reinforcement Learning for
+Robot Control*, ICRA 2019; Silver et al., *Residual Policy Learning*, arXiv:1812.06298 (2018).
+
 ``info`` gains ``controller_mode`` (N,) (an ``icr_controller.Mode`` value, −1 for the baseline),
 ``limit_exceeded`` (N,) (whether the commands exceeded a commanded actuator limit),
 ``target_held`` (N,) (the shaped target was held at a steering stop or axis cap this step: why the
@@ -86,6 +94,8 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         target_rate [rad/s]: fastest motion of a shaped absolute target on the sphere.
         cross_push [rad]: arc a target must keep pushing past a steering stop before it crosses.
         icr_config, swerve_config, follower_config: tuning of the controllers and the follower.
+        correction_cost: weight w of the residual's correction cost (see the module docstring;
+            ``residual`` only, default 0: none).
     """
 
     def __init__(self, env: gym.vector.VectorEnv, action: str = "icr_target", controller: str = "icr",
@@ -94,13 +104,19 @@ class VectorControllerAction(gym.vector.VectorWrapper):
                  mu_accel: float = 2.0, shape_targets: bool = True, target_rate: float = 3.0,
                  cross_push: float = 0.6, icr_config: ICRControllerConfig | None = None,
                  swerve_config: SwerveConfig | None = None, follower_config: PathFollowerConfig | None = None,
-                 signed_mu: bool = False) -> None:
+                 signed_mu: bool = False, correction_cost: float = 0.0) -> None:
         super().__init__(env)
         if not isinstance(action, str) or action not in ACTION_KINDS:
             raise ValueError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
         if (not isinstance(controller, str) or controller not in ("icr", "swerve")
                 or (action != "twist" and controller != "icr")):
             raise ValueError(f"controller must be 'icr' (or 'swerve' for twists), got {controller!r}")
+        if isinstance(correction_cost, bool) or not isinstance(correction_cost, (int, float)) \
+                or not (np.isfinite(correction_cost) and correction_cost >= 0.0):
+            raise ValueError(f"correction_cost must be a finite number >= 0, got {correction_cost!r}")
+        if correction_cost and action != "residual":
+            raise ValueError(f"correction_cost applies to the residual action space only, not {action!r}")
+        self.correction_cost = float(correction_cost)
         base = env.unwrapped
         missing = missing_members(base, VectorControllerInterface)
         if missing:
@@ -165,6 +181,11 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             if self.controller.icr is not None:
                 self.last_command = cmd
         obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(beta_c, phidot_c))
+        if self.correction_cost:
+            cost = np.zeros(N)
+            cost[active] = self.correction_cost * np.mean(a[active] ** 2, axis=1)
+            reward = reward - cost
+            info = dict(info, correction_cost=cost, _correction_cost=np.ones(N, dtype=np.bool_))
         done = terminated | truncated
         if base.autoreset_mode == AutoresetMode.SAME_STEP:
             self._reset_controllers(done)

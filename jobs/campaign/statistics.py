@@ -4,6 +4,13 @@
 (e.g. controller × track) and metric. The percentile bootstrap is Efron & Tibshirani, *An
 Introduction to the Bootstrap* (1993), ch. 13; reporting intervals over seeds follows Agarwal et
 al., *Deep Reinforcement Learning at the Edge of the Statistical Precipice* (NeurIPS 2021).
+
+Trained agents over training seeds (the rliable protocol of Agarwal et al. 2021): :func:`iqm`, the
+interquartile mean (the mean of the middle 50% of the scores, as ``scipy.stats.trim_mean(x, 0.25)``:
+``k = floor(n/4)`` scores cut at each end of the sorted n), and :func:`stratified_bootstrap_iqm`,
+its 95% percentile interval from the stratified bootstrap: each resample draws, for every task
+(track) independently, as many runs (training seeds) as that task has, with replacement, and
+takes the IQM of all the drawn scores together. One task gives the plain bootstrap of the IQM.
 """
 
 from __future__ import annotations
@@ -16,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["bootstrap_ci", "summarize"]
+__all__ = ["bootstrap_ci", "summarize", "iqm", "stratified_bootstrap_iqm"]
 
 
 def bootstrap_ci(values: Iterable[float], *, level: float = 0.95, n_resamples: int = 10_000,
@@ -78,3 +85,49 @@ def summarize(rows: Sequence[Mapping[str, Any]], group_by: Sequence[str], metric
         cell["metrics"] = stats
         out.append(cell)
     return out
+
+
+def _trimmed_mean_rows(x: np.ndarray) -> np.ndarray:
+    """IQM of each row of ``x`` (R, n): the mean of the sorted row without its ``floor(n/4)``
+    smallest and largest entries."""
+    n = x.shape[-1]
+    k = int(0.25 * n)
+    return np.sort(x, axis=-1)[..., k:n - k].mean(axis=-1)
+
+
+def iqm(values: Iterable[float]) -> float:
+    """Interquartile mean of ``values`` (flattened; NaN and inf left out; NaN if none is left):
+    ``scipy.stats.trim_mean(values, 0.25)``, the aggregate of Agarwal et al. (NeurIPS 2021)."""
+    x = np.asarray(list(values) if not isinstance(values, np.ndarray) else values, dtype=np.float64).ravel()
+    x = x[np.isfinite(x)]
+    return float(_trimmed_mean_rows(x[None, :])[0]) if x.size else math.nan
+
+
+def stratified_bootstrap_iqm(scores: Sequence[Sequence[float]], *, level: float = 0.95, n_resamples: int = 10_000,
+                             seed: int = 0) -> dict:
+    """IQM over all runs and tasks of ``scores`` and its stratified-bootstrap percentile interval.
+
+    ``scores``: one sequence per task (stratum) of the runs' scores on it (e.g. per track, one
+    score per training seed, itself the mean over evaluation episodes); tasks may hold different
+    numbers of runs; NaN and inf are left out. Returns ``{"iqm", "lo", "hi", "n"}`` (``n``: the
+    scores used); a single score or all-equal scores give a zero-width interval, none gives NaNs.
+    The resampling is seeded (same scores, same interval)."""
+    if level <= 0.0 or level >= 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level!r}")
+    strata = [np.asarray([float(v) for v in task], dtype=np.float64) for task in scores]
+    strata = [t[np.isfinite(t)] for t in strata]
+    strata = [t for t in strata if t.size]
+    flat = np.concatenate(strata) if strata else np.zeros(0)
+    n = int(flat.size)
+    if n == 0:
+        return {"iqm": math.nan, "lo": math.nan, "hi": math.nan, "n": 0}
+    point = float(_trimmed_mean_rows(flat[None, :])[0])
+    if n == 1 or np.all(flat == flat[0]):
+        return {"iqm": point, "lo": point, "hi": point, "n": n}
+    rng = np.random.default_rng(seed)
+    r = int(n_resamples)
+    drawn = np.concatenate([t[rng.integers(0, t.size, size=(r, t.size))] for t in strata], axis=1)
+    stats = _trimmed_mean_rows(drawn)
+    alpha = (1.0 - level) / 2.0
+    lo, hi = np.quantile(stats, [alpha, 1.0 - alpha])
+    return {"iqm": point, "lo": float(lo), "hi": float(hi), "n": n}

@@ -51,7 +51,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-every", type=arg_int(0), default=200_000,
                         help="environment steps between checkpoints (default 200000; 0: none)")
     parser.add_argument("--time-limit", type=float, default=0.0,
-                        help="stop learning after this many minutes of wall time (default 0: no limit)")
+                        help="safety guard: stop learning after this many minutes of wall time and mark the run "
+                             "incomplete (run.json 'complete': false; reports leave it out); the budget is --steps "
+                             "(default 0: no guard)")
+    parser.add_argument("--correction-cost", type=float, default=0.0, metavar="W",
+                        help="residual action space only: subtract W x mean(action^2) from each step's reward, a "
+                             "cost on the correction's size that keeps the agent near the reference controller "
+                             "(default 0: none)")
     parser.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in --out")
     parser.add_argument("--hyperparams", default=None, help="JSON file of hyperparameters overriding the defaults")
     parser.add_argument("--torch-threads", type=arg_int(1, 256), default=1, help="torch CPU threads (default 1)")
@@ -70,6 +76,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def check_args(args: argparse.Namespace) -> None:
     if not (math.isfinite(args.time_limit) and args.time_limit >= 0):
         raise ValueError(f"--time-limit must be a finite number of minutes >= 0, got {args.time_limit}")
+    cost = args.correction_cost
+    if not (math.isfinite(cost) and cost >= 0):
+        raise ValueError(f"--correction-cost must be a finite number >= 0, got {cost}")
+    if cost and args.action != "residual":
+        raise ValueError(f"--correction-cost applies to --action residual only, not {args.action}")
     require_module("stable_baselines3", "azimut train")
     require_module("torch", "azimut train")
     if args.progress_bar:
@@ -136,8 +147,12 @@ def run(args: argparse.Namespace) -> int:
     record = train(args.algo, args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
                    tuple(args.eval_tracks), args.eval_every, args.checkpoint_every, args.resume, overrides,
                    args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
-                   time_limit_min=args.time_limit, record_extra={"provenance": provenance()})
+                   time_limit_min=args.time_limit, record_extra={"provenance": provenance()},
+                   correction_cost=args.correction_cost)
     write_learning_curve(Path(args.out), record)
+    if not record["complete"]:
+        print(f"INCOMPLETE: the --time-limit guard stopped learning at {record['num_timesteps']} of {args.steps} "
+              "steps (run.json 'complete': false)", flush=True)
     print(f"trained {record['num_timesteps']} steps in {record['learn_wall_s']:.0f} s "
           f"({record['steps_per_s_in_learn']:.0f} steps/s inside learn); model: {args.out}/model.zip", flush=True)
     for r in record["final_eval"]:

@@ -34,7 +34,7 @@ FINAL_COLUMNS = [("return", "{:.1f}", 1.0), ("completed", "{:.2f}", 1.0), ("rms_
 def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, num_robots: int,
                     eval_tracks: list[str], eval_every: int, checkpoint_every: int, overrides: dict | None,
                     time_limit_min: float, out: str, env_kwargs: dict | None = None, torch_threads: int = 1,
-                    resume: bool = False, quiet: bool = True) -> dict:
+                    resume: bool = False, quiet: bool = True, correction_cost: float = 0.0) -> dict:
     """Train one seed into ``out`` (with ``resume``, from its newest checkpoint when it has one
     and no final model); returns ``{"run": run.json, "evaluations": [...]}``."""
     import torch
@@ -49,7 +49,7 @@ def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, n
     record = train(algo, action, track, int(seed), int(steps), folder, int(num_robots), tuple(eval_tracks),
                    int(eval_every), int(checkpoint_every), resume, overrides, False, quiet,
                    env_kwargs=env_kwargs, time_limit_min=float(time_limit_min),
-                   record_extra={"provenance": provenance()})
+                   record_extra={"provenance": provenance()}, correction_cost=float(correction_cost))
     write_learning_curve(folder, record)
     evaluations = json.loads((folder / "evaluations.json").read_text())
     return {"run": record, "evaluations": evaluations}
@@ -66,6 +66,8 @@ def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kw
                "num_robots": args.num_robots, "eval_tracks": list(args.eval_tracks), "eval_every": args.eval_every,
                "checkpoint_every": args.checkpoint_every, "overrides": overrides,
                "time_limit_min": float(args.time_limit), "env_kwargs": env_kwargs}
+        if args.correction_cost:  # only when set: the keys (and so the saved tasks) of earlier runs stay valid
+            key["correction_cost"] = float(args.correction_cost)
         tasks.append(Task("jobs.training.seeds:train_seed_task", key,
                           extra={"out": str(out / f"seed_{seed}"), "torch_threads": args.torch_threads,
                                  "resume": bool(args.resume)},
@@ -147,7 +149,8 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
     def progress(done: int, total: int, task, rec: dict) -> None:
         if rec["status"] == "ok":
             run = rec["result"]["run"]
-            msg = (f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, evaluation mean return "
+            msg = ("" if run.get("complete", True) else "INCOMPLETE (time-limit guard): ") + (
+                   f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, evaluation mean return "
                    f"{rec['result']['evaluations'][-1]['mean_return']:.1f}")
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
@@ -162,7 +165,9 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
         print(f"azimut train: {exc}; run the same command with --resume", flush=True)
         return 130
     wall = time.perf_counter() - start
-    ok = [r for r in records if r["status"] == "ok"]
+    done = [r for r in records if r["status"] == "ok"]
+    ok = [r for r in done if r["result"]["run"].get("complete", True)]  # the --time-limit guard: left out
+    incomplete = [r for r in done if r not in ok]
     histories = [r["result"]["evaluations"] for r in ok]
     curve = learning_curve_stats(histories)
     final_rows: list[dict[str, Any]] = []
@@ -219,6 +224,11 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
     failed = [r for r in records if r["status"] != "ok"]
     if failed:
         lines += ["", "Failed seeds:", ""] + [f"- seed {r['key']['seed']}: {r.get('error')}" for r in failed]
+    if incomplete:
+        lines += ["", "Incomplete seeds (stopped by the --time-limit guard before the step budget; left out of the "
+                  "statistics above):", ""]
+        lines += [f"- seed {r['key']['seed']}: {r['result']['run']['num_timesteps']} of {args.steps} steps"
+                  for r in incomplete]
     lines += [""] + glossary_lines(["track", "seeds", *(k for k, _, _ in FINAL_COLUMNS)])
     lines += ["- **steps**: environment steps of training (all robots together) at the evaluation.",
               "- **mean return**: the evaluation return averaged over the evaluation tracks, then over the seeds."]
@@ -226,4 +236,4 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
         lines.append("- **95% interval**: the percentile-bootstrap interval of the mean over seeds.")
     (out / "report.md").write_text("\n".join(lines) + "\n")
     print(f"{len(ok)} of {len(records)} seeds trained; report written to {out}/report.md", flush=True)
-    return 0 if not failed else 1
+    return 0 if not failed and not incomplete else 1
