@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from azimut_env import ENV_ID
 from train.envs import action_key
 
 __all__ = ["EVAL_TRACKS", "latest_checkpoint", "train"]
@@ -116,7 +117,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
               "track": track, "seed": seed,
               "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
               "correction_cost": float(correction_cost), "eval_tracks": list(eval_tracks),
-              "hyperparams": hp, "hyperparams_version": hp_version, "env_id": "Azimut-v1", "env_kwargs": env_kwargs,
+              "hyperparams": hp, "hyperparams_version": hp_version, "env_id": ENV_ID, "env_kwargs": env_kwargs,
               "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
               "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
               "machine": f"{platform.node()} ({os.cpu_count()} CPUs, shared)", "final_eval": final["rows"],
