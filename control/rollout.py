@@ -189,7 +189,9 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
     num, n, dt, name = len(seeds), env.n, env.control_period, controller.name
     obs, _ = env.reset(seed=seeds, options=options)
     controller.reset(env, np.arange(num))
-    scale = float(getattr(controller, "speed_scale", 1.0) or 1.0)
+    scale = getattr(controller, "speed_scale", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"controller {name!r}: speed_scale must be a finite number > 0, got {scale!r}")
     lengths = [t.length for t in env.tracks]
     horizons = [int(math.ceil((max_time if max_time is not None else 3.0 * nominal_duration(t, scale) + 10.0) / dt))
                 for t in env.tracks]
