@@ -27,7 +27,7 @@ from control.controller import (
 from train.policy import model_file, policy_controller, policy_name
 
 __all__ = ["POLICY_PREFIXES", "is_policy", "arg_controllers", "controller_options", "build_controller",
-           "controller_name", "check_controllers"]
+           "check_controllers"]
 
 #: prefixes of trained policies in ``--controllers``
 POLICY_PREFIXES = ("ppo", "sac")
@@ -88,13 +88,6 @@ def build_controller(spec: str, speed_scale: float = 1.0) -> Controller:
     if is_policy(spec):
         return _cached(spec, tuple(sorted(options.items())))
     return make_controller(spec, **options)
-
-
-def controller_name(spec: str, speed_scale: float = 1.0) -> str:
-    """The name a spec's rows carry (a policy's without loading it)."""
-    if is_policy(spec):
-        return policy_name(spec.split(":", 1)[1])[0]
-    return build_controller(spec, speed_scale).name
 
 
 def check_controllers(specs: list[str], speed_scale: float = 1.0) -> dict[str, str]:
