@@ -363,8 +363,8 @@ def test_reconfigurations_end_when_wheels_stop_where_stiction_holds_them():
     """On the default ("paper") robot the steering's stiction and the tread hold a wheel at rest
     up to a few degrees from its target, beyond reconfig_tol: the controller resumes once the
     measured wheels have stopped within reconfig_hold_tol instead of waiting for the timeout."""
-    from control.rollout import run_episode
     from control.icr.config import ICRControllerConfig, Mode
+    from control.rollout import run_episode
 
     log = run_episode("icr", "figure8", seed=0, max_time=25.0)
     recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
