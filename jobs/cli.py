@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("jobs.estimate.command", "estimate the ICR, the H state and odometry from a recorded robot log "
                  "(CSV, ROS 2 bag, WPILib .wpilog)"),
     "train": ("jobs.training.command", "train an RL baseline (needs the [rl] extra)"),
+    "tune": ("jobs.training.tune", "search azimut train's hyperparameters with Optuna (the [tune] extra)"),
 }
 
 

@@ -46,11 +46,13 @@ class HeldOutEvalCallback(BaseCallback):
     """Every ``eval_every`` timesteps: one deterministic episode per held-out track with the
     current policy and the training VecNormalize statistics; logs ``eval/<track>/...`` and the
     mean return, appends the rows to ``out/evaluations.json``, and saves the best policy (highest
-    mean return) as ``best_model.zip`` + ``best_vecnormalize.pkl``."""
+    mean return) as ``best_model.zip`` + ``best_vecnormalize.pkl``; ``on_evaluation(entry)``
+    returning False stops learning (``stopped`` is then True)."""
 
     def __init__(self, tracks: list[str], eval_every: int, out: Path, algo: str, action: str, env_kwargs: dict,
-                 seed: int = 0, max_time: float | None = None) -> None:
+                 seed: int = 0, max_time: float | None = None, on_evaluation=None) -> None:
         super().__init__()
+        self.on_evaluation, self.stopped = on_evaluation, False
         self.max_time = max_time
         self.tracks, self.eval_every, self.out = list(tracks), int(eval_every), Path(out)
         self.algo, self.action, self.env_kwargs, self.seed = algo, action, dict(env_kwargs), int(seed)
@@ -104,6 +106,9 @@ class HeldOutEvalCallback(BaseCallback):
                             f"{'' if r['completed'] else ' (' + (r['error'] or 'not finished') + ')'}"
                             for r in entry["rows"])
         print(f"[eval @ {self.num_timesteps}] {summary}", flush=True)
+        if self.on_evaluation is not None and self.on_evaluation(entry) is False:
+            self.stopped = True
+            return False
         return True
 
 

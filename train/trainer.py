@@ -18,6 +18,7 @@ import math
 import os
 import platform
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,8 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
           eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
           resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
           env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None,
-          record_extra: dict[str, Any] | None = None, correction_cost: float = 0.0) -> dict:
+          record_extra: dict[str, Any] | None = None, correction_cost: float = 0.0,
+          on_evaluation: Callable[[dict], bool] | None = None) -> dict:
     """Train and save (see the module docstring); returns the run record (``run.json``), to which
     ``record_extra`` (e.g. the caller's provenance: package version, commit) is added.
 
@@ -50,6 +52,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     minutes of wall time and the record says ``"complete": false`` (a run that did not reach its
     step budget, which reports leave out). ``correction_cost`` is the residual action space's cost
     on the correction's size (:class:`~control.action_spaces.vector.VectorControllerAction`).
+    ``on_evaluation(entry)`` is called after each periodic evaluation (its ``evaluations.json``
+    entry); returning False stops learning there (``azimut tune``'s pruner): the record then says
+    ``"stopped": "on_evaluation"`` and ``"complete": false``.
 
     ``track`` is the training track (``random``: a new track per episode); ``eval_tracks`` the
     tracks of the periodic deterministic evaluations (every ``eval_every`` steps, and at the end);
@@ -95,7 +100,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     if time_limit_min > 0:
         callbacks.append(WallClockLimit(60.0 * time_limit_min))
     evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
-                                    env_kwargs, seed=seed, max_time=eval_max_time)
+                                    env_kwargs, seed=seed, max_time=eval_max_time, on_evaluation=on_evaluation)
     callbacks.append(evaluator)
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),
@@ -112,8 +117,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     final["final"] = True
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
-    complete = int(model.num_timesteps) >= int(steps)
-    record = {"complete": complete, "time_limit_min": time_limit_min, "algo": algo, "action": action,
+    complete = int(model.num_timesteps) >= int(steps) and not evaluator.stopped
+    record = {"complete": complete, "stopped": "on_evaluation" if evaluator.stopped else None,
+              "time_limit_min": time_limit_min, "algo": algo, "action": action,
               "track": track, "seed": seed,
               "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
               "correction_cost": float(correction_cost), "eval_tracks": list(eval_tracks),

@@ -332,6 +332,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                 "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args),
                 "exports": exports, "provenance": provenance()}
     write_campaign_report(out, rows, full, campaign, plots, compare)
+    from jobs.eval.agents import write_agents
+
+    write_agents(out, rows, controllers, tracks, n_resamples=args.bootstrap)  # agents over training seeds, if any
     n_failed = len(rows) - len(ok_rows)
     print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")
           + f" in {wall:.1f} s ({executor}, {args.workers} worker(s)); report written to {out}/report.md",

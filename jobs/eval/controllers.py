@@ -1,5 +1,8 @@
 """The controllers ``azimut eval --controllers`` takes, by spec (:mod:`control.controller`).
 
+``ppo:NAME=DIR`` with ``DIR`` an ``azimut train --seeds`` folder stands for its trained seeds,
+``ppo:NAME.s<n>=DIR/seed_<n>/model.zip`` each (:func:`jobs.eval.agents.expand_seed_folders`).
+
 Importing this module registers the trained-policy prefixes: ``ppo:PATH`` and ``sac:PATH`` (PATH
 the ``model.zip`` that ``azimut train`` wrote, or its run folder; its VecNormalize statistics
 beside it; needs the ``rl`` extra), or ``ppo:NAME=PATH`` to name it (default: the run folder's
@@ -59,6 +62,9 @@ def arg_controllers(text: str) -> list[str]:
                                          "package.module:Class")
     if len(set(items)) != len(items):
         raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+    from jobs.eval.agents import expand_seed_folders
+
+    items = expand_seed_folders(items)  # an azimut train --seeds folder: one policy per trained seed
     for item in items:
         if is_policy(item):
             _check_policy_file(item)

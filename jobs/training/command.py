@@ -29,7 +29,7 @@ from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_
 from train.envs import ACTIONS
 from train.trainer import EVAL_TRACKS, latest_checkpoint
 
-__all__ = ["add_arguments", "check_args", "run"]
+__all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,7 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "cost on the correction's size that keeps the agent near the reference controller "
                              "(default 0: none)")
     parser.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in --out")
-    parser.add_argument("--hyperparams", default=None, help="JSON file of hyperparameters overriding the defaults")
+    parser.add_argument("--hyperparams", default=None,
+                        help="JSON file of hyperparameters overriding the defaults: an object of keyword arguments, "
+                             "or the versioned best_hyperparams.json azimut tune writes")
     parser.add_argument("--torch-threads", type=arg_int(1, 256), default=1, help="torch CPU threads (default 1)")
     parser.add_argument("--progress-bar", action="store_true",
                         help="SB3's progress bar (needs tqdm and rich; otherwise a line per evaluation)")
@@ -95,8 +97,12 @@ def check_args(args: argparse.Namespace) -> None:
             data = json.loads(p.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: not valid JSON ({exc})") from None
-        if not isinstance(data, dict):
-            raise ValueError(f"--hyperparams {args.hyperparams}: expected a JSON object")
+        from train.tuning import read_hyperparams_file
+
+        try:  # a plain object of overrides, or the versioned file azimut tune writes
+            data = read_hyperparams_file(data, args.algo, args.action)
+        except ValueError as exc:
+            raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
     if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
         given = [flag for flag, value, default in (("--workers", args.workers, 1),
                                                    ("--executor", args.executor, "auto"),
@@ -123,6 +129,16 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
 
 
+def hyperparams_overrides(args: argparse.Namespace) -> dict | None:
+    """The overrides of ``--hyperparams`` (None without it): the file's object, or the
+    ``hyperparams`` of a versioned file that ``azimut tune`` wrote (checked in :func:`check_args`)."""
+    if not args.hyperparams:
+        return None
+    from train.tuning import read_hyperparams_file
+
+    return read_hyperparams_file(json.loads(Path(args.hyperparams).read_text()), args.algo, args.action)
+
+
 def _robot_kwargs(args: argparse.Namespace) -> dict:
     """The env keyword arguments of ``--robot``/``--robot-file`` (kept in run.json's env_kwargs,
     so the trained policy is evaluated on its robot)."""
@@ -143,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     from jobs.training.plots import write_learning_curve
     from train.trainer import train
 
-    overrides = json.loads(Path(args.hyperparams).read_text()) if args.hyperparams else None
+    overrides = hyperparams_overrides(args)
     record = train(args.algo, args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
                    tuple(args.eval_tracks), args.eval_every, args.checkpoint_every, args.resume, overrides,
                    args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
