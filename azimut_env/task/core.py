@@ -76,7 +76,6 @@ from azimut_env.task.reward import (
     RewardInput,
     charge_penalty,
     current_reward_terms,
-    fill_reward_inputs,
     reward_constants,
     reward_kernel,
     reward_weight_array,
@@ -404,10 +403,9 @@ class AzimutTask:
         cfg, summary = self.config, self.physics.summary
         check_track_limits(rows, self.track_out, self.track_length, cfg.max_lateral_error, self.off_track,
                            self.finished)
-        fill_reward_inputs(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
-                           summary[:, _RS_SLIP], summary[:, _RS_INTERNAL], action, self.prev_action, self.off_track,
-                           self.v_along, self.reward_inputs)
-        self._reward_kernel(rows, self.reward_inputs, self._reward_constants, self._weights, self.reward_terms,
+        self._reward_kernel(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
+                            summary[:, _RS_SLIP], summary[:, _RS_INTERNAL], action, self.prev_action, self.off_track,
+                            self.v_along, self.reward_inputs, self._reward_constants, self._weights, self.reward_terms,
                             self.reward)
         if rows is self._all:
             np.copyto(self.prev_action, action)

@@ -21,6 +21,7 @@ To add a key: a row here, with its reader.
 
 from __future__ import annotations
 
+import math
 import unicodedata
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -33,9 +34,14 @@ from azimut_env.physics.layout import RS, RS_POSE, RS_TWIST_BODY, WS, WS_FORCE
 if TYPE_CHECKING:
     from azimut_env.task.core import AzimutTask
 
-__all__ = ["InfoField", "INFO_FIELDS", "INFO_KEYS", "robot_info", "batch_info", "sub_info", "info_table", "true_eta"]
+__all__ = ["InfoField", "INFO_FIELDS", "INFO_KEYS", "KINDS", "robot_info", "batch_info", "sub_info", "info_table",
+           "true_eta"]
 
+# plain-int columns (numpy indexes with IntEnum members several µs slower, and this runs every step)
 _RS_SLIP, _RS_INTERNAL, _WS_BETA = int(RS.SLIP), int(RS.INTERNAL), int(WS.BETA)
+_RS_POSE = slice(int(RS_POSE.start), int(RS_POSE.stop))
+_RS_TWIST = np.array([int(c) for c in RS_TWIST_BODY], dtype=np.intp)
+_WS_FORCE = slice(int(WS_FORCE.start), int(WS_FORCE.stop))
 
 
 @njit(cache=True)
@@ -58,103 +64,146 @@ def _canonical_lambda(twist, mu, lam):
                 mu[i] = -m
 
 
+def _row_dots(x: np.ndarray) -> np.ndarray:
+    """(N,) each row's ``row @ row``, computed by NumPy's dot loop as the 1-D product is (so bit for
+    bit the same numbers): ``np.vecdot`` (NumPy 2), else a stacked matmul."""
+    vecdot = getattr(np, "vecdot", None)
+    return vecdot(x, x) if vecdot is not None else (x[:, None, :] @ x[:, :, None])[:, 0, 0]
+
+
 def true_eta(twist: np.ndarray) -> tuple[np.ndarray, Any]:
     """The true H state (λ, μ) of chassis twists ξ̇ = (ẋ, ẏ, θ̇) (3,) or (N, 3) in the chassis frame:
     ξ̇ = μ (v, −u, w), so λ ∝ (−ẏ, ẋ, θ̇) and μ = ‖ξ̇‖ ≥ 0, with the canonical sign at μ ≤ 1e-3 (as
     the estimate). Returns ((3,), float) or ((N, 3), (N,))."""
     tw = np.asarray(twist, dtype=np.float64)
-    batch = np.atleast_2d(tw)
-    mu = np.sqrt((batch[:, None, :] @ batch[:, :, None])[:, 0, 0])  # the dot product of ``twist @ twist``
-    lam = np.empty_like(batch)
-    _canonical_lambda(batch, mu, lam)
-    return (lam[0], float(mu[0])) if tw.ndim == 1 else (lam, mu)
+    if tw.ndim == 1:  # one robot (the single env, every step): the operations of a row of the batch
+        x, y, w = tw.tolist()
+        mu = math.sqrt(float(tw @ tw))
+        u, v, w = (-y / mu, x / mu, w / mu) if mu > 0 else (0.0, 0.0, 1.0)
+        if mu <= 1e-3 and (w if w != 0 else (u if u != 0 else v)) < 0:
+            u, v, w, mu = -u, -v, -w, -mu
+        return np.array([u, v, w]), mu
+    mu = np.sqrt(_row_dots(tw))
+    lam = np.empty_like(tw)
+    _canonical_lambda(tw, mu, lam)
+    return lam, mu
 
 
 class InfoField(NamedTuple):
     """One key of the info dict: a row of :data:`INFO_FIELDS`."""
 
     name: str
-    #: the value of one robot: ``()`` a scalar, ``(3,)``, ``(n,)``..., ``(λ (3,), μ ())`` a pair,
+    #: the value of one robot: ``()`` a scalar, ``(3,)``, ``(n,)``..., ``((3,), ())`` a pair (λ, μ),
     #: ``{term: ()}`` a dict by reward term
     shape: str
     unit: str
     doc: str
     #: present on the step whose physics blew up
     at_error: bool
-    #: ``read(task, rows)``: the value of robot ``rows`` (an int) or of every robot (``slice(None)``,
-    #: a leading axis); None for ``error``, which the env supplies
-    read: Callable[[AzimutTask, Any], Any] | None
+    #: ``source(task, rows)``: the values of robot ``rows`` (an int) or of every robot (``slice(None)``,
+    #: a leading robot axis), views where they can be; None for ``error``, which the env supplies
+    source: Callable[[AzimutTask, Any], Any] | None
+    #: how a robot's value and the batch are made from the source's: a key of :data:`KINDS`
+    kind: str
 
 
-def _reward_terms(task: AzimutTask, rows) -> dict[str, Any]:
-    if isinstance(rows, slice):
-        columns = task.reward_terms.T.copy()
-        return {name: columns[j] for j, name in enumerate(task.reward_names)}
-    return dict(zip(task.reward_names, task.reward_terms[rows].tolist()))
+def _copy(v):
+    return v.copy()
+
+
+def _one_pair(v):
+    return v[0].copy(), float(v[1])
+
+
+def _one_terms(v):
+    names, terms = v
+    return dict(zip(names, terms.tolist()))  # tolist: Python floats
+
+
+def _all_terms(v):
+    names, terms = v
+    columns = terms.T.copy()
+    return {name: columns[j] for j, name in enumerate(names)}
+
+
+#: kind -> (one robot's value from its source value, the batch from the source's batch)
+KINDS: dict[str, tuple[Callable, Callable]] = {
+    "array": (_copy, _copy),
+    "float": (float, _copy),
+    "bool": (bool, _copy),
+    "eta": (true_eta, true_eta),
+    "pair": (_one_pair, lambda v: (v[0].copy(), v[1].copy())),
+    "terms": (_one_terms, _all_terms),
+    "error": (None, None),
+}
+
+
+def _twist(t: AzimutTask, r) -> np.ndarray:
+    return t.physics.summary[r, _RS_TWIST]  # an index array: a copy
+
+
+def _pose_estimate(t: AzimutTask, r) -> np.ndarray:
+    return t.odometry.pose[r] if t.odometry is not None else t.physics.summary[r, _RS_POSE]
 
 
 _F = InfoField
 #: the info dict, key by key
 INFO_FIELDS: tuple[InfoField, ...] = (
     _F("pose", "(3,)", "m, m, rad", "true chassis pose (x, y, θ), world frame", False,
-       lambda t, r: t.physics.summary[r, RS_POSE].copy()),
-    _F("pose_estimate", "(3,)", "m, m, rad", "the pose the observation used (pose_source)", False,
-       lambda t, r: t.pose_estimates()[r]),
-    _F("twist", "(3,)", "m/s, rad/s", "true chassis twist (ẋ, ẏ, θ̇), chassis frame", False,
-       lambda t, r: t.physics.summary[r, RS_TWIST_BODY]),
-    _F("eta_true", "((3,), ())", "-, m/s", "true H state (λ, μ) of the twist, canonical sign", False,
-       lambda t, r: true_eta(t.physics.summary[r, RS_TWIST_BODY])),
+       lambda t, r: t.physics.summary[r, _RS_POSE], "array"),
+    _F("pose_estimate", "(3,)", "m, m, rad", "the pose the observation used (pose_source)", False, _pose_estimate,
+       "array"),
+    _F("twist", "(3,)", "m/s, rad/s", "true chassis twist (ẋ, ẏ, θ̇), chassis frame", False, _twist, "array"),
+    _F("eta_true", "((3,), ())", "-, m/s", "true H state (λ, μ) of the twist, canonical sign", False, _twist,
+       "eta"),
     _F("eta_hat", "((3,), ())", "-, m/s", "IT estimate (λ̂, μ̂), the observation's", False,
-       lambda t, r: (t.lam_hat[r].copy(), t.mu_hat[r].copy() if isinstance(r, slice) else float(t.mu_hat[r]))),
+       lambda t, r: (t.lam_hat[r], t.mu_hat[r]), "pair"),
     _F("beta_true", "(n,)", "rad", "true steering angles (wheel side of the spring)", False,
-       lambda t, r: t.physics.wheel_summary[r, :, _WS_BETA].copy()),
-    _F("beta_est", "(n,)", "rad", "S(λ̂): steering angles of the estimated ICR", False,
-       lambda t, r: t.beta_est[r].copy()),
+       lambda t, r: t.physics.wheel_summary[r, :, _WS_BETA], "array"),
+    _F("beta_est", "(n,)", "rad", "S(λ̂): steering angles of the estimated ICR", False, lambda t, r: t.beta_est[r],
+       "array"),
     _F("tire_forces", "(n, 2)", "N", "step-mean tire forces (F_x, F_y), chassis frame", False,
-       lambda t, r: t.physics.wheel_summary[r, :, WS_FORCE].copy()),
+       lambda t, r: t.physics.wheel_summary[r, :, _WS_FORCE], "array"),
     _F("slip_power", "()", "W", "step-mean tire slip power Σ abs(F·v_slip)", False,
-       lambda t, r: t.physics.summary[r, _RS_SLIP].copy()),
+       lambda t, r: t.physics.summary[r, _RS_SLIP], "float"),
     _F("internal_force", "()", "N", "step-mean internal force of the wheels", False,
-       lambda t, r: t.physics.summary[r, _RS_INTERNAL].copy()),
-    _F("qua", "()", "-", "qua of the measured steering angles (eq. 28–29)", False,
-       lambda t, r: t.qua[r].copy()),
-    _F("progress", "()", "m", "true progress along the track (unwrapped over laps)", False,
-       lambda t, r: t.s[r].copy()),
-    _F("lateral_error", "()", "m", "true distance to the path, positive to its left", False,
-       lambda t, r: t.lat[r].copy()),
-    _F("heading_error", "()", "rad", "true θ − θ_ref, wrapped", False, lambda t, r: t.head[r].copy()),
+       lambda t, r: t.physics.summary[r, _RS_INTERNAL], "float"),
+    _F("qua", "()", "-", "qua of the measured steering angles (eq. 28–29)", False, lambda t, r: t.qua[r], "float"),
+    _F("progress", "()", "m", "true progress along the track (unwrapped over laps)", False, lambda t, r: t.s[r],
+       "float"),
+    _F("lateral_error", "()", "m", "true distance to the path, positive to its left", False, lambda t, r: t.lat[r],
+       "float"),
+    _F("heading_error", "()", "rad", "true θ − θ_ref, wrapped", False, lambda t, r: t.head[r], "float"),
     _F("reward_terms", "{term: ()}", "-", "the reward terms of the step by name (0 at a reset)", True,
-       _reward_terms),
-    _F("off_track", "()", "bool", "the step left the track (terminated)", True, lambda t, r: t.off_track[r].copy()),
-    _F("finished", "()", "bool", "the step finished the track (terminated)", True, lambda t, r: t.finished[r].copy()),
-    _F("stalled", "()", "bool", "the step ended a stall (terminated)", True, lambda t, r: t.stalled[r].copy()),
-    _F("error", "()", "str", "the physics failure, only on the step that blew up", True, None),
+       lambda t, r: (t.reward_names, t.reward_terms[r]), "terms"),
+    _F("off_track", "()", "bool", "the step left the track (terminated)", True, lambda t, r: t.off_track[r], "bool"),
+    _F("finished", "()", "bool", "the step finished the track (terminated)", True, lambda t, r: t.finished[r],
+       "bool"),
+    _F("stalled", "()", "bool", "the step ended a stall (terminated)", True, lambda t, r: t.stalled[r], "bool"),
+    _F("error", "()", "str", "the physics failure, only on the step that blew up", True, None, "error"),
 )
 del _F
 
 #: the keys, in the order of the table
 INFO_KEYS = tuple(f.name for f in INFO_FIELDS)
-
-
-def _python(value: Any) -> Any:
-    """NumPy scalars (0-d) as Python ``float``/``bool``, inside pairs too."""
-    if isinstance(value, tuple):
-        return tuple(_python(v) for v in value)
-    if (isinstance(value, np.ndarray) and value.ndim == 0) or isinstance(value, np.generic):
-        return value.item()
-    return value
+# (name, at_error, source, one robot's value, the batch) of the keys the task holds, in the table's order
+_READERS = tuple((f.name, f.at_error, f.source, *KINDS[f.kind]) for f in INFO_FIELDS if f.source is not None)
+_ERROR = next(f.name for f in INFO_FIELDS if f.source is None)
 
 
 def robot_info(task: AzimutTask, i: int, error: str | None = None) -> dict[str, Any]:
-    """Robot i's info as the single env gives it (per-robot shapes); with ``error`` (its physics
-    blew up on this step) only the keys with ``at_error``, and ``error``."""
+    """Robot i's info as the single env gives it (per-robot shapes, scalars as Python ``float`` and
+    ``bool``); with ``error`` (its physics blew up on this step) only the keys with ``at_error``,
+    and ``error``."""
     out: dict[str, Any] = {}
-    for f in INFO_FIELDS:
-        if f.read is None:
-            if error is not None:
-                out[f.name] = error
-        elif error is None or f.at_error:
-            out[f.name] = _python(f.read(task, i))
+    last, values = None, None
+    for name, at_error, source, one, _ in _READERS:
+        if error is None or at_error:
+            if source is not last:  # consecutive keys of one source (twist, eta_true) read it once
+                last, values = source, source(task, i)
+            out[name] = one(values)
+    if error is not None:
+        out[_ERROR] = error
     return out
 
 
@@ -163,28 +212,32 @@ def batch_info(task: AzimutTask, errors: list[str | None] | None = None) -> dict
     ``"_key"``; ``errors`` (N,) the physics failure message of each robot whose physics blew up on
     this step (None elsewhere): those robots have only the keys with ``at_error``, and ``error``."""
     N = task.n_robots
-    errored = np.zeros(N, dtype=np.bool_)
-    if errors is not None:
-        errored = np.array([e is not None for e in errors], dtype=np.bool_)
-    fine = ~errored
-    every = np.ones(N, dtype=np.bool_)
+    errored = None if errors is None else np.array([e is not None for e in errors], dtype=np.bool_)
+    if errored is not None and not errored.any():
+        errored = None
+    masks = iter(np.ones((len(_READERS) + len(task.reward_names), N), dtype=np.bool_))  # a row per mask
     out: dict[str, Any] = {}
-    for f in INFO_FIELDS:
-        if f.read is None:
-            if errored.any():
-                err = np.full(N, None, dtype=object)
-                for i in np.flatnonzero(errored):
-                    err[i] = errors[i]
-                out[f.name] = err
-                out["_" + f.name] = errored
-            continue
-        value = f.read(task, slice(None))
-        mask = every.copy() if f.at_error else fine.copy()
-        if isinstance(value, dict):
-            for name in list(value):
-                value["_" + name] = mask.copy()
-        out[f.name] = value
-        out["_" + f.name] = mask
+    last, values, everyone = None, None, slice(None)
+    for name, at_error, source, _, batch in _READERS:
+        if source is not last:
+            last, values = source, source(task, everyone)
+        value = batch(values)
+        if isinstance(value, dict):  # the reward terms, each with its mask
+            for key in list(value):
+                value["_" + key] = next(masks)
+                if errored is not None and not at_error:
+                    value["_" + key][:] = ~errored
+        mask = next(masks)
+        if errored is not None and not at_error:
+            mask[:] = ~errored
+        out[name] = value
+        out["_" + name] = mask
+    if errored is not None:
+        err = np.full(N, None, dtype=object)
+        for i in np.flatnonzero(errored):
+            err[i] = errors[i]
+        out[_ERROR] = err
+        out["_" + _ERROR] = errored
     return out
 
 
@@ -194,13 +247,16 @@ def _item(value: Any, i: int) -> Any:
     if isinstance(value, dict):
         return {k: _item(v, i) for k, v in value.items() if not k.startswith("_") and value["_" + k][i]}
     x = value[i]
-    return x.copy() if isinstance(x, np.ndarray) else _python(x)
+    if isinstance(x, np.ndarray):
+        return x.copy()
+    return x.item() if isinstance(x, np.generic) else x
 
 
 def sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:
     """Sub-env i's entries of a batched info (:func:`batch_info`'s convention): the keys whose mask
-    holds i, each value without the leading axis (0-d values as Python scalars)."""
-    return {k: _item(v, i) for k, v in info.items() if not k.startswith("_") and f"_{k}" in info and info[f"_{k}"][i]}
+    holds i, each value without the leading axis (NumPy scalars as Python ones)."""
+    return {k: _item(v, i) for k, v in info.items()
+            if not k.startswith("_") and f"_{k}" in info and info[f"_{k}"][i]}
 
 
 def info_table() -> str:

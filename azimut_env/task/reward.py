@@ -27,9 +27,9 @@ term's weight ``w``. With v_max the track's top reference speed and dt the contr
 quantity no term reads yet also adds a column to :class:`RewardInput` (and its value to
 :func:`fill_reward_inputs`) or to :class:`RewardConstant` (and to :func:`reward_constants`).
 
-Data flow (:meth:`~azimut_env.task.core.AzimutTask.observe`): :func:`fill_reward_inputs` writes
-each robot's inputs, then :func:`reward_kernel`'s compiled function, generated from the table
-(one call of each term's function per robot, then the sum), writes the terms and the reward.
+Data flow (:meth:`~azimut_env.task.core.AzimutTask.observe`): one call of :func:`reward_kernel`'s
+compiled function, generated from the table: :func:`fill_reward_inputs` writes each robot's
+inputs, then each term's function per robot, then the sum, into the terms and the reward.
 """
 
 from __future__ import annotations
@@ -305,14 +305,15 @@ _KERNELS: dict[tuple, Callable] = {}
 
 
 def reward_kernel(terms: tuple[RewardTerm, ...] | None = None) -> Callable:
-    """The compiled ``kernel(rows, x, k, weights, terms_out, reward)`` of a table (default: the
-    module's :data:`REWARD_TERMS` as it is now): for the robots where ``rows`` is True, each
-    term's function on the robot's inputs ``x[i]`` into ``terms_out[i, j]`` (N, len(terms)), and
-    their sum in the table's order into ``reward[i]``.
+    """The compiled reward stage of a table (default: the module's :data:`REWARD_TERMS` as it is
+    now), ``kernel(rows, <the inputs of fill_reward_inputs>, x, k, weights, terms_out, reward)``:
+    :func:`fill_reward_inputs` into ``x``, then for the robots where ``rows`` is True each term's
+    function on the robot's inputs ``x[i]`` into ``terms_out[i, j]`` (N, len(terms)), and their sum
+    in the table's order into ``reward[i]``; one compiled call per step.
 
     Its source is generated from the table (one line per term), so that adding a term is a row and
     a function. It is cached on disk by numba as if it were defined in this file, under a name that
-    hashes its source and the source of every term's function: an edited term gets a new kernel,
+    hashes its source and the source of every function it calls: an edited term gets a new kernel,
     never a stale one (a function without retrievable source is compiled without the disk cache)."""
     terms = _table(terms)
     key = tuple((t.name, t.function) for t in terms)
@@ -323,8 +324,13 @@ def reward_kernel(terms: tuple[RewardTerm, ...] | None = None) -> Callable:
     return kernel
 
 
+_FILL_ARGS = ("rows, track_state, s_prev, vel_world, max_speeds, slip, internal, action, prev_action, off_track, "
+              "v_along, x")
+
+
 def _compile_kernel(terms: tuple[RewardTerm, ...]) -> Callable:
-    body = ["(rows, x, k, weights, terms, reward):",
+    body = [f"({_FILL_ARGS}, k, weights, terms, reward):",
+            f"    _fill_inputs({_FILL_ARGS})",
             "    for i in range(rows.shape[0]):",
             "        if not rows[i]:",
             "            continue",
@@ -335,14 +341,16 @@ def _compile_kernel(terms: tuple[RewardTerm, ...]) -> Callable:
              "            total += terms[i, j]",
              "        reward[i] = total"]
     body_src = "\n".join(body)
+    called = [fill_reward_inputs, speed_along] + [t.function for t in terms]
     try:
-        sources = [inspect.getsource(t.function.py_func) for t in terms]
+        sources = [inspect.getsource(f.py_func) for f in called]
         cache = True
     except (OSError, TypeError):
         sources, cache = [], False
     digest = hashlib.sha256("\n".join([body_src, *sources]).encode()).hexdigest()[:16]
     name = f"_reward_kernel_{digest}"
     namespace = {f"_term_{j}": t.function for j, t in enumerate(terms)}
+    namespace["_fill_inputs"] = fill_reward_inputs
     namespace["__name__"] = __name__
     # compiled under this file's name: numba's disk cache needs a source file to key its index on
     exec(compile(f"def {name}{body_src}\n", __file__, "exec"), namespace)

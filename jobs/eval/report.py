@@ -109,7 +109,7 @@ def _statistics_sentence(cells: list[dict], campaign: dict) -> str:
     if any(interval_shown(s) for c in cells for s in c["metrics"].values() if isinstance(s, dict)):
         return (f"Mean over the {n_seeds} seeds and, in brackets, the {100 * campaign['level']:.0f}% "
                 f"percentile-bootstrap interval of the mean ({campaign['n_resamples']} resamples, seeded; no bracket "
-                f"where every seed gave the same value){failed}.")
+                f"where fewer than two seeds have a value or all gave the same){failed}.")
     if n_seeds == 1:
         return f"One seed: each cell is that episode's value (no interval: run several seeds with --seeds){failed}."
     return f"Mean over the {n_seeds} seeds, which gave the same value in every cell (no interval){failed}."

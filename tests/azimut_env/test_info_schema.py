@@ -121,3 +121,15 @@ def test_true_eta_is_the_canonical_h_state_of_the_twist(twist):
         assert lam.tolist() == [0.0, 0.0, 1.0] and mu == 0.0
     batch_lam, batch_mu = true_eta(np.array([twist, twist]))
     assert batch_lam.shape == (2, 3) and np.array_equal(batch_lam[1], lam) and batch_mu[1] == mu
+
+
+def test_true_eta_of_one_robot_is_its_row_of_the_batch_bit_for_bit():
+    """The single env's path (one twist) and the vector env's (a batch) are two codings of one
+    formula; they must give the same bits, tiny twists (the sign rule) and zeros included."""
+    rng = np.random.default_rng(0)
+    tw = np.concatenate([rng.normal(size=(2000, 3)), 1e-4 * rng.normal(size=(2000, 3)),
+                         np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1e-5], [-1e-5, 0.0, 0.0], [0.0, -2e-4, 0.0]])])
+    lam, mu = true_eta(tw)
+    for i in range(tw.shape[0]):
+        one_lam, one_mu = true_eta(tw[i])
+        assert one_lam.tobytes() == lam[i].tobytes() and np.float64(one_mu).tobytes() == mu[i].tobytes(), tw[i]
