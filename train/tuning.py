@@ -115,6 +115,14 @@ def best_hyperparams_file(study, algo: str, action: str, path: Path, extra: dict
     return data
 
 
+def hyperparams_overrides(path: str | None, algo: str, action: str) -> dict | None:
+    """The overrides of the ``--hyperparams`` file ``path`` (None without one), read by
+    :func:`read_hyperparams_file`; ``azimut train`` and its seeds campaign both read them here."""
+    if not path:
+        return None
+    return read_hyperparams_file(json.loads(Path(path).read_text()), algo, action)
+
+
 def read_hyperparams_file(data: Any, algo: str, action: str) -> dict:
     """The overrides in a ``--hyperparams`` file's JSON ``data``: a plain object of keyword
     arguments, or a versioned file of :func:`best_hyperparams_file` (``format``

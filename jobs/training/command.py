@@ -132,11 +132,9 @@ def check_args(args: argparse.Namespace) -> None:
 def hyperparams_overrides(args: argparse.Namespace) -> dict | None:
     """The overrides of ``--hyperparams`` (None without it): the file's object, or the
     ``hyperparams`` of a versioned file that ``azimut tune`` wrote (checked in :func:`check_args`)."""
-    if not args.hyperparams:
-        return None
-    from train.tuning import read_hyperparams_file
+    from train.tuning import hyperparams_overrides as read_overrides
 
-    return read_hyperparams_file(json.loads(Path(args.hyperparams).read_text()), args.algo, args.action)
+    return read_overrides(args.hyperparams, args.algo, args.action)
 
 
 def _robot_kwargs(args: argparse.Namespace) -> dict:

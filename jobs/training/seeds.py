@@ -58,9 +58,9 @@ def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, n
 def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kwargs: dict | None = None) -> list:
     """One campaign task per seed; the key holds what changes the result, ``out`` does not."""
     from jobs.campaign.engine import Task
-    from jobs.training.command import hyperparams_overrides
+    from train.tuning import hyperparams_overrides
 
-    overrides = hyperparams_overrides(args)
+    overrides = hyperparams_overrides(args.hyperparams, args.algo, args.action)
     tasks = []
     for seed in seeds:
         key = {"algo": args.algo, "action": args.action, "track": args.track, "seed": int(seed), "steps": args.steps,
