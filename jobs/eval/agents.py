@@ -196,7 +196,13 @@ def agent_section(summary: dict, rows: list[dict], tracks: Sequence[str], refere
         lines += [f"- {g}: {b['met']} of {b['seeds']} seeds ("
                   + ", ".join(f"s{s} {'met' if ok else 'not met'}" for s, ok in b["by_seed"].items()) + ")"
                   for g, b in bars.items()]
-    return lines
+    from jobs.glossary import GLOSSARY, Column, glossary_lines
+
+    columns = {"agent": Column("agent", "an agent group NAME (its training seeds NAME.s<n>) or a reference controller"),
+               "seeds": Column("seeds", "the training seeds of the group with an episode on the track"),
+               "seeds × tracks": Column("seeds × tracks", "the scores the aggregate is taken over"),
+               **{k: GLOSSARY.get(k, Column(h, "the episodes' metric of that name")) for k, h, *_ in metrics}}
+    return lines + [""] + glossary_lines(columns, columns, "### Columns of this section")
 
 
 def write_agents(out: Path, rows: list[dict], names: Sequence[str], tracks: Sequence[str],
