@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from azimut_env.physics.layout import CMD
+from azimut_env.validation import check_fields
 from azimut_env.validation import check_positive_fields as _check_positive
 
 __all__ = ["ActuatorLimits", "setpoints_from_action", "action_from_setpoints", "setpoints_row"]
@@ -52,6 +53,7 @@ class ActuatorLimits:
     steer_max: float = math.pi / 2
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "steer_rate_max", "steer_accel_max", "steer_torque_max", "wheel_speed_max",
                         "wheel_accel_max", "wheel_torque_max")
         if self.unlimited_steering:

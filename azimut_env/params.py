@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from azimut_env.action_map import ActuatorLimits, action_from_setpoints, setpoints_from_action
+from azimut_env.validation import check_fields
 from azimut_env.validation import check_positive_fields as _check_positive
 from estimation.geometry import RobotGeometry
 
@@ -78,6 +79,7 @@ class SteeringParams:
     com_offset: float = 0.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "stiffness", "position_gain", "module_mass", "module_inertia", "stribeck_speed")
         _check_positive(self, "damping", "friction_coulomb", "friction_static", "com_offset", allow_zero=True)
         if not (math.isfinite(self.stop_restitution) and 0.0 <= self.stop_restitution <= 1.0):
@@ -126,6 +128,7 @@ class SteeringMotorParams:
     rotor_inertia: float = 0.025
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.model not in ("kinematic", "dc"):
             raise ValueError(f"SteeringMotorParams.model must be 'kinematic' or 'dc', got {self.model!r}")
         _check_positive(self, "stall_torque", "no_load_speed", "rotor_inertia")
@@ -174,6 +177,7 @@ class WheelParams:
     drive_no_load_speed: float = 22.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "inertia", "velocity_gain", "drive_stall_torque", "drive_no_load_speed")
         _check_positive(self, "bearing_damping", allow_zero=True)
         if self.drive_model not in ("current_limit", "dc"):
@@ -232,6 +236,7 @@ class TireParams:
     rolling_knee: float = 0.02
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "friction", "cornering_stiffness", "longitudinal_stiffness", "relaxation_length",
                         "longitudinal_relaxation_length", "contact_half_length", "rolling_knee")
         _check_positive(self, "rolling_resistance", "damping_time", allow_zero=True)
@@ -264,6 +269,7 @@ class ChassisParams:
     com_height: float = 0.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "mass", "length", "width")
         _check_positive(self, "com_height", allow_zero=True)
 
@@ -296,6 +302,7 @@ class SensorParams:
     steer_bias: float = 0.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "steer_noise", "steer_resolution", "motor_noise", "wheel_speed_noise", "steer_bias",
                         allow_zero=True)
         if int(self.wheel_cpr) != self.wheel_cpr or self.wheel_cpr < 0:
@@ -349,6 +356,7 @@ class ImperfectionParams:
     radius_error_std: float = 0.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _per_wheel(self, "steer_offset", 0.1)
         _per_wheel(self, "radius_error", 0.1)
         _check_positive(self, "steer_offset_std", "radius_error_std", allow_zero=True)
@@ -394,6 +402,7 @@ class RobotParams:
     gravity: float = 9.81
 
     def __post_init__(self) -> None:
+        check_fields(self)
         _check_positive(self, "gravity")
         g = self.geometry
         if not isinstance(g, RobotGeometry):

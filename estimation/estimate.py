@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,6 +13,7 @@ from estimation.kinematics import _eta_kernel
 from estimation.operational import ls_kernel_batch, ne_kernel_batch, ns_batch
 from estimation.oracle import OracleParams, oracle_kernel_batch, oracle_tables
 from estimation.quality import QUALITY_F
+from estimation.validation import check_nonnegative
 
 __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "IT_BEST", "IT_PAPER"]
 
@@ -191,9 +191,7 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         the ICR.
     """
     _check_method(method)
-    if isinstance(mu_tol, (bool, np.bool_)) or not isinstance(mu_tol, (int, float, np.integer, np.floating)) \
-            or not (math.isfinite(mu_tol) and mu_tol >= 0):
-        raise ValueError(f"mu_tol must be a finite number >= 0 [m/s], got {mu_tol!r}")
+    mu_tol = check_nonnegative("mu_tol [m/s]", mu_tol)
     flat, batch = _prepare(q, geom)
     ph = np.array(_real_array(phidot, "phidot"), dtype=np.float64)  # a private copy: the kernel scales it in place
     if ph.shape != np.shape(q):

@@ -47,6 +47,7 @@ from estimation.kinematics import (
     _steering_dist2,
     _steering_dist2_upto,
 )
+from estimation.validation import check_fields
 
 __all__ = ["ITParams", "it_kernel_batch"]
 
@@ -92,6 +93,7 @@ class ITParams:
         return -1 if self.race_iter is None else int(self.race_iter)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("eps_delta", "eps_lambda", "min_step"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):

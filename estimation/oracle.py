@@ -17,6 +17,7 @@ from numba import njit
 from estimation.geometry import RobotGeometry
 from estimation.it import _descend, _starting_points, _workspace
 from estimation.kinematics import _steering_dist2, steering_from_lambda
+from estimation.validation import check_fields
 
 __all__ = ["OracleParams", "oracle_grid", "oracle_kernel_batch"]
 
@@ -40,6 +41,7 @@ class OracleParams:
     refine: int = 12
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name, low in (("grid_points", 2), ("ring_points", 0), ("refine", 1)):
             value = getattr(self, name)
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):

@@ -8,6 +8,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
+from estimation.validation import check_range
+
 __all__ = ["QUALITY_F", "quality", "joint_distance_metric"]
 
 #: Scaling factor f of eq. (29) used for every result of the paper.
@@ -93,8 +95,6 @@ def quality(beta_est, q, f: float = QUALITY_F) -> np.ndarray:
 
     Returns a 0-d array for one configuration, (N,) for a batch.
     """
-    if isinstance(f, (bool, np.bool_)) or not isinstance(f, (int, float, np.integer, np.floating)) \
-            or not (math.isfinite(f) and f >= 1):
-        raise ValueError(f"f must be a finite number >= 1, got {f!r}")
+    f = check_range("f", f, 1.0)
     m, batch = _metric(beta_est, q)
     return np.clip(1.0 - np.log1p(f * m) / math.log1p(f), 0.0, 1.0).reshape(batch)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from azimut_env.validation import check_positive
+from azimut_env.validation import check_fields, check_positive
 
 __all__ = ["BlowUp", "BlowUpLimits", "BLOWUP_MESSAGES"]
 
@@ -47,5 +47,6 @@ class BlowUpLimits:
     position: float = 1e4
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("speed", "spin", "yaw_rate", "position"):  # NaN would disarm the check
             object.__setattr__(self, name, check_positive(f"BlowUpLimits.{name}", getattr(self, name)))

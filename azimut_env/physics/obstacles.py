@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
+from azimut_env.validation import check_fields
+
 __all__ = ["Obstacle", "add_obstacle_shape", "add_robot_shape", "overlapping_shapes"]
 
 #: Collision categories: robots collide with obstacles only, never with each other.
@@ -37,6 +39,7 @@ class Obstacle:
     vertices: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.vertices:
             if len(self.vertices) < 3 or not np.all(np.isfinite(np.asarray(self.vertices, dtype=float))):
                 raise ValueError("Obstacle polygon needs >= 3 finite vertices")

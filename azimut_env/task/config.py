@@ -21,7 +21,7 @@ from typing import Any
 from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.localisation import LocalisationParams, check_pose_source
 from azimut_env.task.reward import OFF_TRACK, check_reward_weights, default_reward_weights
-from azimut_env.validation import check_int, check_nonnegative, check_positive, check_range
+from azimut_env.validation import check_fields, check_int, check_nonnegative, check_positive, check_range
 
 __all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS",
            "LEGACY_WEIGHT_KEYWORDS"]
@@ -86,6 +86,7 @@ class TaskConfig:
     localisation: LocalisationParams = field(default_factory=LocalisationParams)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         # every field checked (and stored as its canonical type) here, once, with the field's name
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
         # 0.1 ms .. 1 s: below, step counts of the time limit overflow and the render rate is absurd
@@ -169,7 +170,8 @@ def task_settings(params: RobotParams | None = None, sensors: SensorParams | str
         raise TypeError(f"unexpected keyword argument(s) {unknown}: the env takes track, robot, params, "
                         f"imperfections, sensors, "
                         f"noise_scale, obstacles, render_mode and the TaskConfig fields {list(TASK_CONFIG_FIELDS)}")
-    config["localisation"] = config.get("localisation") or LocalisationParams()
+    if config.get("localisation") is None:  # only None means the default; a falsy 0, "" or [] is refused
+        config["localisation"] = LocalisationParams()
     return params, TaskConfig(**config)
 
 

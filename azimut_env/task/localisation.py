@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from azimut_env.tracks import TQ
-from azimut_env.validation import check_nonnegative, check_range
+from azimut_env.validation import check_fields, check_nonnegative, check_range
 from estimation import integrate_pose, odometry_twist
 
 __all__ = ["POSE_SOURCES", "LocalisationParams", "check_pose_source", "OdometryPoses"]
@@ -62,6 +62,7 @@ class LocalisationParams:
     fix_noise_theta_rad: float = 0.01
 
     def __post_init__(self) -> None:
+        check_fields(self)
         fp = self.fix_period_s
         if not (isinstance(fp, (int, float)) and not isinstance(fp, bool) and (fp == math.inf or
                                                                                  (math.isfinite(fp) and fp > 0))):

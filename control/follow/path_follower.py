@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from azimut_env.tracks import Track, wrap_angle
+from azimut_env.validation import check_fields
 from estimation.hrep import eta_from_twist
 
 __all__ = ["PathFollowerConfig", "PathFollower", "FollowerOutput"]
@@ -86,6 +87,7 @@ class PathFollowerConfig:
     speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("k_int", "moving_speed", "preview", "preview_min"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_bool, check_int, check_positive, check_range
+from azimut_env.validation import check_bool, check_fields, check_int, check_positive, check_range
 
 __all__ = ["Mode", "Event", "ICRControllerConfig"]
 
@@ -114,6 +114,7 @@ class ICRControllerConfig:
     mu_own_scale: bool = False
 
     def __post_init__(self) -> None:
+        check_fields(self)
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
         for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",

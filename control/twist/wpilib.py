@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_bool
+from azimut_env.validation import check_bool, check_fields
 from control.commands import WheelCommand
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
@@ -74,6 +74,7 @@ class SwerveConfig:
     coupling: bool = False
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling"):
             object.__setattr__(self, name, check_bool(f"SwerveConfig.{name}", getattr(self, name)))
         if not (math.isfinite(self.speed_deadband) and self.speed_deadband >= 0):

@@ -265,43 +265,64 @@ test_wrappers, test_wrappers_slow = _profiles(
 
 
 def _config_classes():
+    """Every config dataclass of the libraries (frozen, every init field with a default), found by
+    walking the packages: a new class or field is fuzzed without editing this file."""
     import dataclasses
+    import pkgutil
 
-    import azimut_env.physics.engine as physics
-    import azimut_env.task.core as task
-    import azimut_env.task.localisation as localisation
-    import control.follow.path_follower as path_follower
-    import control.icr.controller as icr_controller
-    import control.twist.wpilib as swerve
-    from azimut_env import params
-    from estimation import it, oracle
+    import azimut_env
+    import control
+    import estimation
 
-    classes = [params.ActuatorLimits, params.SteeringParams, params.SteeringMotorParams, params.WheelParams,
-               params.TireParams, params.ChassisParams, params.SensorParams, params.RobotParams, task.TaskConfig,
-               localisation.LocalisationParams, physics.BlowUpLimits, icr_controller.ICRControllerConfig,
-               swerve.SwerveConfig, path_follower.PathFollowerConfig, it.ITParams, oracle.OracleParams]
-    return [(c, f.name) for c in classes for f in dataclasses.fields(c) if f.init]
+    classes = []
+    for pkg in (estimation, azimut_env, control):
+        for info in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
+            module = importlib.import_module(info.name)
+            for obj in vars(module).values():
+                if inspect.isclass(obj) and dataclasses.is_dataclass(obj) and obj.__module__ == module.__name__ \
+                        and obj.__dataclass_params__.frozen \
+                        and all(f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+                                for f in dataclasses.fields(obj) if f.init):
+                    classes.append(obj)
+    return [(c, f.name, str(f.type)) for c in classes for f in dataclasses.fields(c) if f.init]
 
 
 CONFIG_FIELDS = _config_classes()
+#: what a field of each annotation must hold once accepted (the canonical Python type, never a
+#: bool for a number, a NumPy scalar or a 0-d array)
+STORED = {"float": (float,), "int": (int,), "bool": (bool,), "str": (str,)}
+numbers_at_entry = st.one_of(
+    st.just(10**400), st.just(-10**400), st.just(2**63), st.just(True), st.just(np.True_), st.just(np.False_),
+    st.sampled_from([np.array(0.3), np.array(2), np.array(True), np.array(1 + 1j), np.array("1"), np.array([0.5])]),
+    st.sampled_from([np.float32(0.5), np.float16(2), np.int8(3), np.uint64(2**63), np.complex128(1),
+                     np.longdouble(0.25), "0.5", b"1", 1j]),
+    st.floats(allow_nan=True, allow_infinity=True), st.integers(-5, 5))
 
 
 def _prop_config_fields(cls_field, value):
-    cls, name = cls_field
+    cls, name, annotation = cls_field
     TRIED["config"] += 1
     try:
         obj = cls(**{name: value})
-    except (ValueError, TypeError):
+    except (ValueError, TypeError) as exc:
         TRIED["config.refused"] += 1
+        if annotation in STORED or annotation.endswith("| None"):  # a plain field's error names it
+            assert name in str(exc), (cls.__name__, name, value, str(exc))
         return
     got = getattr(obj, name)
     if isinstance(value, float) and not math.isfinite(value):  # NaN or inf kept: a defect unless inf means "none"
         assert isinstance(got, float) and math.isinf(got) and math.isinf(value), (cls.__name__, name, value)
+    kinds = [k.strip() for k in annotation.split("|")]
+    if got is None and "None" in kinds:
+        return
+    want = [STORED[k] for k in kinds if k in STORED]
+    if want:  # stored as the canonical type of its annotation, exactly (no subclass: bool is an int)
+        assert any(type(got) in w for w in want), (cls.__name__, name, value, type(got))
 
 
 test_config_fields, test_config_fields_slow = _profiles(
-    _prop_config_fields, 150, 5000, cls_field=st.sampled_from(CONFIG_FIELDS),
-    value=st.one_of(junk, st.floats(-1e3, 1e3), st.integers(-5, 5), st.just(float("nan"))))
+    _prop_config_fields, 200, 5000, cls_field=st.sampled_from(CONFIG_FIELDS),
+    value=st.one_of(junk, numbers_at_entry, st.floats(-1e3, 1e3), st.integers(-5, 5), st.just(float("nan"))))
 
 
 # ---------------------------------------------------------------------- estimators

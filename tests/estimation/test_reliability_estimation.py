@@ -67,9 +67,11 @@ def test_estimators_refuse_complex_object_strings(bad, err):
         estimate_eta(np.zeros(4), np.zeros(4, complex), GEOM)
 
 
-@pytest.mark.parametrize("mu_tol", [float("nan"), -1.0, float("inf"), "1e-3", None])
-def test_estimate_eta_refuses_bad_mu_tol(mu_tol):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize("mu_tol, error", [(float("nan"), ValueError), (-1.0, ValueError), (float("inf"), ValueError),
+                                           (10**400, ValueError), ("1e-3", TypeError), (None, TypeError),
+                                           (True, TypeError), (1j, TypeError)])
+def test_estimate_eta_refuses_bad_mu_tol(mu_tol, error):
+    with pytest.raises(error, match="mu_tol"):
         estimate_eta(np.zeros(4), np.zeros(4), GEOM, mu_tol=mu_tol)
 
 
