@@ -19,6 +19,7 @@ __all__ = ["RESET_OPTIONS", "check_reset_options", "check_kick", "check_track", 
 
 #: the keys ``reset(options=...)`` accepts
 RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
+_INT64_MAX = int(np.iinfo(np.int64).max)
 
 
 def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
@@ -80,13 +81,15 @@ def start_progress_on(track: Track, s0: float, what: str = "options['start_progr
 
 
 def check_kick(kick: Any, n: int) -> dict[str, Any]:
-    """A validated ``kick`` option: ``{"step": int >= 0, "wheels": [int], "impulse": float}``."""
+    """A validated ``kick`` option: ``{"step": int in [0, 2**63 − 1], "wheels": [int], "impulse":
+    float}`` (every value storable in the task's arrays, so applying it cannot fail)."""
     if not isinstance(kick, dict):
         raise TypeError(f"options['kick'] must be a dict, got {type(kick).__name__}")
     extra = set(kick) - {"step", "wheels", "impulse"}
     if extra:
         raise ValueError(f"options['kick'] takes keys 'step', 'wheels', 'impulse', got {sorted(map(str, extra))}")
-    return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0),
+    # the step is stored in an int64 array: a larger one (2**63) raised OverflowError mid-reset
+    return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0, max_value=_INT64_MAX),
                 wheels=check_index_list("options['kick']['wheels']", kick.get("wheels", range(n)), n),
                 impulse=check_finite("options['kick']['impulse']", kick.get("impulse", 0.5)))
 
