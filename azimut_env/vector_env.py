@@ -189,6 +189,14 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
 
     # ------------------------------------------------------------------ vector API
 
+    def __getstate__(self) -> dict:
+        """Pickling and deep copy at any time: the numba typed list of the generators (a cache of
+        ``_rngs``, which pickles) is dropped and rebuilt on the next step; the copy goes on bit for
+        bit (the typed list had made every env that had stepped unpicklable)."""
+        d = super().__getstate__()
+        d["_rng_list"] = None
+        return d
+
     def _typed_rngs(self) -> NumbaList:
         """The generators as a numba typed list (rebuilt when one is replaced by a reseed)."""
         if self._rng_list is None:
