@@ -18,6 +18,7 @@ from numba import njit
 
 __all__ = [
     "normalize",
+    "unit_and_norm",
     "canonical_lambda",
     "canonical_eta",
     "lambda_distance",
@@ -51,13 +52,29 @@ def _check_last3(lam: np.ndarray, name: str = "lam") -> np.ndarray:
     return lam
 
 
+def unit_and_norm(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x/‖x‖, ‖x‖) along the last axis of finite x, at any scale: each row is first scaled by the
+    power of two 2^−e that brings its largest |component| into [0.5, 1) (exact, so the result is
+    bit for bit that of the plain formula wherever the plain one neither overflows nor
+    underflows); the plain ‖x‖ overflows to inf beyond ~1e154 (x/‖x‖ = 0) and underflows to 0
+    below ~1e−162. Zero rows give unit 0 and norm 0; ‖x‖ itself may still overflow (inf)."""
+    peak = np.max(np.abs(x), axis=-1, keepdims=True)
+    _, e = np.frexp(peak)
+    scaled = np.ldexp(x, -e)
+    norm = np.linalg.norm(scaled, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", over="ignore"):
+        unit = np.where(norm > 0, scaled / np.where(norm > 0, norm, 1.0), 0.0)
+        return unit, np.ldexp(norm, e)[..., 0]
+
+
 def normalize(lam: np.ndarray) -> np.ndarray:
-    """Project non-zero vectors of R³ onto the unit sphere. Raises ValueError on a zero vector."""
+    """Project non-zero vectors of R³ onto the unit sphere, at any scale (:func:`unit_and_norm`).
+    Raises ValueError on a zero vector."""
     lam = _check_last3(lam)
-    norm = np.linalg.norm(lam, axis=-1, keepdims=True)
+    unit, norm = unit_and_norm(lam)
     if np.any(norm == 0):
         raise ValueError("cannot normalise a zero vector to a point of Λ")
-    return lam / norm
+    return unit
 
 
 @njit(cache=True)
@@ -185,7 +202,7 @@ def lambda_from_plane(xy: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(xy)):
         raise ValueError("xy must be finite")
     h = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
-    return h / np.linalg.norm(h, axis=-1, keepdims=True)
+    return unit_and_norm(h)[0]
 
 
 def plane_from_lambda(lam: np.ndarray) -> np.ndarray:
@@ -207,9 +224,8 @@ def eta_from_twist(twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(twist)):
         raise ValueError("twist must be finite")
     vec = np.stack([-twist[..., 1], twist[..., 0], twist[..., 2]], axis=-1)
-    mu = np.linalg.norm(vec, axis=-1)
-    safe = np.where(mu > 0, mu, 1.0)[..., None]
-    lam = np.where(mu[..., None] > 0, vec / safe, np.array([0.0, 0.0, 1.0]))
+    unit, mu = unit_and_norm(vec)
+    lam = np.where(mu[..., None] > 0, unit, np.array([0.0, 0.0, 1.0]))
     return lam, mu
 
 

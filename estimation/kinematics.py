@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from estimation.geometry import RobotGeometry
-from estimation.hrep import _canonical_eta_sign, twist_from_eta
+from estimation.hrep import _canonical_eta_sign, twist_from_eta, unit_and_norm
 from estimation.quality import _quality_from_d2
 
 __all__ = [
@@ -220,11 +220,10 @@ def _check_lambda(lam, name: str = "lam") -> tuple[np.ndarray, tuple[int, ...]]:
         raise ValueError(f"{name} must have shape (3,) or (N, 3), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or inf")
-    flat = np.ascontiguousarray(arr.reshape(-1, 3))
-    norms = np.linalg.norm(flat, axis=1)
+    unit, norms = unit_and_norm(arr.reshape(-1, 3))  # at any scale: 1e155·λ overflowed the norm (β = 0)
     if np.any(norms == 0):
         raise ValueError(f"{name} contains a zero vector, which is not a point of Λ")
-    return flat / norms[:, None], arr.shape[:-1]
+    return np.ascontiguousarray(unit), arr.shape[:-1]
 
 
 def _check_angles(q, geom: RobotGeometry, name: str = "q") -> tuple[np.ndarray, tuple[int, ...]]:

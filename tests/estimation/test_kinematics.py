@@ -1,6 +1,8 @@
 """Kinematics: β = F(λ) (eq. 15–17), its derivatives (checked against finite differences, since
 the printed eq. (18) carries sign errors), singularities (eq. 21), wheel speeds and μ."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -247,3 +249,21 @@ def test_twist_from_wheels_inverts_wheel_speeds(geom):
         assert slip < 1e-10
     _, slip = twist_from_wheels(beta + np.deg2rad(10) * np.arange(geom.n), bdot, phidot, geom)
     assert slip > 1e-3
+
+
+@pytest.mark.parametrize("scale", [2.0**-1000, 1e-300, 1e-200, 1e150, 1e155, 1e200, 1e300, 1e308, 2.0**1000])
+def test_steering_from_lambda_at_any_scale(scale):
+    """``steering_from_lambda`` of a λ scaled by 1e155…1e308 returned zeros (‖λ‖ overflowed)."""
+    from estimation.hrep import eta_from_twist, normalize
+
+    geom = RobotGeometry.azimut3()
+    lam = np.array([[0.3, -0.5, 0.8], [-0.9, 0.1, 0.05], [0.0, 0.0, 1.0]])
+    want = steering_from_lambda(lam, geom)
+    got = steering_from_lambda(lam * scale, geom)
+    assert np.allclose(got, want, rtol=0, atol=1e-12)  # the scaled λ is itself rounded (a power of two: exact)
+    if math.frexp(scale)[0] == 0.5:
+        assert np.array_equal(got, want)
+    assert np.allclose(normalize(lam * scale), normalize(lam), rtol=0, atol=1e-15)
+    lam_t, mu = eta_from_twist(np.array([2.0, -1.0, 0.5]) * min(scale, 1e300))
+    assert np.allclose(lam_t, eta_from_twist(np.array([2.0, -1.0, 0.5]))[0], rtol=0, atol=1e-15)
+    assert math.isfinite(float(mu)) and mu > 0
