@@ -200,8 +200,8 @@ class AzimutPhysics:
     def set_obstacles(self, obstacles: Sequence = ()) -> None:
         """Replace the static obstacles (Obstacle, (x, y, radius) or vertex lists)."""
         obs = tuple(Obstacle.coerce(o) for o in obstacles)
-        for shape in self._obstacle_shapes:
-            self.space.remove(shape)
+        for shapes in self._obstacle_shapes:
+            self.space.remove(*shapes)
         self._obstacle_shapes = []
         had_shapes = bool(self.obstacles)
         self.obstacles = obs
