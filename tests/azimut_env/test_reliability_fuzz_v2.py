@@ -1,0 +1,169 @@
+"""Property-based tests (hypothesis) of issue 20, one per class of the issue that the fuzz tests of
+issue 10 (``test_reliability_fuzz.py``) did not reach: copies of the vector env at any time,
+λ at any scale, obstacles of any shape. The numbers-at-entry class is fuzzed there (every config
+dataclass field, found by walking the packages), as are the reset options at int64/float64 edges.
+
+The default run keeps ``max_examples`` small; ``-m slow`` runs the same properties longer.
+"""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from azimut_env.vector_env import AzimutVectorEnv
+
+
+def _profiles(fn, default: int, slow: int, **given_kwargs):
+    """The same property as a default test (``default`` examples) and a slow one."""
+    quick = settings(max_examples=default, deadline=None, suppress_health_check=list(HealthCheck))(
+        given(**given_kwargs)(fn))
+    long = pytest.mark.slow(settings(max_examples=slow, deadline=None, suppress_health_check=list(HealthCheck))(
+        given(**given_kwargs)(fn)))
+    return quick, long
+
+
+# ---------------------------------------------------------------------- lifecycle: copies at any time
+
+OPS = st.lists(st.sampled_from(["step", "step", "step", "reset", "reset_some", "bad_step", "bad_reset", "copy"]),
+               min_size=1, max_size=12)
+
+
+def _apply(env, op, t):
+    rng = np.random.default_rng(t)
+    if op == "step":
+        env.step(rng.uniform(-1, 1, (env.num_envs, 8)).astype(np.float32))
+    elif op == "reset":
+        env.reset(seed=t)
+    elif op == "reset_some":
+        env.reset(options={"reset_mask": np.arange(env.num_envs) == t % env.num_envs})
+    elif op == "bad_step":
+        try:
+            env.step(np.full((env.num_envs, 8), np.inf, np.float32))
+        except (ValueError, RuntimeError):
+            pass
+    elif op == "bad_reset":
+        try:
+            env.reset(options={"kick": {"step": 2**63}})
+        except ValueError:
+            pass
+
+
+def _prop_vector_copy_any_time(ops, how):
+    env = AzimutVectorEnv(num_envs=2, max_episode_steps=3)
+    env.reset(seed=1)
+    twin = None
+    for t, op in enumerate(ops):
+        if op == "copy":
+            twin = pickle.loads(pickle.dumps(env)) if how == "pickle" else copy.deepcopy(env)
+            continue
+        try:
+            _apply(env, op, t)
+        except Exception as exc:  # noqa: BLE001 (an op refused in this state is applied to the twin too)
+            if twin is not None:
+                with pytest.raises(type(exc)):
+                    _apply(twin, op, t)
+            continue
+        if twin is not None:
+            _apply(twin, op, t)
+            assert np.array_equal(twin.task.obs, env.task.obs) and np.array_equal(twin.task.reward, env.task.reward)
+            assert np.array_equal(twin.physics.summary, env.physics.summary)
+
+
+test_vector_copy_any_time, test_vector_copy_any_time_slow = _profiles(
+    _prop_vector_copy_any_time, 15, 300, ops=OPS, how=st.sampled_from(["pickle", "deepcopy"]))
+
+
+# ---------------------------------------------------------------------- λ at any scale
+
+
+def _prop_lambda_any_scale(lam, k):
+    from estimation import RobotGeometry
+    from estimation.kinematics import steering_from_lambda
+
+    lam = np.array(lam)
+    if not np.any(lam):
+        return
+    scaled = np.ldexp(lam, k)
+    if not np.array_equal(np.ldexp(scaled, -k), lam):  # the scaling itself rounded (subnormal): not exact
+        return
+    geom = RobotGeometry.azimut3()
+    assert np.array_equal(steering_from_lambda(scaled, geom), steering_from_lambda(lam, geom))
+
+
+test_lambda_any_scale, test_lambda_any_scale_slow = _profiles(
+    _prop_lambda_any_scale, 200, 5000, lam=st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+    k=st.integers(-1070, 1010))
+
+
+# ---------------------------------------------------------------------- obstacles of any shape
+
+
+def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Even-odd rule: which of ``pts`` (m, 2) are inside the closed polygon ``poly`` (k, 2)."""
+    x, y = pts[:, 0:1], pts[:, 1:2]
+    a, b = poly, np.roll(poly, -1, axis=0)
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xs = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return (np.sum(crosses & (x < xs), axis=1) % 2) == 1
+
+
+def _prop_polygon_obstacles(radii, angles, jitter, winding):
+    """A star-shaped polygon (simple by construction, concave for most radii): its convex parts
+    are convex, cover it exactly (area, and every sampled point is in a part iff it is in the
+    polygon, away from the boundary). Arbitrary vertex lists: refused with ValueError/TypeError, or
+    decomposed likewise."""
+    from azimut_env.physics.obstacles import Obstacle, _signed_area
+
+    k = len(radii)
+    theta = np.sort(np.array(angles[:k]) + np.arange(k)) * (2 * np.pi / k)
+    poly = np.stack([np.array(radii) * np.cos(theta), np.array(radii) * np.sin(theta)], axis=1)[::winding]
+    if jitter:
+        poly = poly + np.array(jitter[:2]) * 3.0
+    try:
+        ob = Obstacle(vertices=[tuple(p) for p in poly])
+    except (ValueError, TypeError):  # a sliver: zero area, or vertices too close to tell apart
+        return
+    parts = [np.array(p) for p in ob.parts]
+    for part in parts:
+        assert _signed_area(part) > 0  # counter-clockwise and convex
+        d = np.roll(part, -1, axis=0) - part
+        assert np.all(d[:, 0] * np.roll(d, -1, axis=0)[:, 1] - d[:, 1] * np.roll(d, -1, axis=0)[:, 0] > -1e-9)
+    assert np.isclose(sum(_signed_area(p) for p in parts), abs(_signed_area(poly)), rtol=1e-9)
+    pts = np.random.default_rng(k).uniform(poly.min(axis=0), poly.max(axis=0), (400, 2))
+    in_poly = _inside(poly, pts)
+    in_parts = np.any([_inside(p, pts) for p in parts], axis=0)
+    a, ab = poly[None], (np.roll(poly, -1, axis=0) - poly)[None]  # edges a → a + ab
+    t = np.clip(np.sum((pts[:, None] - a) * ab, axis=2) / np.sum(ab * ab, axis=2), 0.0, 1.0)
+    edge = np.min(np.linalg.norm(pts[:, None] - (a + t[..., None] * ab), axis=2), axis=1)
+    far = edge > 1e-6  # points on the boundary may go either way
+    assert np.array_equal(in_poly[far], in_parts[far])
+
+
+test_polygon_obstacles, test_polygon_obstacles_slow = _profiles(
+    _prop_polygon_obstacles, 60, 2000, radii=st.lists(st.floats(0.05, 3.0), min_size=3, max_size=12),
+    angles=st.lists(st.floats(0.0, 0.95), min_size=12, max_size=12),
+    jitter=st.one_of(st.just([]), st.lists(st.floats(-1, 1), min_size=2, max_size=2)), winding=st.sampled_from([1, -1]))
+
+
+def _prop_any_vertex_list(vertices):
+    from azimut_env.physics.obstacles import Obstacle, _signed_area
+
+    try:
+        ob = Obstacle(vertices=vertices)
+    except (ValueError, TypeError):
+        return
+    area = abs(_signed_area(np.array(ob.vertices)))
+    assert np.isclose(sum(_signed_area(np.array(p)) for p in ob.parts), area, rtol=1e-9)
+
+
+test_any_vertex_list, test_any_vertex_list_slow = _profiles(
+    _prop_any_vertex_list, 100, 3000,
+    vertices=st.lists(st.tuples(st.one_of(st.floats(-3, 3), st.integers(-3, 3)),
+                                st.one_of(st.floats(-3, 3), st.integers(-3, 3))), min_size=0, max_size=9))
