@@ -30,8 +30,8 @@ from estimation.validation import (
 
 __all__ = [
     "check_finite", "check_real", "check_range", "check_positive", "check_nonnegative", "check_int", "check_bool",
-    "check_choice", "check_real_array", "check_index_list", "check_seed", "check_fields", "check_positive_fields", "real_scalar", "show",
-    "ResetNeeded",
+    "check_choice", "check_real_array", "check_index_list", "check_seed", "check_fields", "check_positive_fields",
+    "real_scalar", "show", "ResetNeeded",
 ]
 
 

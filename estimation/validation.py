@@ -117,9 +117,13 @@ def check_positive_fields(obj: Any, *names: str, allow_zero: bool = False) -> No
     """The fields ``names`` of the frozen dataclass ``obj`` are finite and > 0 (>= 0 with
     ``allow_zero``), stored as ``float``; ``ValueError``/``TypeError`` naming ``Class.field``
     otherwise (the parameter dataclasses' ``__post_init__``)."""
-    check = check_nonnegative if allow_zero else check_positive
     for name in names:
-        object.__setattr__(obj, name, check(f"{type(obj).__name__}.{name}", getattr(obj, name)))
+        label = f"{type(obj).__name__}.{name}"
+        v = real_scalar(label, getattr(obj, name))
+        if not (math.isfinite(v) and (v >= 0 if allow_zero else v > 0)):
+            raise ValueError(f"{label} must be finite and {'>= 0' if allow_zero else '> 0'}, "
+                             f"got {show(getattr(obj, name))}")
+        object.__setattr__(obj, name, v)
 
 
 def check_int(name: str, value: Any, min_value: int | None = None, max_value: int | None = None) -> int:

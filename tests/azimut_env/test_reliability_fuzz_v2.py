@@ -119,7 +119,8 @@ def _prop_polygon_obstacles(radii, angles, jitter, winding):
     are convex, cover it exactly (area, and every sampled point is in a part iff it is in the
     polygon, away from the boundary). Arbitrary vertex lists: refused with ValueError/TypeError, or
     decomposed likewise."""
-    from azimut_env.physics.obstacles import Obstacle, _signed_area
+    from azimut_env.physics.obstacles import Obstacle
+    from azimut_env.physics.polygons import signed_area as _signed_area
 
     k = len(radii)
     theta = np.sort(np.array(angles[:k]) + np.arange(k)) * (2 * np.pi / k)
@@ -153,7 +154,8 @@ test_polygon_obstacles, test_polygon_obstacles_slow = _profiles(
 
 
 def _prop_any_vertex_list(vertices):
-    from azimut_env.physics.obstacles import Obstacle, _signed_area
+    from azimut_env.physics.obstacles import Obstacle
+    from azimut_env.physics.polygons import signed_area as _signed_area
 
     try:
         ob = Obstacle(vertices=vertices)
