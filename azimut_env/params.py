@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from azimut_env.action_map import ActuatorLimits, action_from_setpoints, setpoints_from_action
-from azimut_env.validation import check_fields
+from azimut_env.validation import check_fields, check_real_array
 from azimut_env.validation import check_positive_fields as _check_positive
 from estimation.geometry import RobotGeometry
 
@@ -317,10 +317,9 @@ class SensorParams:
 def _per_wheel(obj, name: str, bound: float) -> None:
     """Freeze the per-wheel tuple ``name`` of ``obj`` (finite, |x| <= bound) in place."""
     raw = getattr(obj, name)
-    try:
-        values = tuple(float(x) for x in np.asarray(raw, dtype=np.float64).reshape(-1))
-    except (TypeError, ValueError):
-        raise ValueError(f"{type(obj).__name__}.{name} must be a sequence of numbers, got {raw!r}") from None
+    if isinstance(raw, (str, bytes)):
+        raise ValueError(f"{type(obj).__name__}.{name} must be a sequence of numbers, got {raw!r}")
+    values = tuple(check_real_array(f"{type(obj).__name__}.{name}", raw).reshape(-1).tolist())  # 10**400: refused
     if not all(math.isfinite(x) and abs(x) <= bound for x in values):
         raise ValueError(f"{type(obj).__name__}.{name} must be finite and within ±{bound}, got {values}")
     object.__setattr__(obj, name, values)
