@@ -4,7 +4,8 @@ The ``arg_*`` functions are ``argparse`` ``type=`` converters: they raise
 ``argparse.ArgumentTypeError``, which argparse reports as one line on stderr with exit status 2
 (``azimut X: error: argument --flag: ...``), before the command starts any work.
 :func:`check_output_path` checks a file the command will write (its directory exists and is
-writable, the path is not a directory and not under a file) for the same early refusal. The
+writable, the path is not a directory and not under a file) for the same early refusal, and
+:func:`check_output_layout` every file and folder a command writes inside its output folder. The
 numeric checks they share with the constructors are :mod:`azimut_env.validation`'s.
 """
 
@@ -12,11 +13,12 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 from azimut_env.validation import check_range
 
-__all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "require_module",
+__all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_output_layout",
+           "require_module",
            "arg_robot", "arg_robot_file", "add_robot_arguments", "robot_params", "robot_env_kwargs", "robot_label"]
 
 
@@ -154,6 +156,54 @@ def require_module(module: str, why: str) -> None:
         found = False
     if not found:
         raise ValueError(f"{why} needs {module}, which is not installed")
+
+
+def check_output_layout(out: str | os.PathLike, files: Sequence[str] = (),
+                        dirs: Mapping[str, Sequence[str]] | None = None) -> None:
+    """Check, before any work, every path a command will write under its output folder ``out``:
+    what exists there must be of the kind the command writes (``ValueError``, one line, naming
+    the path, otherwise). Before, a file ``episodes`` or a directory ``metrics.json`` in the
+    folder crashed the command, some only after every episode had run.
+
+    ``files``: relative paths of files it writes (an existing one must be a writable file, not a
+    directory). ``dirs``: relative paths of folders it writes (or fills), each with the suffixes
+    of the files it writes inside (an existing folder must be a writable directory, and no entry
+    in it with one of those suffixes may be a directory). Nothing on the way from ``out`` to a
+    path may be a file. ``out`` itself is :func:`check_output_path`'s (``directory=True``)."""
+    root = os.path.abspath(os.fspath(out))
+
+    def check_parents(rel: str) -> None:
+        parts = os.path.normpath(rel).split(os.sep)[:-1]
+        for i in range(len(parts)):
+            q = os.path.join(root, *parts[:i + 1])
+            if os.path.exists(q) and not os.path.isdir(q):
+                raise ValueError(f"{q}: exists and is not a directory (the output folder needs a folder "
+                                 f"{os.path.join(*parts[:i + 1])}/ there)")
+
+    for rel in files:
+        check_parents(rel)
+        p = os.path.join(root, rel)
+        if os.path.isdir(p):
+            raise ValueError(f"{p}: is a directory (the output folder's file {rel} is written there)")
+        if os.path.lexists(p) and not os.path.isfile(p):
+            raise ValueError(f"{p}: exists and is not a regular file (the output folder's file {rel})")
+        if os.path.exists(p) and not os.access(p, os.W_OK):
+            raise ValueError(f"{p}: file is not writable")
+    for rel, suffixes in (dirs or {}).items():
+        check_parents(rel)
+        p = os.path.join(root, rel)
+        if os.path.lexists(p) and not os.path.isdir(p):
+            raise ValueError(f"{p}: exists and is not a directory (the output folder's {rel}/ folder is written "
+                             "there)")
+        if not os.path.isdir(p):
+            continue
+        if not _writable_dir(p):
+            raise ValueError(f"{p}: directory is not writable")
+        if suffixes:
+            with os.scandir(p) as entries:
+                for entry in entries:
+                    if entry.name.endswith(tuple(suffixes)) and entry.is_dir():
+                        raise ValueError(f"{entry.path}: is a directory (files of {rel}/ are written there)")
 
 
 def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:

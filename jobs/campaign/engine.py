@@ -22,34 +22,31 @@ whose worker dies is retried ``retries`` times (default once), then recorded as 
 stopping the others. Each task limits its own threads (numba, torch, OpenMP/MKL/OpenBLAS) so
 that ``workers`` processes on as many cores do not oversubscribe them.
 
-Statistics over seeds (:func:`bootstrap_ci`, :func:`summarize`) are in :mod:`jobs.campaign.statistics`
-and importable from here; the command-line flags (``--seeds``, ``--workers``, ``--executor``,
+A task is a :class:`~jobs.campaign.task.Task`; its records, checked when read back (a record that
+is not valid is recomputed), are :class:`~jobs.campaign.store.TaskStore`'s. Statistics over seeds
+(:func:`bootstrap_ci`, :func:`summarize`) are in :mod:`jobs.campaign.statistics`. All are
+importable from here; the command-line flags (``--seeds``, ``--workers``, ``--executor``,
 ``--ray-address``) are in :mod:`jobs.campaign.args`.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
-import hashlib
 import importlib
 import importlib.util
-import json
 import multiprocessing
 import os
-import re
 import socket
 import sys
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from jobs.campaign.statistics import bootstrap_ci, summarize  # re-exported
+from jobs.campaign.store import TaskStore  # re-exported
+from jobs.campaign.task import Task, resolve  # re-exported
 
 __all__ = ["Task", "TaskStore", "EXECUTORS", "run_tasks", "resolve_executor", "ray_available",
            "ClusterUnreachable", "limit_threads", "thread_env", "bootstrap_ci", "summarize", "CampaignInterrupted"]
@@ -65,58 +62,6 @@ class CampaignInterrupted(KeyboardInterrupt):
     def __init__(self, done: int, total: int):
         super().__init__(f"interrupted: {done} of {total} tasks saved; run again with resume to finish")
         self.done, self.total = done, total
-
-
-# ------------------------------------------------------------------------------------ tasks
-
-
-def _canonical(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True)
-
-
-@dataclass(frozen=True)
-class Task:
-    """One unit of work: ``fn(**key, **extra)``.
-
-    Attributes:
-        fn: ``"package.module:function"``, importable in every worker; it returns a dict (its
-            JSON-serialisable entries are saved; an entry ``"artifacts"`` is handed to the
-            campaign's ``on_result`` callback in the driver and not saved).
-        key: JSON-serialisable keyword arguments; with ``fn`` they define the task (its id) and
-            must determine its result, seeds included.
-        extra: keyword arguments that do not change the result (e.g. what to return for plots).
-        label: a readable prefix of the id (file-name safe characters are kept).
-        cost: an estimate of the run time, to start the longest tasks first (no effect on results).
-    """
-
-    fn: str
-    key: Mapping[str, Any]
-    extra: Mapping[str, Any] = field(default_factory=dict)
-    label: str = ""
-    cost: float = 1.0
-
-    def __post_init__(self):
-        if not isinstance(self.fn, str) or ":" not in self.fn:
-            raise ValueError(f"Task.fn must be 'module:function', got {self.fn!r}")
-        try:
-            _canonical(dict(self.key))
-        except TypeError as exc:
-            raise TypeError(f"Task.key must be JSON-serialisable: {exc}") from None
-
-    @property
-    def id(self) -> str:
-        """A stable id: the label and a hash of ``fn`` and ``key`` (same task, same id, anywhere)."""
-        digest = hashlib.sha256(_canonical({"fn": self.fn, "key": dict(self.key)}).encode()).hexdigest()[:12]
-        label = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", self.label).strip("_")[:80]
-        return f"{label}-{digest}" if label else digest
-
-
-def _resolve(fn: str) -> Callable[..., dict]:
-    module, _, name = fn.partition(":")
-    obj: Any = importlib.import_module(module)
-    for part in name.split("."):
-        obj = getattr(obj, part)
-    return obj
 
 
 # --------------------------------------------------------------------------- thread limits
@@ -156,7 +101,7 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
     start, cpu = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     try:
-        result = _resolve(fn)(**dict(key), **dict(extra))
+        result = resolve(fn)(**dict(key), **dict(extra))
         if not isinstance(result, dict):
             raise TypeError(f"task function {fn} returned {type(result).__name__}, expected dict")
         rec = {"status": "ok", "result": result}
@@ -168,54 +113,6 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
 
 def _worker_init(threads: int | None) -> None:
     limit_threads(threads)
-
-
-# --------------------------------------------------------------------------------- storage
-
-
-class TaskStore:
-    """One JSON file per finished task in ``folder``: ``{id, fn, key, status, attempts, ...}``."""
-
-    def __init__(self, folder: str | os.PathLike):
-        self.folder = Path(folder)
-
-    def path(self, task: Task) -> Path:
-        return self.folder / f"{task.id}.json"
-
-    def load(self, task: Task) -> dict | None:
-        """The saved record of ``task`` (same fn and key), or None."""
-        p = self.path(task)
-        if not p.is_file():
-            return None
-        try:
-            rec = json.loads(p.read_text())
-        except (OSError, ValueError):
-            return None  # a torn or foreign file: recompute
-        if rec.get("fn") != task.fn or _canonical(rec.get("key")) != _canonical(dict(task.key)):
-            return None
-        return rec
-
-    def save(self, task: Task, record: dict) -> None:
-        self.folder.mkdir(parents=True, exist_ok=True)
-        p = self.path(task)
-        tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(record, indent=1, allow_nan=True, default=_json_default))
-        os.replace(tmp, p)  # atomic: a reader sees the old file or the whole new one
-
-    def clear(self) -> None:
-        """Remove every task record (a campaign started without resume)."""
-        if self.folder.is_dir():
-            for p in self.folder.iterdir():
-                if p.is_file() and (p.suffix in (".json", ".npz", ".tmp")):
-                    p.unlink()
-
-
-def _json_default(obj: Any):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
 # ------------------------------------------------------------------------------- executors
@@ -388,19 +285,22 @@ def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, ex
         threads: threads per task (numba, torch, BLAS); default ``cpu_count // workers`` for the
             parallel executors and unchanged for ``serial``.
         retries: how many times a failed task (exception or dead worker) is run again.
-        resume: keep the saved records and run only the tasks that have none (or a failed one).
+        resume: keep the saved records and run only the tasks that have none (or a failed or an
+            invalid one, :meth:`TaskStore.load`; the invalid ones are in ``store.rejected``).
         on_result: ``on_result(task, record)`` in this process for each newly finished task before
             it is saved (``record["result"]["artifacts"]`` is there, and dropped afterwards).
         progress: ``progress(done, total, task, record)`` after each newly finished task.
 
     Raises:
         CampaignInterrupted: on Ctrl-C, after saving what had finished.
+        ValueError: before any task runs, if a record could not be written (:meth:`TaskStore.check_writable`).
     """
     if not isinstance(store, TaskStore):
         store = TaskStore(store)
     ids = [t.id for t in tasks]
     if len(set(ids)) != len(ids):
         raise ValueError("two tasks have the same function and key")
+    store.check_writable(tasks)
     workers = max(1, int(workers))
     executor = resolve_executor(executor, workers, ray_address)
     if threads is None and executor != "serial":

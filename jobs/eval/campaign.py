@@ -89,6 +89,26 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     return out
 
 
+def check_episode_result(result: Any, key: dict) -> None:
+    """The schema of a saved :func:`episode_task` result, what the report reads back on
+    ``--resume``: ``{"metrics": row}`` with the episode's controller, track and seed and every
+    metric of :data:`SUMMARY_COLUMNS` a number (``completed`` a bool; NaN or None where undefined).
+    Raises ``ValueError``/``TypeError`` naming what is wrong (the record is then recomputed)."""
+    if not isinstance(result, dict) or not isinstance(result.get("metrics"), dict):
+        raise TypeError("no 'metrics' dict")
+    row = result["metrics"]
+    for name in ("controller", "track", "seed"):
+        if row.get(name) != key[name] or type(row.get(name)) is not type(key[name]):
+            raise ValueError(f"metrics[{name!r}] = {row.get(name)!r}, the episode's is {key[name]!r}")
+    for name, *_ in SUMMARY_COLUMNS:
+        if name not in row:
+            raise KeyError(f"metrics[{name!r}] is missing")
+        v = row[name]
+        kinds = (bool,) if name == "completed" else (int, float, type(None))
+        if not isinstance(v, kinds) or (name != "completed" and isinstance(v, bool)):
+            raise TypeError(f"metrics[{name!r}] = {v!r} is not a {'bool' if name == 'completed' else 'number'}")
+
+
 def _robot_n(robot: str) -> int:
     """The wheel count of a robot (a preset's name or a file's path)."""
     from azimut_env.params import RobotParams
@@ -123,7 +143,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
-                                  label=f"{names.get(controller, controller)}-{track}-s{seed}", cost=cost))
+                                  label=f"{names.get(controller, controller)}-{track}-s{seed}", cost=cost,
+                                  check="jobs.eval.campaign:check_episode_result"))
     return tasks
 
 
@@ -152,7 +173,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def check_args(args: argparse.Namespace) -> None:
     """The campaign flags together (``ValueError``, one line): --seed with --seeds, the executor,
     the output folder."""
-    from jobs.args import check_output_path
+    from jobs.args import check_output_layout, check_output_path
 
     if args.seeds is not None and args.seed not in (None, 0) and args.seeds != [args.seed]:
         raise ValueError("give --seed or --seeds, not both")
@@ -160,6 +181,27 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     check_executor_args(args)
     check_output_path(args.out, directory=True)
+    check_output_layout(args.out, *output_layout(args))
+
+
+def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[str, ...]]]:
+    """What ``azimut eval`` writes in its output folder, for :func:`jobs.args.check_output_layout`:
+    the files (``metrics.json``, ``report.md``, the kick study's ``kicks_<controller>.json``) and
+    the folders with the suffixes of the files written in them (``episodes/``: the records and
+    traces ``--resume`` reads; ``plots/``; ``videos/``; ``kicks/<controller>/``)."""
+    files = ["metrics.json", "report.md"]
+    dirs: dict[str, tuple[str, ...]] = {"episodes": (".json", ".npz")}
+    if not getattr(args, "no_plots", True):
+        dirs["plots"] = (".png",)
+    if getattr(args, "video", None):
+        dirs["videos"] = (".gif", ".mp4")
+    if getattr(args, "kick_runs", 0):
+        from control.episode import CONTROLLERS
+
+        for controller in [c for c in args.controllers if c in CONTROLLERS]:
+            files.append(f"kicks_{controller}.json")
+            dirs[f"kicks/{controller}"] = (".json",)
+    return files, dirs
 
 
 def run_kwargs(args: argparse.Namespace) -> dict:
@@ -279,6 +321,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
 
     start = time.perf_counter()
     n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")
+    for path, problem in store.rejected:  # recomputed below: say so
+        print(f"azimut eval: {path}: not a valid episode record ({problem}); recomputing it", file=sys.stderr)
+    store.rejected.clear()
     try:
         records = run_tasks(tasks, store, **run_kwargs(args), on_result=on_result, progress=progress)
     except CampaignInterrupted as exc:

@@ -95,6 +95,17 @@ def kick_trial_task(seed: int, controller: str = "icr", track: str = "paper") ->
     return {"trial": asdict(kick_trial(seed, controller, track))}
 
 
+def check_kick_trial_result(result, key: dict) -> None:
+    """The schema of a saved :func:`kick_trial_task` result read back on ``--resume``: ``{"trial":
+    the KickTrial's fields}`` of this seed (``TypeError``/``ValueError`` otherwise: recomputed)."""
+    trial = result.get("trial") if isinstance(result, dict) else None
+    if not isinstance(trial, dict) or not isinstance(trial.get("wheels"), list):
+        raise TypeError("no 'trial' dict with a 'wheels' list")
+    KickTrial(**{**trial, "wheels": tuple(trial["wheels"])})  # every field, no other
+    if trial["seed"] != key["seed"]:
+        raise ValueError(f"trial seed {trial['seed']!r}, the task's is {key['seed']!r}")
+
+
 def kick_study_campaign(n_runs: int, controller: str = "icr", track: str = "paper", seed0: int = 1000,
                         store=None, **run_kwargs) -> list[KickTrial]:
     """:func:`kick_study` run by :func:`jobs.campaign.engine.run_tasks` (``run_kwargs``: executor,
@@ -106,7 +117,8 @@ def kick_study_campaign(n_runs: int, controller: str = "icr", track: str = "pape
     from jobs.campaign.engine import Task, run_tasks
 
     tasks = [Task("jobs.eval.robustness:kick_trial_task", {"seed": seed0 + i, "controller": controller, "track": track},
-                  label=f"kick-{controller}-{track}-{seed0 + i}") for i in range(n_runs)]
+                  label=f"kick-{controller}-{track}-{seed0 + i}", check="jobs.eval.robustness:check_kick_trial_result")
+             for i in range(n_runs)]
     if store is None:
         with tempfile.TemporaryDirectory(prefix="azimut-kicks-") as tmp:
             records = run_tasks(tasks, tmp, **run_kwargs)

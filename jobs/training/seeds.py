@@ -55,6 +55,24 @@ def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, n
     return {"run": record, "evaluations": evaluations}
 
 
+def check_seed_result(result, key: dict) -> None:
+    """The schema of a saved :func:`train_seed_task` result read back on ``--resume``: ``{"run":
+    run.json's record (num_timesteps, learn_wall_s, final_eval rows), "evaluations": [{timesteps,
+    mean_return}, ...]}`` (``TypeError``/``KeyError`` otherwise: the seed is recomputed)."""
+    run, evaluations = result.get("run"), result.get("evaluations")
+    if not isinstance(run, dict) or not isinstance(evaluations, list) or not evaluations:
+        raise TypeError("no 'run' dict and 'evaluations' list")
+    for name in ("num_timesteps", "learn_wall_s"):
+        if isinstance(run[name], bool) or not isinstance(run[name], (int, float)):
+            raise TypeError(f"run[{name!r}] = {run[name]!r} is not a number")
+    if not isinstance(run["final_eval"], list) or not all(isinstance(r, dict) for r in run["final_eval"]):
+        raise TypeError("run['final_eval'] is not a list of rows")
+    for e in evaluations:
+        if not isinstance(e, dict) or not isinstance(e["timesteps"], int) \
+                or not isinstance(e["mean_return"], (int, float)):
+            raise TypeError(f"evaluation {e!r} is not {{timesteps, mean_return}}")
+
+
 def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kwargs: dict | None = None) -> list:
     """One campaign task per seed; the key holds what changes the result, ``out`` does not."""
     from jobs.campaign.engine import Task
@@ -72,7 +90,8 @@ def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kw
         tasks.append(Task("jobs.training.seeds:train_seed_task", key,
                           extra={"out": str(out / f"seed_{seed}"), "torch_threads": args.torch_threads,
                                  "resume": bool(args.resume)},
-                          label=f"{args.algo}-{args.action}-seed{seed}", cost=float(args.steps)))
+                          label=f"{args.algo}-{args.action}-seed{seed}", cost=float(args.steps),
+                          check="jobs.training.seeds:check_seed_result"))
     return tasks
 
 
