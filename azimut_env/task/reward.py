@@ -46,6 +46,7 @@ from numba import njit
 
 from azimut_env.task.observation import speed_along
 from azimut_env.tracks import TQ
+from azimut_env.validation import check_nonnegative
 
 __all__ = ["RewardTerm", "REWARD_TERMS", "current_reward_terms", "RewardInput", "RewardConstant", "RewardWeights",
            "OFF_TRACK", "reward_term_names", "default_reward_weights", "check_reward_weights", "reward_weight_array",
@@ -219,12 +220,8 @@ def check_reward_weights(overrides: Mapping[str, Any] | None = None) -> RewardWe
     if unknown:
         raise ValueError(f"reward_weights: unknown term(s) {unknown}; the terms are {list(names)}")
     weights = dict(default_reward_weights())
-    for name, w in overrides.items():
-        if isinstance(w, (bool, np.bool_)) or not isinstance(w, (int, float, np.integer, np.floating)):
-            raise TypeError(f"reward_weights[{name!r}] must be a real number, got {type(w).__name__}")
-        if not math.isfinite(w) or w < 0:
-            raise ValueError(f"reward_weights[{name!r}] must be finite and >= 0, got {w}")
-        weights[name] = float(w)
+    for name, w in overrides.items():  # the one numeric check: 10**400 raised OverflowError here
+        weights[name] = check_nonnegative(f"reward_weights[{name!r}]", w)
     return RewardWeights(weights)
 
 
