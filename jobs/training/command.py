@@ -103,6 +103,9 @@ def check_args(args: argparse.Namespace) -> None:
             data = read_hyperparams_file(data, args.algo, args.action)
         except ValueError as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
+    from jobs.args import check_output_layout
+
+    check_output_layout(args.out, *output_layout(args))
     if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
         given = [flag for flag, value, default in (("--workers", args.workers, 1),
                                                    ("--executor", args.executor, "auto"),
@@ -113,6 +116,8 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
         if args.resume and latest_checkpoint(Path(args.out)) is None:
             raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
+        if args.resume:
+            check_checkpoint(latest_checkpoint(Path(args.out)))
         if not args.resume and (Path(args.out) / "model.zip").exists():
             raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
     else:
@@ -135,6 +140,38 @@ def hyperparams_overrides(args: argparse.Namespace) -> dict | None:
     from train.tuning import hyperparams_overrides as read_overrides
 
     return read_overrides(args.hyperparams, args.algo, args.action)
+
+
+def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[str, ...]]]:
+    """What ``azimut train`` writes in ``--out``, for :func:`jobs.args.check_output_layout`: one
+    run (the model, its statistics, the best model, run.json, evaluations.json, the learning
+    curve; checkpoints/ and the logger's tb/ or logs/), or with ``--seeds`` one run folder per
+    seed plus the campaign's records (seeds/), seeds.json, report.md and learning_curves.png."""
+    run_files = ["model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl", "run.json",
+                 "evaluations.json", "learning_curve.png"]
+    run_dirs = {"checkpoints": (".zip", ".pkl"), "tb": (), "logs": (".csv",)}
+    if getattr(args, "seeds", None) is None:
+        return run_files, run_dirs
+    files = ["seeds.json", "report.md", "learning_curves.png"]
+    dirs: dict[str, tuple[str, ...]] = {"seeds": (".json",)}
+    for seed in args.seeds:
+        files += [f"seed_{seed}/{f}" for f in run_files]
+        dirs.update({f"seed_{seed}/{d}": suffixes for d, suffixes in run_dirs.items()})
+    return files, dirs
+
+
+def check_checkpoint(ckpt: Path) -> None:
+    """``--resume``'s checkpoint and its VecNormalize statistics, read before any work
+    (``ValueError``, one line: a corrupted or truncated checkpoint, or missing or unreadable
+    statistics, raised a traceback from inside SB3 after the env was built)."""
+    from train.policy import vecnormalize_path
+    from train.saved_files import check_model_file, check_vecnormalize_file
+
+    try:
+        check_model_file(ckpt)
+        check_vecnormalize_file(vecnormalize_path(ckpt), ckpt)
+    except ValueError as exc:
+        raise ValueError(f"--resume: {exc}") from None
 
 
 def _robot_kwargs(args: argparse.Namespace) -> dict:
