@@ -111,8 +111,26 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
     return rec
 
 
-def _worker_init(threads: int | None) -> None:
+#: how often a worker process checks that the campaign's driver is still alive [s]
+PARENT_POLL_S = 0.5
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Watchdog of a worker process (a daemon thread): exit at once when the driver ``parent`` is
+    gone (the worker is re-parented). Without it a worker outlived a SIGKILLed ``azimut eval
+    --workers 2``, and with it the resource tracker, holding the caller's pipes, indefinitely."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def _worker_init(threads: int | None, parent: int | None = None) -> None:
     limit_threads(threads)
+    if parent is not None:
+        import threading
+
+        threading.Thread(target=_exit_with_parent, args=(parent,), name="azimut-parent-watchdog",
+                         daemon=True).start()
 
 
 # ------------------------------------------------------------------------------- executors
@@ -171,7 +189,8 @@ def _process(todo, workers, threads, retries):
     ctx = multiprocessing.get_context("spawn")
 
     def new_slot():
-        return cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_worker_init, initargs=(threads,))
+        return cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_worker_init,
+                                      initargs=(threads, os.getpid()))
 
     slots = [None] * workers
     pending = deque((task, 1) for task in todo)

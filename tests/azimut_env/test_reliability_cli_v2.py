@@ -7,7 +7,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pickle
+import signal
+import subprocess
+import sys
+import time
 import zipfile
 from pathlib import Path
 
@@ -217,3 +222,56 @@ def test_train_resume_reads_its_checkpoint_before_any_work(checkpoint_folder, ca
     assert code == 2 and not ran
     line = _one_line(err)
     assert line.startswith("azimut train: error: --resume: ") and message in line
+
+
+# ---------------------------------------------------------------------- no orphaned workers
+
+
+def _process_group(pgid: int) -> list[tuple[int, str]]:
+    """(pid, command line) of the live processes of process group ``pgid`` (Linux /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        if fields[0] != "Z" and int(fields[2]) == pgid:
+            out.append((int(entry), cmd))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_sigkill_of_eval_with_workers_leaves_no_process(tmp_path):
+    """SIGKILL of the ``azimut eval --workers 2`` process left its spawn workers and the resource
+    tracker alive indefinitely, holding the caller's pipes."""
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "jobs.cli", "eval", "--controllers", "icr,twist", "--tracks",
+                             "paper,circle", "--seeds", "0-3", "--workers", "2", "--no-plots", "--out",
+                             str(tmp_path / "out")], start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, env=env, cwd=root)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # the driver, the resource tracker and two spawn workers
+            workers = [p for p in _process_group(proc.pid) if "multiprocessing.spawn" in p[1]]
+            if len(workers) == 2:
+                break
+            time.sleep(0.2)
+        assert len(workers) == 2, _process_group(proc.pid)
+        time.sleep(1.0)  # the workers initialised (their watchdog runs)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 15
+        while _process_group(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = _process_group(proc.pid)
+        assert not left, left
+        proc.stdout.read()  # EOF: nobody holds the pipe any more
+    finally:
+        for pid, _ in _process_group(proc.pid):  # only what this test started
+            os.kill(pid, signal.SIGKILL)
+        proc.stdout.close()
