@@ -195,12 +195,13 @@ def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[
         dirs["plots"] = (".png",)
     if getattr(args, "video", None):
         dirs["videos"] = (".gif", ".mp4")
-    if getattr(args, "kick_runs", 0):
-        from control.episode import CONTROLLERS
+    if getattr(args, "kick_runs", 0):  # the study runs every controller but the trained policies, by name
+        from jobs.eval.controllers import is_policy
 
-        for controller in [c for c in args.controllers if c in CONTROLLERS]:
-            files.append(f"kicks_{controller}.json")
-            dirs[f"kicks/{controller}"] = (".json",)
+        names = getattr(args, "controller_names", None) or {}
+        for spec in [c for c in args.controllers if not is_policy(c)]:
+            files.append(f"kicks_{names.get(spec, spec)}.json")
+            dirs[f"kicks/{names.get(spec, spec)}"] = (".json",)
     return files, dirs
 
 
