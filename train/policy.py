@@ -23,8 +23,8 @@ from control.action_spaces.controller import ActionController
 from control.commands import WheelCommand
 from train.envs import ACTIONS
 
-__all__ = ["TrainedPolicy", "load_policy", "vecnormalize_path", "PolicyController", "policy_controller",
-           "policy_name", "model_file"]
+__all__ = ["TrainedPolicy", "load_policy", "check_policy_spaces", "vecnormalize_path", "PolicyController",
+           "policy_controller", "policy_name", "model_file"]
 
 #: the spelling of a policy's short name in ``ppo:NAME=PATH``
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -81,29 +81,79 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
 
     ``algo`` defaults to the run's ``run.json`` (the ``ppo:``/``sac:`` prefix of ``azimut eval``
     passes it); the action space and env arguments come from ``run.json`` (raw if absent).
+    Its companions are checked before any episode (``ValueError``, one line, saying what was
+    found): the archive (:func:`train.saved_files.check_model_file`), the VecNormalize statistics
+    beside it (required: without them the policy acted on raw observations without a word) and
+    the model's spaces against its env's (:func:`check_policy_spaces`).
     """
     from stable_baselines3 import PPO, SAC
 
-    path = Path(path)
-    if path.is_dir():
-        path = path / "model.zip"
-    if not path.is_file():
-        raise ValueError(f"{path}: no such model file")
+    from train.saved_files import check_model_file, check_vecnormalize_file
+
+    path = check_model_file(model_file(path))  # a corrupted or truncated archive: one line, before SB3
     meta_file = next((p / "run.json" for p in (path.parent, path.parent.parent) if (p / "run.json").is_file()), None)
-    meta = json.loads(meta_file.read_text()) if meta_file else {}
+    try:
+        meta = json.loads(meta_file.read_text()) if meta_file else {}
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{meta_file}: unreadable run record ({type(exc).__name__})") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{meta_file}: not a run record (a JSON {type(meta).__name__})")
     algo = algo or meta.get("algo")
     if algo not in ("ppo", "sac"):
         raise ValueError(f"{path}: unknown algorithm {algo!r} (give ppo:PATH or sac:PATH)")
+    action, env_kwargs = meta.get("action", "raw"), meta.get("env_kwargs") or {}
+    if action not in ACTIONS or not isinstance(env_kwargs, dict):
+        raise ValueError(f"{meta_file}: action {action!r} is not one of {', '.join(ACTIONS)}, or env_kwargs "
+                         "is not a dict")
+    vn = check_vecnormalize_file(vecnormalize_path(path), path)  # missing: refused (raw observations otherwise)
     model = (PPO if algo == "ppo" else SAC).load(str(path), device=device)
+    with open(vn, "rb") as fh:
+        stats = pickle.load(fh)
+    check_policy_spaces(path, model, stats, action, env_kwargs)
     obs_rms, clip_obs, eps = None, 10.0, 1e-8
-    vn = vecnormalize_path(path)
-    if vn is not None:
-        with open(vn, "rb") as fh:
-            stats = pickle.load(fh)
-        if getattr(stats, "norm_obs", True):
-            obs_rms, clip_obs, eps = stats.obs_rms, float(stats.clip_obs), float(stats.epsilon)
-    return TrainedPolicy(model=model, algo=algo, action=meta.get("action", "raw"),
-                         env_kwargs=meta.get("env_kwargs", {}), obs_rms=obs_rms, clip_obs=clip_obs, epsilon=eps)
+    if getattr(stats, "norm_obs", True):
+        obs_rms, clip_obs, eps = stats.obs_rms, float(stats.clip_obs), float(stats.epsilon)
+    return TrainedPolicy(model=model, algo=algo, action=action, env_kwargs=env_kwargs, obs_rms=obs_rms,
+                         clip_obs=clip_obs, epsilon=eps)
+
+
+def _space_text(space) -> str:
+    low, high = getattr(space, "low", None), getattr(space, "high", None)
+    if low is not None and np.all(low == low.flat[0]) and np.all(high == high.flat[0]):
+        return f"{type(space).__name__}({low.flat[0]:g}, {high.flat[0]:g}, {space.shape})"
+    return f"{type(space).__name__}{getattr(space, 'shape', '')}"
+
+
+def check_policy_spaces(path: Path, model, stats, action: str, env_kwargs: dict) -> None:
+    """The companions of a loaded policy against the env it will act in (the action space
+    ``action`` of an ``AzimutVectorEnv`` built with ``env_kwargs``), before any episode:
+    ``ValueError`` saying what was found and what the env has when the model's action or
+    observation space, or the normalisation statistics' observation size, differ (a model of
+    another action space passed the argument check and then failed every episode)."""
+    from gymnasium import spaces
+
+    from train.envs import make_vector_env
+
+    try:
+        env = make_vector_env(action, 1, "paper", env_kwargs=env_kwargs)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: its run's env arguments are refused: {exc}") from None
+    try:
+        want_a, want_o = env.single_action_space, env.single_observation_space
+        got_a, got_o = model.action_space, model.observation_space
+        if not (isinstance(got_a, spaces.Box) and got_a.shape == want_a.shape and np.array_equal(got_a.low, want_a.low)
+                and np.array_equal(got_a.high, want_a.high)):
+            raise ValueError(f"{path}: the model acts in {_space_text(got_a)}, the {action!r} action space of its env "
+                             f"is {_space_text(want_a)} (a model of another action space, or run.json of another run)")
+        if not (isinstance(got_o, spaces.Box) and got_o.shape == want_o.shape):
+            raise ValueError(f"{path}: the model observes {_space_text(got_o)}, its env gives "
+                             f"{_space_text(want_o)} (trained with other env arguments or another version)")
+        mean = getattr(getattr(stats, "obs_rms", None), "mean", None)
+        if getattr(stats, "norm_obs", True) and np.shape(mean) != want_o.shape:
+            raise ValueError(f"{path}: its VecNormalize statistics are of observations of shape {np.shape(mean)}, "
+                             f"its env gives {want_o.shape} (statistics of another run)")
+    finally:
+        env.close()
 
 
 def model_file(path: str | Path) -> Path:
