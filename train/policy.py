@@ -24,7 +24,7 @@ from control.commands import WheelCommand
 from train.envs import ACTIONS
 
 __all__ = ["TrainedPolicy", "load_policy", "check_policy_spaces", "vecnormalize_path", "PolicyController",
-           "policy_controller", "policy_name", "model_file"]
+           "policy_controller", "policy_name", "model_file", "policy_files"]
 
 #: the spelling of a policy's short name in ``ppo:NAME=PATH``
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -154,6 +154,20 @@ def check_policy_spaces(path: Path, model, stats, action: str, env_kwargs: dict)
                              f"its env gives {want_o.shape} (statistics of another run)")
     finally:
         env.close()
+
+
+def policy_files(path: str | Path) -> dict[str, Path]:
+    """The files a policy loaded from ``path`` reads (what its results depend on): ``model``, and
+    those present of ``vecnormalize`` and ``run.json``."""
+    model = model_file(path)
+    files = {"model": model}
+    vn = vecnormalize_path(model)
+    if vn is not None:
+        files["vecnormalize"] = vn
+    meta = next((p / "run.json" for p in (model.parent, model.parent.parent) if (p / "run.json").is_file()), None)
+    if meta is not None:
+        files["run.json"] = meta
+    return files
 
 
 def model_file(path: str | Path) -> Path:

@@ -6,12 +6,13 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import os
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Task", "canonical", "resolve"]
+__all__ = ["Task", "canonical", "resolve", "file_digest"]
 
 
 def canonical(obj: Any) -> str:
@@ -69,3 +70,14 @@ def resolve(fn: str) -> Callable[..., dict]:
     for part in name.split("."):
         obj = getattr(obj, part)
     return obj
+
+
+def file_digest(path: str | os.PathLike) -> str:
+    """SHA-256 of the content of the file ``path`` (hex): what a task's key holds for each file its
+    result depends on (a model, its statistics, a robot description), so that a file changed at
+    the same path is a new task, never a stale record."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()

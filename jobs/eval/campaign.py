@@ -32,6 +32,7 @@ from control.episode import episode_metrics
 from control.rollout import run_episode
 from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
+from jobs.campaign.task import file_digest
 from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.plots import comparison_plots, write_plots
 from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
@@ -63,11 +64,14 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
 
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
-                 return_log: bool = False, robot: str | None = None, robot_file: str | None = None) -> dict:
+                 return_log: bool = False, robot: str | None = None, robot_file: str | None = None,
+                 inputs: dict | None = None) -> dict:
     """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
     ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
     ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
-    name) or ``robot_file`` (a description file) pick the robot (default: azimut3)."""
+    name) or ``robot_file`` (a description file) pick the robot (default: azimut3). ``inputs``:
+    the content digests of the files the episode reads (:func:`episode_tasks`), in its key so
+    that a changed file is a new episode; not read here."""
     from jobs.args import robot_env_kwargs
 
     robot_kw = robot_env_kwargs(robot, robot_file)
@@ -91,13 +95,15 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
 
 def check_episode_result(result: Any, key: dict) -> None:
     """The schema of a saved :func:`episode_task` result, what the report reads back on
-    ``--resume``: ``{"metrics": row}`` with the episode's controller, track and seed and every
+    ``--resume``: ``{"metrics": row}`` with a controller name, the episode's track and seed and every
     metric of :data:`SUMMARY_COLUMNS` a number (``completed`` a bool; NaN or None where undefined).
     Raises ``ValueError``/``TypeError`` naming what is wrong (the record is then recomputed)."""
     if not isinstance(result, dict) or not isinstance(result.get("metrics"), dict):
         raise TypeError("no 'metrics' dict")
     row = result["metrics"]
-    for name in ("controller", "track", "seed"):
+    if not isinstance(row.get("controller"), str):  # the controller's name (a policy's is not its spec)
+        raise TypeError(f"metrics['controller'] = {row.get('controller')!r} is not a name")
+    for name in ("track", "seed"):
         if row.get(name) != key[name] or type(row.get(name)) is not type(key[name]):
             raise ValueError(f"metrics[{name!r}] = {row.get(name)!r}, the episode's is {key[name]!r}")
     for name, *_ in SUMMARY_COLUMNS:
@@ -126,8 +132,14 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
     episode with ``all_logs``: the export) return their logs; ``names`` (spec -> name) labels
     them. The robot (``robot``, ``robot_file``) is in each task's key only when it is not the
     default, so the default campaign's task ids are those of before."""
+    from jobs.eval.controllers import controller_files
+
     names = names or {}
     tasks = []
+    # the content of every file an episode reads, in its key: a file changed at the same path (a
+    # retrained model, edited statistics or robot file) is a new episode, not a stale record reused
+    inputs = {c: {role: file_digest(p) for role, p in controller_files(c).items()} for c in controllers}
+    robot_digest = {"robot_file": file_digest(robot_file)} if robot_file else {}
     for track in tracks:
         nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
         for controller in controllers:
@@ -139,6 +151,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                     key["robot_file"] = str(Path(robot_file).resolve())
                 elif robot:
                     key["robot"] = robot
+                if inputs[controller] or robot_digest:  # only then: the default campaign's ids stay
+                    key["inputs"] = {**inputs[controller], **robot_digest}
                 cost = min(nominal, max_time) if max_time else nominal
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,

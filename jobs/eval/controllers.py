@@ -27,10 +27,10 @@ from control.controller import (
     make_controller,
     register_controller,
 )
-from train.policy import model_file, policy_controller, policy_name
+from train.policy import model_file, policy_controller, policy_files, policy_name
 
 __all__ = ["POLICY_PREFIXES", "is_policy", "arg_controllers", "controller_options", "build_controller",
-           "check_controllers"]
+           "check_controllers", "controller_files"]
 
 #: prefixes of trained policies in ``--controllers``
 POLICY_PREFIXES = ("ppo", "sac")
@@ -115,3 +115,22 @@ def check_controllers(specs: list[str], speed_scale: float = 1.0) -> dict[str, s
                              "name a policy with ppo:NAME=PATH")
         seen[name] = spec
     return names
+
+
+def controller_files(spec: str) -> dict[str, str]:
+    """The files a controller of ``spec`` reads, by role: a trained policy's model, statistics and
+    run.json (:func:`train.policy.policy_files`); a ``package.module:Attr`` controller's module
+    source (a module of the user's, which may change between runs). Built-in names: none (the
+    package's own code)."""
+    if is_policy(spec):
+        return {role: str(p) for role, p in policy_files(policy_name(spec.split(":", 1)[1])[1]).items()}
+    if ":" in spec and not is_prefixed(spec) and spec not in controller_names():
+        import importlib.util
+
+        try:
+            origin = getattr(importlib.util.find_spec(spec.split(":", 1)[0]), "origin", None)
+        except (ImportError, ValueError):
+            origin = None
+        if origin and origin not in ("built-in", "frozen"):
+            return {"module": origin}
+    return {}

@@ -275,3 +275,25 @@ def test_sigkill_of_eval_with_workers_leaves_no_process(tmp_path):
         for pid, _ in _process_group(proc.pid):  # only what this test started
             os.kill(pid, signal.SIGKILL)
         proc.stdout.close()
+
+
+def test_eval_resume_after_editing_the_robot_file_recomputes(tmp_path, capsys):
+    import azimut_env
+
+    robot = tmp_path / "robot.toml"
+    text = (Path(azimut_env.__file__).parent / "robots" / "azimut3.toml").read_text()
+    robot.write_text(text)
+    argv = TINY_EVAL + ["--robot-file", str(robot), "--out", str(tmp_path / "out")]
+    assert main(argv) == 0 and "[1/1]" in capsys.readouterr().out
+    assert main(argv + ["--resume"]) == 0 and "[1/1]" not in capsys.readouterr().out
+    robot.write_text(text + "\n# edited: the same parameters, another file content\n")
+    assert main(argv + ["--resume"]) == 0 and "[1/1]" in capsys.readouterr().out
+
+
+def test_controller_files_by_kind():
+    import json as json_module
+
+    from jobs.eval.controllers import controller_files
+
+    assert controller_files("icr") == {} and controller_files("twist") == {}
+    assert controller_files("json:dumps") == {"module": json_module.__file__}  # a user's module: its source

@@ -83,3 +83,20 @@ def test_a_broken_run_record_is_refused(good_run, tmp_path, text):
     (run / "run.json").write_text(text)
     with pytest.raises(ValueError, match="run.json"):
         load_policy(run / "model.zip")
+
+
+def test_eval_resume_after_retraining_at_the_same_path_recomputes(tmp_path, capsys):
+    """``eval --resume`` after retraining a model at the same path reused the old episodes (the
+    episode key held only the path, not the model's content)."""
+    from stable_baselines3 import PPO
+
+    from train.envs import make_sb3_env
+
+    model = _save_run(tmp_path / "run")
+    argv = ["eval", "--controllers", f"ppo:{model}", "--tracks", "paper", "--max-time", "0.2", "--no-plots",
+            "--out", str(tmp_path / "out")]
+    assert main(argv) == 0 and "[1/1]" in capsys.readouterr().out
+    assert main(argv + ["--resume"]) == 0 and "[1/1]" not in capsys.readouterr().out  # the same files: reused
+    PPO("MlpPolicy", make_sb3_env("raw", 1, "paper"), seed=123, device="cpu").save(str(model))  # "retrained"
+    assert main(argv + ["--resume"]) == 0 and "[1/1]" in capsys.readouterr().out  # a new episode
+    assert main(argv + ["--resume"]) == 0 and "[1/1]" not in capsys.readouterr().out
