@@ -297,6 +297,12 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
         self._check_ready()
         self.physics.kick(0, wheels, impulse)
 
+    def check_can_step(self) -> None:
+        """Raise what :meth:`step` would raise for the env's state, whatever the action
+        (``ResetNeeded``: no successful reset, or a physics failure ended the episode). A wrapper
+        calls it before moving any state of its own."""
+        self._check_ready()
+
     def _check_ready(self) -> None:
         if self._done_error is not None:
             raise ResetNeeded(f"the episode ended with a physics failure ({self._done_error}); call reset()")

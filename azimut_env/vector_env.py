@@ -281,16 +281,23 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
         obs = task.obs.copy()
         return obs, self._vector_info(np.zeros(self.num_envs, dtype=np.bool_))
 
-    def step(self, actions):
-        """Step every sub-env (autoresetting those that ended, in NEXT_STEP mode)."""
+    def check_can_step(self) -> None:
+        """Raise what :meth:`step` would raise for the env's state, whatever the actions:
+        ``ResetNeeded`` before a successful reset, ``RuntimeError`` when, with autoreset
+        disabled, a sub-env has ended. A wrapper calls it before moving any state of its own (its
+        controllers advanced, then the step was refused)."""
         if self._needs_reset:
             raise ResetNeeded("call reset() before step(): the vector env has not been reset, or a sub-env's "
                               "last reset failed")
-        task, N = self.task, self.num_envs
-        resetting = self._autoreset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():
             raise RuntimeError(f"sub-envs {np.flatnonzero(self._autoreset).tolist()} ended: with autoreset "
                                "disabled, reset them (options={'reset_mask': ...}) before stepping")
+
+    def step(self, actions):
+        """Step every sub-env (autoresetting those that ended, in NEXT_STEP mode)."""
+        self.check_can_step()
+        task, N = self.task, self.num_envs
+        resetting = self._autoreset.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
         any_reset = resetting is not None and bool(resetting.any())
         active = ~resetting if any_reset else None
         a = task.apply_actions(actions, active)

@@ -113,6 +113,7 @@ class _ControllerWrapper(gym.Wrapper):
         """One step with the clipped action ``a``."""
         if not self._ctl.ready[0]:
             raise ResetNeeded("call reset() before step()")
+        self.env.unwrapped.check_can_step()  # what the env would refuse, before the controller moves
         cmd = self._ctl.command(self._view, a[None, :], _ROW)
         ci = cmd.info
         events = int(cmd.events[0]) if cmd.events is not None else 0

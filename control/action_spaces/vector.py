@@ -163,6 +163,7 @@ class VectorControllerAction(gym.vector.VectorWrapper):
             raise ResetNeeded("call reset() before step()")
         a = np.clip(a, -1.0, 1.0)
         base = self.env.unwrapped
+        base.check_can_step()  # what the env would refuse, before any controller or target state moves
         beta = base.measured_beta
         N, n = beta.shape
         beta_c, phidot_c = beta.copy(), np.zeros((N, n))  # autoreset this step: the action is ignored
