@@ -27,8 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from azimut_env.task.reset_options import start_progress_on
 from azimut_env.tracks import Track, wrap_angle
-from azimut_env.validation import check_fields
+from azimut_env.validation import check_fields, check_finite
 from estimation.hrep import eta_from_twist
 
 __all__ = ["PathFollowerConfig", "PathFollower", "FollowerOutput"]
@@ -149,7 +150,13 @@ class PathFollower:
 
     def reset(self, progress: float | None = None) -> None:
         """Forget the progress (the next step searches the whole track unless given) and the
-        integral of the cross-track error."""
+        integral of the cross-track error. ``progress`` [m]: None, or a finite number (not a
+        bool) within [0, length] on an open track, wrapped modulo the length on a closed one
+        (the env's ``start_progress`` rule); ``ValueError``/``TypeError`` otherwise, changing
+        nothing (NaN, inf or 1e9 were accepted and the next step reported the lap finished;
+        ``True`` was taken as 1)."""
+        if progress is not None:
+            progress = start_progress_on(self.track, check_finite("progress", progress), "progress")
         self.progress = progress
         self._integral = 0.0
         self._max_progress = None
