@@ -123,6 +123,11 @@ def _robot_n(robot: str) -> int:
     return resolve_robot(robot, None, RobotParams).n
 
 
+def episode_label(name: str, track: str, seed: int) -> str:
+    """An episode's label: its task id's prefix and its export's folder name (sanitised)."""
+    return f"{name}-{track}-s{seed}"
+
+
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
@@ -157,7 +162,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
-                                  label=f"{names.get(controller, controller)}-{track}-s{seed}", cost=cost,
+                                  label=episode_label(names.get(controller, controller), track, seed), cost=cost,
                                   check="jobs.eval.campaign:check_episode_result"))
     return tasks
 
@@ -202,13 +207,22 @@ def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[
     """What ``azimut eval`` writes in its output folder, for :func:`jobs.args.check_output_layout`:
     the files (``metrics.json``, ``report.md``, the kick study's ``kicks_<controller>.json``) and
     the folders with the suffixes of the files written in them (``episodes/``: the records and
-    traces ``--resume`` reads; ``plots/``; ``videos/``; ``kicks/<controller>/``)."""
+    traces ``--resume`` reads; ``plots/``; ``videos/``; ``exports/<episode>/``; ``kicks/<controller>/``)."""
     files = ["metrics.json", "report.md"]
     dirs: dict[str, tuple[str, ...]] = {"episodes": (".json", ".npz")}
     if not getattr(args, "no_plots", True):
         dirs["plots"] = (".png",)
     if getattr(args, "video", None):
         dirs["videos"] = (".gif", ".mp4")
+    if getattr(args, "export", None):  # one bag folder per episode, replaced: each must be a folder if it exists
+        names = getattr(args, "controller_names", None) or {}
+        tracks = args.tracks if isinstance(args.tracks, list) else [t for t in str(args.tracks).split(",") if t]
+        dirs["exports"] = ()
+        for spec in args.controllers:
+            for track in tracks:
+                for seed in seeds_of(args):
+                    label = re.sub(r"[^A-Za-z0-9_.-]+", "_", episode_label(names.get(spec, spec), track, seed))
+                    dirs[f"exports/{label}"] = ()
     if getattr(args, "kick_runs", 0):  # the study runs every controller but the trained policies, by name
         from jobs.eval.controllers import is_policy
 

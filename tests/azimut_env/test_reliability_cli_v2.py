@@ -64,10 +64,12 @@ def test_eval_output_folder_of_the_wrong_kind_refused_before_work(tmp_path, caps
 def test_layout_names_videos_and_kicks(tmp_path):
     from jobs.eval.campaign import output_layout
 
-    args = argparse.Namespace(no_plots=False, video="gif", kick_runs=3, controllers=["icr", "twist"])
+    args = argparse.Namespace(no_plots=False, video="gif", kick_runs=3, controllers=["icr", "twist"], export="mcap",
+                              tracks=["paper"], seed=0, seeds=[0, 1])
     files, dirs = output_layout(args)
     assert {"metrics.json", "report.md", "kicks_icr.json", "kicks_twist.json"} <= set(files)
-    assert {"episodes", "plots", "videos", "kicks/icr", "kicks/twist"} <= set(dirs)
+    assert {"episodes", "plots", "videos", "kicks/icr", "kicks/twist", "exports", "exports/icr-paper-s0",
+            "exports/twist-paper-s1"} <= set(dirs)
     (tmp_path / "videos").write_text("x")
     with pytest.raises(ValueError, match="videos: exists and is not a directory"):
         check_output_layout(tmp_path, files, dirs)
