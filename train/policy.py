@@ -22,28 +22,13 @@ from azimut_env.validation import check_real_array
 from control.action_spaces.controller import ActionController
 from control.commands import WheelCommand
 from train.envs import ACTIONS
+from train.saved_files import check_model_file, check_vecnormalize_file, vecnormalize_path  # re-exported
 
 __all__ = ["TrainedPolicy", "load_policy", "check_policy_spaces", "vecnormalize_path", "PolicyController",
            "policy_controller", "policy_name", "model_file", "policy_files"]
 
 #: the spelling of a policy's short name in ``ppo:NAME=PATH``
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
-
-
-def vecnormalize_path(model_path: Path) -> Path | None:
-    """The VecNormalize statistics saved beside ``model_path`` (None if there are none):
-    ``model.zip`` -> ``vecnormalize.pkl``, ``best_model.zip`` -> ``best_vecnormalize.pkl``, a
-    checkpoint ``model_<N>_steps.zip`` -> ``model_vecnormalize_<N>_steps.pkl`` (SB3's
-    ``CheckpointCallback`` names)."""
-    model_path = Path(model_path)
-    stem = model_path.name.removesuffix(".zip")
-    names = [stem.replace("model", "vecnormalize", 1) + ".pkl"]
-    if stem.startswith("model_") and stem.endswith("_steps"):
-        names.insert(0, "model_vecnormalize_" + stem.removeprefix("model_") + ".pkl")
-    for name in names:
-        if (model_path.parent / name).is_file():
-            return model_path.parent / name
-    return None
 
 
 @dataclass
@@ -87,8 +72,6 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
     the model's spaces against its env's (:func:`check_policy_spaces`).
     """
     from stable_baselines3 import PPO, SAC
-
-    from train.saved_files import check_model_file, check_vecnormalize_file
 
     path = check_model_file(model_file(path))  # a corrupted or truncated archive: one line, before SB3
     meta_file = next((p / "run.json" for p in (path.parent, path.parent.parent) if (p / "run.json").is_file()), None)

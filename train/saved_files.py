@@ -14,10 +14,26 @@ import pickle
 import zipfile
 from pathlib import Path
 
-__all__ = ["check_model_file", "check_vecnormalize_file"]
+__all__ = ["check_model_file", "check_vecnormalize_file", "check_checkpoint", "vecnormalize_path"]
 
 #: the entries every SB3 model archive holds
 MODEL_ENTRIES = ("data", "policy.pth")
+
+
+def vecnormalize_path(model_path: Path) -> Path | None:
+    """The VecNormalize statistics saved beside ``model_path`` (None if there are none):
+    ``model.zip`` -> ``vecnormalize.pkl``, ``best_model.zip`` -> ``best_vecnormalize.pkl``, a
+    checkpoint ``model_<N>_steps.zip`` -> ``model_vecnormalize_<N>_steps.pkl`` (SB3's
+    ``CheckpointCallback`` names)."""
+    model_path = Path(model_path)
+    stem = model_path.name.removesuffix(".zip")
+    names = [stem.replace("model", "vecnormalize", 1) + ".pkl"]
+    if stem.startswith("model_") and stem.endswith("_steps"):
+        names.insert(0, "model_vecnormalize_" + stem.removeprefix("model_") + ".pkl")
+    for name in names:
+        if (model_path.parent / name).is_file():
+            return model_path.parent / name
+    return None
 
 
 def check_model_file(path: str | Path) -> Path:
@@ -60,3 +76,15 @@ def check_vecnormalize_file(path: str | Path | None, model: str | Path) -> Path:
         raise ValueError(f"{path}: holds a {type(stats).__name__}, not the VecNormalize statistics of "
                          f"{Path(model).name}")
     return path
+
+
+def check_checkpoint(ckpt: str | Path) -> None:
+    """``azimut train --resume``'s checkpoint and the VecNormalize statistics beside it, read
+    before any work (``ValueError``, one line, starting ``--resume:``: a corrupted or truncated
+    checkpoint, or missing or unreadable statistics, raised a traceback from inside SB3 after the
+    env was built)."""
+    try:
+        check_model_file(ckpt)
+        check_vecnormalize_file(vecnormalize_path(Path(ckpt)), ckpt)
+    except ValueError as exc:
+        raise ValueError(f"--resume: {exc}") from None

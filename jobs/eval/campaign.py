@@ -34,6 +34,7 @@ from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
 from jobs.campaign.task import file_digest
 from jobs.eval.controllers import build_controller, check_controllers
+from jobs.eval.outputs import episode_label, output_layout
 from jobs.eval.plots import comparison_plots, write_plots
 from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
 from jobs.records import provenance
@@ -123,11 +124,6 @@ def _robot_n(robot: str) -> int:
     return resolve_robot(robot, None, RobotParams).n
 
 
-def episode_label(name: str, track: str, seed: int) -> str:
-    """An episode's label: its task id's prefix and its export's folder name (sanitised)."""
-    return f"{name}-{track}-s{seed}"
-
-
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
@@ -200,37 +196,7 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     check_executor_args(args)
     check_output_path(args.out, directory=True)
-    check_output_layout(args.out, *output_layout(args))
-
-
-def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[str, ...]]]:
-    """What ``azimut eval`` writes in its output folder, for :func:`jobs.args.check_output_layout`:
-    the files (``metrics.json``, ``report.md``, the kick study's ``kicks_<controller>.json``) and
-    the folders with the suffixes of the files written in them (``episodes/``: the records and
-    traces ``--resume`` reads; ``plots/``; ``videos/``; ``exports/<episode>/``; ``kicks/<controller>/``)."""
-    files = ["metrics.json", "report.md"]
-    dirs: dict[str, tuple[str, ...]] = {"episodes": (".json", ".npz")}
-    if not getattr(args, "no_plots", True):
-        dirs["plots"] = (".png",)
-    if getattr(args, "video", None):
-        dirs["videos"] = (".gif", ".mp4")
-    if getattr(args, "export", None):  # one bag folder per episode, replaced: each must be a folder if it exists
-        names = getattr(args, "controller_names", None) or {}
-        tracks = args.tracks if isinstance(args.tracks, list) else [t for t in str(args.tracks).split(",") if t]
-        dirs["exports"] = ()
-        for spec in args.controllers:
-            for track in tracks:
-                for seed in seeds_of(args):
-                    label = re.sub(r"[^A-Za-z0-9_.-]+", "_", episode_label(names.get(spec, spec), track, seed))
-                    dirs[f"exports/{label}"] = ()
-    if getattr(args, "kick_runs", 0):  # the study runs every controller but the trained policies, by name
-        from jobs.eval.controllers import is_policy
-
-        names = getattr(args, "controller_names", None) or {}
-        for spec in [c for c in args.controllers if not is_policy(c)]:
-            files.append(f"kicks_{names.get(spec, spec)}.json")
-            dirs[f"kicks/{names.get(spec, spec)}"] = (".json",)
-    return files, dirs
+    check_output_layout(args.out, *output_layout(args, seeds_of(args)))
 
 
 def run_kwargs(args: argparse.Namespace) -> dict:

@@ -117,6 +117,8 @@ def check_args(args: argparse.Namespace) -> None:
         if args.resume and latest_checkpoint(Path(args.out)) is None:
             raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
         if args.resume:
+            from train.saved_files import check_checkpoint
+
             check_checkpoint(latest_checkpoint(Path(args.out)))
         if not args.resume and (Path(args.out) / "model.zip").exists():
             raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
@@ -158,20 +160,6 @@ def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[
         files += [f"seed_{seed}/{f}" for f in run_files]
         dirs.update({f"seed_{seed}/{d}": suffixes for d, suffixes in run_dirs.items()})
     return files, dirs
-
-
-def check_checkpoint(ckpt: Path) -> None:
-    """``--resume``'s checkpoint and its VecNormalize statistics, read before any work
-    (``ValueError``, one line: a corrupted or truncated checkpoint, or missing or unreadable
-    statistics, raised a traceback from inside SB3 after the env was built)."""
-    from train.policy import vecnormalize_path
-    from train.saved_files import check_model_file, check_vecnormalize_file
-
-    try:
-        check_model_file(ckpt)
-        check_vecnormalize_file(vecnormalize_path(ckpt), ckpt)
-    except ValueError as exc:
-        raise ValueError(f"--resume: {exc}") from None
 
 
 def _robot_kwargs(args: argparse.Namespace) -> dict:

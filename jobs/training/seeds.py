@@ -147,7 +147,7 @@ def check_seed_args(args: argparse.Namespace) -> None:
         raise ValueError("give --seed or --seeds, not both")
     check_executor_args(args)
     if args.resume:  # the seeds that will resume from a checkpoint: read it now, not in the task
-        from jobs.training.command import check_checkpoint
+        from train.saved_files import check_checkpoint
         from train.trainer import latest_checkpoint
 
         for seed in args.seeds:

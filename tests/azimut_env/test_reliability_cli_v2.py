@@ -62,11 +62,11 @@ def test_eval_output_folder_of_the_wrong_kind_refused_before_work(tmp_path, caps
 
 
 def test_layout_names_videos_and_kicks(tmp_path):
-    from jobs.eval.campaign import output_layout
+    from jobs.eval.outputs import output_layout
 
     args = argparse.Namespace(no_plots=False, video="gif", kick_runs=3, controllers=["icr", "twist"], export="mcap",
-                              tracks=["paper"], seed=0, seeds=[0, 1])
-    files, dirs = output_layout(args)
+                              tracks=["paper"])
+    files, dirs = output_layout(args, [0, 1])
     assert {"metrics.json", "report.md", "kicks_icr.json", "kicks_twist.json"} <= set(files)
     assert {"episodes", "plots", "videos", "kicks/icr", "kicks/twist", "exports", "exports/icr-paper-s0",
             "exports/twist-paper-s1"} <= set(dirs)
