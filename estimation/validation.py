@@ -173,16 +173,20 @@ def check_choice(name: str, value: Any, choices: Iterable[Any]) -> Any:
 
 
 def check_real_array(name: str, value: Any, shape: Sequence[int | None] | None = None, *,
-                     finite: bool = False, dtype=np.float64) -> np.ndarray:
-    """An array of real numbers (bool, int or float dtype; never complex, object or strings),
-    converted to ``dtype``; ``shape`` with ``None`` for any length; ``finite`` refuses NaN/inf
-    (and values beyond ``dtype``'s range, which become inf)."""
+                     finite: bool = False, dtype=np.float64, broadcast: tuple[int, ...] | None = None) -> np.ndarray:
+    """An array of real numbers (bool, int or float dtype; never complex, object or strings; a
+    scalar bool is refused as everywhere, an array of bools is read as 0/1), converted to
+    ``dtype``; ``shape`` with ``None`` for any length; ``finite`` refuses NaN/inf (and values
+    beyond ``dtype``'s range, which become inf); ``broadcast``: returned broadcast to that shape
+    (a scalar, or an array that broadcasts; ``ValueError`` naming ``name`` otherwise)."""
     try:
         arr = np.asarray(value)
     except (ValueError, OverflowError) as exc:  # ragged nesting, integers beyond int64/object
         raise ValueError(f"{name} must be an array of real numbers: {exc}") from None
     if arr.dtype.kind not in "biuf":
         raise TypeError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    if arr.ndim == 0 and arr.dtype.kind == "b":  # a scalar bool is not a number (an array of them is 0/1)
+        raise TypeError(f"{name} must be a real number or an array of them, got {show(value)} (bool)")
     with np.errstate(over="ignore"):
         arr = arr.astype(dtype, copy=False)
     if shape is not None:
@@ -191,6 +195,12 @@ def check_real_array(name: str, value: Any, shape: Sequence[int | None] | None =
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
     if finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite")
+    if broadcast is not None:
+        try:
+            return np.broadcast_to(arr, broadcast)
+        except ValueError:
+            raise ValueError(f"{name} must be a scalar or broadcast to shape {broadcast}, got shape {arr.shape}") \
+                from None
     return arr
 
 

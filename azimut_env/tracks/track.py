@@ -25,6 +25,10 @@ from azimut_env.validation import check_bool, check_nonnegative, check_positive,
 __all__ = ["Track"]
 
 
+#: the largest |heading| a track takes [rad]: an angle unwrapped along a track stays far below it;
+#: beyond it an angle has no digits left for its fraction of a turn
+_MAX_HEADING = 1e6
+
 @dataclass(frozen=True, eq=False)
 class Track:
     """A reference track (see the module docstring).
@@ -152,7 +156,7 @@ class Track:
             raise ValueError(f"waypoints must have shape (W >= 2, 2 or 3), got {wp.shape}")
         if not np.all(np.isfinite(wp)):
             raise ValueError("waypoints must be finite")
-        if np.ptp(wp[:, :2], axis=0).max() / spacing > 1e7:
+        if np.ptp(wp[:, :2], axis=0).max() > 1e7 * spacing:  # (no division: a subnormal spacing overflowed it)
             raise ValueError(f"spacing {spacing} m is too fine for waypoints spanning {np.ptp(wp[:, :2]):.3g} m "
                              "(more than 1e7 samples)")
         w = wp.shape[0]
@@ -163,10 +167,12 @@ class Track:
         elif heading is None:
             hd = wp[:, 2] if wp.shape[1] == 3 else np.zeros(w)
         else:
-            hd = np.broadcast_to(check_real_array("heading", heading, finite=True), (w,))
-        sp = np.broadcast_to(check_real_array("speed", speed, finite=True), (w,))
+            hd = check_real_array("heading", heading, finite=True, broadcast=(w,))
+        sp = check_real_array("speed", speed, finite=True, broadcast=(w,))
         if np.any(sp < 0):
             raise ValueError("speed must be >= 0 [m/s]")
+        if hd is not None and np.any(np.abs(hd) > _MAX_HEADING):  # 7e306 rad overflowed the heading's gradient
+            raise ValueError(f"heading must lie within ±{_MAX_HEADING:g} rad (an angle, unwrapped along the track)")
         pts = wp[:, :2]
         if closed:
             pts = np.vstack([pts, pts[:1]])
@@ -203,7 +209,8 @@ class Track:
     def with_ramps(self, ramp: float) -> Track:
         """A copy whose speed rises from 0 over the first and falls to 0 over the last ``ramp`` m."""
         ramp = check_positive("ramp", ramp)
-        scale = np.clip(np.minimum(self.s, self.length - self.s) / ramp, 0.0, 1.0)
+        with np.errstate(over="ignore"):  # a subnormal ramp: inf, clipped to 1 (no ramp)
+            scale = np.clip(np.minimum(self.s, self.length - self.s) / ramp, 0.0, 1.0)
         v = self.speed * np.sqrt(scale)
         v[0] = min(self.speed[0], 0.05)  # let the robot start
         xy, th = self.xy, self.heading

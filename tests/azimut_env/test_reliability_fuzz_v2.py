@@ -169,3 +169,170 @@ test_any_vertex_list, test_any_vertex_list_slow = _profiles(
     _prop_any_vertex_list, 100, 3000,
     vertices=st.lists(st.tuples(st.one_of(st.floats(-3, 3), st.integers(-3, 3)),
                                 st.one_of(st.floats(-3, 3), st.integers(-3, 3))), min_size=0, max_size=9))
+
+
+# ---------------------------------------------------------------------- numbers at other entry points
+
+edge = st.one_of(
+    st.sampled_from([10**400, -10**400, 2**63, True, np.True_, np.array(0.3), np.array(2), np.array(True), 1j,
+                     "0.3", None, np.float32(0.3), np.int64(2), [0.3, 0.4]]),
+    st.floats(allow_nan=True, allow_infinity=True), st.integers(-3, 3))
+
+
+def _prop_track_kwargs(name, value):
+    """Every keyword of ``Track.from_waypoints`` (read from its signature): refused with a clear
+    error naming it, or a track of finite numbers."""
+    import inspect
+
+    from azimut_env.tracks import Track
+
+    assert name in inspect.signature(Track.from_waypoints).parameters
+    try:
+        track = Track.from_waypoints([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]], **{name: value})
+    except (ValueError, TypeError) as exc:
+        assert name in str(exc) or "waypoints" in str(exc), (name, value, str(exc))
+        return
+    assert np.all(np.isfinite(track.xy)) and np.all(np.isfinite(track.speed)) and track.length > 0
+
+
+def _track_kwargs():
+    import inspect
+
+    from azimut_env.tracks import Track
+
+    return [p for p in inspect.signature(Track.from_waypoints).parameters if p != "waypoints"]
+
+
+test_track_kwargs, test_track_kwargs_slow = _profiles(
+    _prop_track_kwargs, 60, 2000, name=st.sampled_from(_track_kwargs()), value=edge)
+
+
+def _prop_reward_weights(weights):
+    from azimut_env.task.config import TaskConfig
+
+    try:
+        cfg = TaskConfig(reward_weights=weights)
+    except (ValueError, TypeError) as exc:
+        assert "reward_weights" in str(exc)
+        return
+    assert all(type(w) is float and np.isfinite(w) and w >= 0 for w in cfg.reward_weights.values())
+
+
+def _reward_terms():
+    from azimut_env.task.reward import reward_term_names
+
+    return list(reward_term_names())
+
+
+test_reward_weights, test_reward_weights_slow = _profiles(
+    _prop_reward_weights, 60, 2000,
+    weights=st.dictionaries(st.one_of(st.sampled_from(_reward_terms()), st.text(max_size=4)), edge, max_size=3))
+
+
+# ---------------------------------------------------------------------- files the command line reads and writes
+
+json_values = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(-10, 10), st.floats(allow_nan=True), st.text(max_size=5)),
+    lambda children: st.one_of(st.lists(children, max_size=4), st.dictionaries(st.text(max_size=8), children,
+                                                                                   max_size=4)), max_leaves=12)
+
+
+def _prop_record_files(tmp_path_factory, content, mutate):
+    """Whatever a record file holds (any JSON, a valid record with one field replaced by any JSON,
+    torn bytes, a directory), reading it back gives a valid record or None (recompute, listed as
+    rejected), never an exception."""
+    import json
+
+    from jobs.campaign.store import TaskStore, record_problem
+    from jobs.campaign.task import Task
+
+    task = Task("jobs.eval.campaign:episode_task", {"controller": "icr", "track": "paper", "seed": 0},
+                check="jobs.eval.campaign:check_episode_result")
+    store = TaskStore(tmp_path_factory.mktemp("records"))
+    path = store.path(task)
+    metrics = {name: 0.5 for name in ("rms_lateral_m", "max_lateral_m", "rms_heading_rad", "completion_time_s",
+                                      "slip_energy_J", "mean_internal_force_N", "mean_qua", "mean_qua_moving",
+                                      "min_qua_moving", "standstill_share", "limit_violation_steps",
+                                      "reconfigure_events", "return")}
+    metrics.update(completed=True, controller="icr", track="paper", seed=0)
+    good = {"id": task.id, "fn": task.fn, "key": dict(task.key), "status": "ok", "attempts": 1,
+            "result": {"metrics": metrics}}
+    assert record_problem(good, task) is None
+    if mutate in ("status", "attempts", "result", "key"):
+        path.write_text(json.dumps({**good, mutate: content}, allow_nan=True))
+    elif mutate in ("rms_lateral_m", "completed", "seed", "controller"):
+        path.write_text(json.dumps({**good, "result": {"metrics": {**metrics, mutate: content}}}, allow_nan=True))
+    elif mutate == "whole":
+        path.write_text(json.dumps(content, allow_nan=True))
+    elif mutate == "torn":
+        path.write_text(json.dumps(good)[: len(json.dumps(content)) % 200])
+    else:
+        path.mkdir()
+    got = store.load(task)
+    if got is None:
+        assert [p for p, _ in store.rejected] == [path]
+    else:
+        assert record_problem(got, task) is None and not store.rejected
+
+
+def _record_test(max_examples):
+    @settings(max_examples=max_examples, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(content=json_values, mutate=st.sampled_from(["status", "attempts", "result", "key", "rms_lateral_m",
+                                                        "completed", "seed", "controller", "whole", "torn", "dir"]))
+    def test(tmp_path_factory, content, mutate):
+        _prop_record_files(tmp_path_factory, content, mutate)
+
+    return test
+
+
+test_record_files = _record_test(80)
+test_record_files_slow = pytest.mark.slow(_record_test(2000))
+
+
+def _prop_output_layout(tmp_path_factory, kinds, flags):
+    """Any mix of files and folders where ``azimut eval`` writes (every path of its layout, made
+    a file or a folder at random): the check refuses it (one line naming a path) or every path
+    that exists is of the kind written there."""
+    import argparse
+    import os
+
+    from jobs.args import check_output_layout
+    from jobs.eval.outputs import output_layout
+
+    args = argparse.Namespace(no_plots=not flags[0], video="gif" if flags[1] else None, kick_runs=flags[2],
+                              controllers=["icr", "twist"], export="mcap" if flags[3] else None, tracks=["paper"])
+    files, dirs = output_layout(args, [0])
+    out = tmp_path_factory.mktemp("out")
+    paths = sorted(set(files) | set(dirs))
+    for rel, kind in zip(paths, kinds):
+        p = out / rel
+        if kind == "absent" or any(q.exists() and not q.is_dir() for q in p.parents if out in q.parents):
+            continue
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if kind == "file" and not p.exists():
+            p.write_text("x")
+        elif kind == "dir" and not p.exists():
+            p.mkdir()
+    try:
+        check_output_layout(out, files, dirs)
+    except ValueError as exc:
+        assert len(str(exc).splitlines()) == 1 and str(out) in str(exc)
+        return
+    for rel in files:
+        assert not os.path.isdir(out / rel)
+    for rel in dirs:
+        assert not (out / rel).exists() or (out / rel).is_dir()
+
+
+def _layout_test(max_examples):
+    @settings(max_examples=max_examples, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(kinds=st.lists(st.sampled_from(["absent", "absent", "file", "dir"]), min_size=20, max_size=20),
+           flags=st.tuples(st.booleans(), st.booleans(), st.integers(0, 2), st.booleans()))
+    def test(tmp_path_factory, kinds, flags):
+        _prop_output_layout(tmp_path_factory, kinds, flags)
+
+    return test
+
+
+test_output_layout = _layout_test(60)
+test_output_layout_slow = pytest.mark.slow(_layout_test(2000))
