@@ -46,7 +46,7 @@ from numba import njit
 
 from azimut_env.task.observation import speed_along
 from azimut_env.tracks import TQ
-from azimut_env.validation import check_nonnegative
+from azimut_env.validation import real_scalar, show
 
 __all__ = ["RewardTerm", "REWARD_TERMS", "current_reward_terms", "RewardInput", "RewardConstant", "RewardWeights",
            "OFF_TRACK", "reward_term_names", "default_reward_weights", "check_reward_weights", "reward_weight_array",
@@ -221,7 +221,11 @@ def check_reward_weights(overrides: Mapping[str, Any] | None = None) -> RewardWe
         raise ValueError(f"reward_weights: unknown term(s) {unknown}; the terms are {list(names)}")
     weights = dict(default_reward_weights())
     for name, w in overrides.items():  # the one numeric check: 10**400 raised OverflowError here
-        weights[name] = check_nonnegative(f"reward_weights[{name!r}]", w)
+        label = f"reward_weights[{name!r}]"
+        v = real_scalar(label, w)
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{label} must be finite and >= 0, got {show(w)}")
+        weights[name] = v
     return RewardWeights(weights)
 
 

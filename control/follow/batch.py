@@ -19,10 +19,8 @@ import numpy as np
 from numba import njit
 from numba.typed import List as NumbaList
 
-from azimut_env.task.reset_options import start_progress_on
 from azimut_env.tracks import Track, interp1, project_window_kernel, wrap_pi, wrap_progress
-from azimut_env.validation import check_finite
-from control.follow.path_follower import PathFollower, PathFollowerConfig
+from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress
 
 __all__ = ["BatchFollower"]
 
@@ -155,7 +153,7 @@ class BatchFollower:
     def reset(self, i: int, track: Track, progress: float) -> None:
         """Robot i starts on ``track`` at ``progress`` [m] (integral and farthest progress cleared);
         ``progress`` as :meth:`PathFollower.reset` takes it (checked before any state changes)."""
-        progress = start_progress_on(track, check_finite("progress", progress), "progress")
+        progress = check_start_progress(track, progress)
         key = id(track)
         hit = self._cache.get(key)
         if hit is None or hit[0] is not track:

@@ -27,12 +27,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.task.reset_options import start_progress_on
 from azimut_env.tracks import Track, wrap_angle
 from azimut_env.validation import check_fields, check_finite
 from estimation.hrep import eta_from_twist
 
-__all__ = ["PathFollowerConfig", "PathFollower", "FollowerOutput"]
+__all__ = ["PathFollowerConfig", "PathFollower", "FollowerOutput", "check_start_progress"]
+
+
+def check_start_progress(track: Track, progress) -> float:
+    """A follower's starting progress [m] on ``track`` as ``float``: a finite number (not a bool)
+    within [0, length] on an open track, within [−length, length] on a closed one (progress is
+    counted over laps there: a start beyond one lap would report the lap finished at once, one
+    just before the start line is slightly negative). ``ValueError``/``TypeError`` naming it."""
+    s = check_finite("progress", progress)
+    lo = -track.length if track.closed else 0.0
+    if not lo <= s <= track.length:
+        raise ValueError(f"progress = {s!r} m is off the track: it must lie in [{lo:.6g}, {track.length:.6g}] m")
+    return s
 
 
 @dataclass(frozen=True)
@@ -150,13 +161,12 @@ class PathFollower:
 
     def reset(self, progress: float | None = None) -> None:
         """Forget the progress (the next step searches the whole track unless given) and the
-        integral of the cross-track error. ``progress`` [m]: None, or a finite number (not a
-        bool) within [0, length] on an open track, wrapped modulo the length on a closed one
-        (the env's ``start_progress`` rule); ``ValueError``/``TypeError`` otherwise, changing
-        nothing (NaN, inf or 1e9 were accepted and the next step reported the lap finished;
-        ``True`` was taken as 1)."""
+        integral of the cross-track error. ``progress`` [m]: None, or a start along the track
+        (:func:`check_start_progress`); ``ValueError``/``TypeError`` otherwise, changing nothing
+        (NaN, inf or 1e9 were accepted and the next step reported the lap finished; ``True`` was
+        taken as 1)."""
         if progress is not None:
-            progress = start_progress_on(self.track, check_finite("progress", progress), "progress")
+            progress = check_start_progress(self.track, progress)
         self.progress = progress
         self._integral = 0.0
         self._max_progress = None

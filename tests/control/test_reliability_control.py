@@ -79,11 +79,13 @@ def test_path_follower_reset_progress_checked(progress, error):
         batch.reset(0, track, progress)
 
 
-def test_path_follower_reset_progress_on_a_closed_track_wraps():
-    track = make_track("circle")
+def test_path_follower_reset_progress_on_a_closed_track():
+    track = make_track("circle")  # progress counts laps there: within one lap either way of the start
     follower = PathFollower(track)
-    follower.reset(track.length * 3 + 1.25)
-    assert follower.progress == pytest.approx(1.25)
+    follower.reset(-0.01)  # just before the start line
+    assert follower.progress == -0.01
+    with pytest.raises(ValueError, match="off the track"):
+        follower.reset(track.length * 3 + 1.25)
     follower.reset(np.float32(2.0))
     assert type(follower.progress) is float and follower.progress == 2.0
     follower.reset(None)
