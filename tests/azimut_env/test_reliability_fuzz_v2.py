@@ -336,3 +336,39 @@ def _layout_test(max_examples):
 
 test_output_layout = _layout_test(60)
 test_output_layout_slow = pytest.mark.slow(_layout_test(2000))
+
+
+def _prop_strict_json(tmp_path_factory, value):
+    """What the reports write (``jobs.records.write_json``: metrics.json, seeds.json) is strict JSON
+    whatever it holds: NaN and ±inf as null, NumPy values as numbers (a strict parser refused bare
+    NaN)."""
+    import json
+
+    from jobs.records import write_json
+
+    def refuse(token):
+        raise ValueError(f"not strict JSON: {token}")
+
+    path = tmp_path_factory.mktemp("json") / "metrics.json"
+    write_json(path, value)
+    json.loads(path.read_text(), parse_constant=refuse)
+
+
+def _strict_json_test(max_examples):
+    leaves = st.one_of(st.none(), st.booleans(), st.integers(-10, 10), st.floats(allow_nan=True, allow_infinity=True),
+                       st.text(max_size=4), st.sampled_from([np.float64("nan"), np.float32("inf"), np.int64(3),
+                                                             np.array([1.0, np.nan]), np.bool_(True)]))
+    values = st.recursive(leaves, lambda c: st.one_of(st.lists(c, max_size=4), st.dictionaries(st.text(max_size=4), c,
+                                                                                                 max_size=4)),
+                          max_leaves=12)
+
+    @settings(max_examples=max_examples, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(value=values)
+    def test(tmp_path_factory, value):
+        _prop_strict_json(tmp_path_factory, value)
+
+    return test
+
+
+test_strict_json = _strict_json_test(80)
+test_strict_json_slow = pytest.mark.slow(_strict_json_test(3000))
