@@ -65,6 +65,8 @@ class FeedForwardController:
         else:
             lam, mu = eta_from_twist(body)
             beta = steering_from_lambda(lam, geom)
+            if prev is not None:  # unlimited steering: the nearer angle of each axis
+                beta = geom.nearest_steering(beta, prev)
             rate = None if prev is None else (beta - prev) / dt
             if rate is not None:
                 rate = np.where(np.abs(rate) > 5.0, 0.0, rate)  # a wheel flipping at its stop

@@ -39,13 +39,15 @@ def _real_array(x, name: str) -> np.ndarray:
     return arr.astype(np.float64, copy=False)
 
 
-def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:
+def _prepare(q, geom: RobotGeometry, shifts: bool = False):
     """Validate q ((n,) or (N, n), real, finite) and return it as contiguous (N, n) in the
-    steering range, plus the batch shape. Kept lean: it is on the single-call hot path.
+    steering range, plus the batch shape (and, with ``shifts``, the (N, n) multiples of π taken
+    off each angle, or None when none was). Kept lean: it is on the single-call hot path.
 
     Only the angles outside the steering range are wrapped (β and β + π are the same axis): an
     angle in range is never touched, so each row's result is independent of the rest of its
-    batch, bit for bit."""
+    batch, bit for bit. (With unlimited steering the measured angles are anywhere in ]−π, π], and
+    about half of them are wrapped.)"""
     if not isinstance(geom, RobotGeometry):
         raise TypeError(f"geom must be a RobotGeometry, got {type(geom).__name__}")
     arr = _real_array(q, "q")
@@ -55,12 +57,16 @@ def _prepare(q, geom: RobotGeometry) -> tuple[np.ndarray, tuple[int, ...]]:
         raise ValueError("q contains NaN or inf")
     batch = arr.shape[:-1]
     flat = arr.reshape(-1, geom.n)
+    shift = None
     if flat.size and (flat.max() > geom.steer_max or flat.min() <= geom.steer_min):
         outside = (flat > geom.steer_max) | (flat <= geom.steer_min)
-        flat = np.where(outside, geom.wrap_steering(flat), flat)  # β and β + π: the same propulsion axis
+        wrapped = np.where(outside, geom.wrap_steering(flat), flat)  # β and β + π: the same propulsion axis
+        if shifts:
+            shift = flat - wrapped
+        flat = wrapped
     elif not flat.flags.c_contiguous:
         flat = np.ascontiguousarray(flat)
-    return flat, batch
+    return (flat, batch, shift) if shifts else (flat, batch)
 
 
 @dataclass(frozen=True)
@@ -90,7 +96,7 @@ def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams):
     conv = np.empty(N, dtype=np.bool_)
     it_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, params.eps_delta, params.eps_lambda,
                     int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
-                    params.accept_d2(geom.n), lam, d2, iters, starts, conv)
+                    params.accept_d2(geom.n), lam, d2, iters, starts, conv, geom.unlimited_steering)
     return lam, d2, iters, starts, conv
 
 
@@ -115,7 +121,8 @@ def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params
         grid, grid_beta = oracle_tables(geom, oracle_params)
         d2 = np.empty(flat.shape[0])
         oracle_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, grid, grid_beta,
-                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2)
+                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2,
+                            geom.unlimited_steering)
     return lam
 
 
@@ -189,19 +196,32 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         estimate (n,)/(N, n), a wheel whose axis holds λ̂ taking its measured angle; and
         ``quality(S(λ̂), q)`` of eq. (28)–(29), scalar/(N,): how well the propulsion axes define
         the ICR.
+
+    Unlimited steering (``geom.unlimited_steering``): q may be any angle; each wheel's distance
+    to the surface is taken modulo π (:meth:`RobotGeometry.steering_difference`) and S(λ̂) is the
+    angle of each axis nearest the measured one. A measured angle outside the steering range
+    (either kind of robot) is the same axis as its wrapped angle with the wheel rolling the other
+    way, so its φ̇ counts with the opposite sign in μ̂.
     """
     _check_method(method)
     mu_tol = check_nonnegative("mu_tol [m/s]", mu_tol)
-    flat, batch = _prepare(q, geom)
+    flat, batch, shift = _prepare(q, geom, shifts=True)
     ph = np.array(_real_array(phidot, "phidot"), dtype=np.float64)  # a private copy: the kernel scales it in place
     if ph.shape != np.shape(q):
         raise ValueError(f"phidot must have the shape of q {np.shape(q)}, got {ph.shape}")
     if not np.isfinite(ph).all():
         raise ValueError("phidot contains NaN or inf")
+    ph = ph.reshape(-1, geom.n)
+    if shift is not None:
+        # a wheel whose angle was taken by an odd multiple of π rolls the other way at the
+        # wrapped angle: its speed changes sign with it (r φ̇ = μ c(β), c(β + π) = −c(β))
+        ph = np.where(np.mod(np.rint(shift / np.pi), 2.0) != 0.0, -ph, ph)
     lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
     beta = np.empty_like(flat)
     mu = np.empty(flat.shape[0])
     qua = np.empty(flat.shape[0])
-    _eta_kernel(lam, flat, ph.reshape(-1, geom.n), geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
-                float(mu_tol), QUALITY_F, beta, mu, qua, np.empty(geom.n))
+    _eta_kernel(lam, flat, ph, geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
+                float(mu_tol), QUALITY_F, beta, mu, qua, np.empty(geom.n), geom.unlimited_steering)
+    if shift is not None and geom.unlimited_steering:
+        beta += shift  # S(λ̂) as the angles nearest the measured ones
     return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,)), qua.reshape(batch)

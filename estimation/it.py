@@ -113,7 +113,7 @@ class ITParams:
 
 
 @njit(cache=True)
-def _starting_points(q, E, P, steer_max, keep, starts, start_d2, start_beta, c, lam, scratch):
+def _starting_points(q, E, P, steer_max, keep, starts, start_d2, start_beta, c, lam, scratch, periodic=False):
     """Pairwise propulsion-axis intersections, the ``keep`` closest sorted by joint-space distance.
 
     Fills ``starts`` (≥keep, 3), ``start_d2`` and ``start_beta`` (S of each start); ``c`` (n, 3),
@@ -137,7 +137,7 @@ def _starting_points(q, E, P, steer_max, keep, starts, start_d2, start_beta, c, 
             lam[1] /= nrm
             lam[2] /= nrm
             bound = start_d2[keep - 1] if m == keep else np.inf
-            d2 = _steering_dist2_upto(lam, q, E, P, steer_max, scratch, bound)
+            d2 = _steering_dist2_upto(lam, q, E, P, steer_max, scratch, bound, periodic)
             if d2 > bound:
                 continue  # farther than every start kept
             # insertion into the sorted list of kept starts
@@ -268,13 +268,15 @@ def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, l
 
 @njit(cache=True)
 def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_step, grad, lam_t, beta_t,
-             slide=False):
+             slide=False, periodic=False):
     """Lines 7–20 of Algorithm 1 from λ (modified in place), given d2 = ‖q − S(λ)‖² and
     ``beta_cur`` = S(λ) (updated in place, so F is evaluated once per point).
 
     With ``slide`` (IT+), a backtracking failure next to a stop continues along the stop's
     boundary (:func:`_slide`) instead of ending the descent. ``beta_t`` is a work array of n.
-    Returns (d2, iterations, converged)."""
+    ``periodic`` (unlimited steering): the distance is taken modulo π per wheel
+    (:func:`~estimation.kinematics._steering_dist2_upto`), continuous where F wraps, so there is
+    no stop to slide along. Returns (d2, iterations, converged)."""
     n = q.shape[0]
     count = 0
     kmax = -1
@@ -343,13 +345,13 @@ def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_st
             lam_t[i] = x
             lam_t[j] = y
             lam_t[c] = math.sqrt(max(0.0, 1.0 - rho2))
-            dt = _steering_dist2(lam_t, q, E, P, steer_max, beta_t)
+            dt = _steering_dist2(lam_t, q, E, P, steer_max, beta_t, periodic)
             if dt <= d2:
                 accepted = True
                 break
             step *= 0.5
         if not accepted:
-            if slide and kmax >= 0 and beta_near < 0.3:
+            if slide and not periodic and kmax >= 0 and beta_near < 0.3:
                 beta_k, _ = _beta_wheel(lam[0], lam[1], lam[2], E, P, kmax, steer_max)
                 lim = steer_max if steer_max - beta_k < beta_k - (steer_max - math.pi) else steer_max - math.pi
                 ds2 = _slide(q, E, P, steer_max, lam, d2, kmax, lim, max_iter, min_step, grad, lam_t, beta_t)
@@ -375,7 +377,7 @@ def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_st
 
 @njit(cache=True)
 def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter, accept_d2, ws,
-              out):
+              out, periodic=False):
     """One point: fills out[0:3] with λ. Returns (d2, iterations, starts tried, converged).
 
     ``race_iter`` < 0 runs the paper's Algorithm 1. ``race_iter`` >= 0 runs the improved variant:
@@ -384,14 +386,14 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     ``ws`` holds the work arrays (:func:`_workspace`)."""
     starts, start_d2, start_beta, c, grad, lam, lam_t, beta_cur, beta_t, race_lam, race_it = ws
     n = q.shape[0]
-    m = _starting_points(q, E, P, steer_max, n_starts, starts, start_d2, start_beta, c, lam, beta_t)
+    m = _starting_points(q, E, P, steer_max, n_starts, starts, start_d2, start_beta, c, lam, beta_t, periodic)
     if m == 0:
         # No pair of propulsion axes intersects (cannot happen with non-collinear steering axes
         # and finite input); fall back to the rotation about the chassis centre.
         out[0] = 0.0
         out[1] = 0.0
         out[2] = 1.0
-        return _steering_dist2(out, q, E, P, steer_max, beta_t), 0, 0, False
+        return _steering_dist2(out, q, E, P, steer_max, beta_t, periodic), 0, 0, False
     if math.sqrt(start_d2[0]) <= eps_delta:
         # Line 4: the closest intersection lies on the surface: a well-defined ICR.
         for i in range(3):
@@ -409,7 +411,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
             for k in range(n):
                 beta_cur[k] = start_beta[s, k]
             d2, it, conv = _descend(q, E, P, steer_max, lam, start_d2[s], beta_cur, eps_lambda, max_iter, min_step,
-                                    grad, lam_t, beta_t)
+                                    grad, lam_t, beta_t, False, periodic)
             total_iter += it
             if conv or d2 < best_d2:
                 # Line 23 returns the first start that converges; Line 26 the closest otherwise.
@@ -426,7 +428,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     for k in range(n):
         beta_cur[k] = start_beta[0, k]
     best_d2, it, best_conv = _descend(q, E, P, steer_max, out, start_d2[0], beta_cur, eps_lambda, max_iter,
-                                      min_step, grad, lam_t, beta_t, True)
+                                      min_step, grad, lam_t, beta_t, True, periodic)
     total_iter += it
     if best_d2 <= accept_d2 or m == 1:
         return best_d2, total_iter, 1, best_conv
@@ -441,7 +443,7 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
         for k in range(n):
             beta_cur[k] = start_beta[s, k]
         d2, it, conv = _descend(q, E, P, steer_max, race_lam[s], start_d2[s], beta_cur, eps_lambda, race_iter,
-                                min_step, grad, lam_t, beta_t, True)
+                                min_step, grad, lam_t, beta_t, True, periodic)
         total_iter += it
         race_it[s] = it
         if d2 < lead_d2:
@@ -455,9 +457,9 @@ def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_s
     d2 = lead_d2
     conv = lead_done
     if not conv:
-        d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur)
+        d2 = _steering_dist2(lam, q, E, P, steer_max, beta_cur, periodic)
         d2, it, conv = _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter - race_it[lead],
-                                min_step, grad, lam_t, beta_t, True)
+                                min_step, grad, lam_t, beta_t, True, periodic)
         total_iter += it
     if d2 < best_d2:
         best_d2 = d2
@@ -478,8 +480,9 @@ def _workspace(n):
 
 @njit(cache=True)
 def it_kernel_batch(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts,
-                    race_iter, accept_d2, lam_out, d2_out, iters_out, starts_out, conv_out):
-    """Algorithm 1 over a batch q (N, n). Writes λ (N, 3) and diagnostics."""
+                    race_iter, accept_d2, lam_out, d2_out, iters_out, starts_out, conv_out, periodic=False):
+    """Algorithm 1 over a batch q (N, n). Writes λ (N, 3) and diagnostics. ``periodic``:
+    unlimited steering (the joint-space distance modulo π per wheel)."""
     n = q.shape[1]
     m_max = n * (n - 1) // 2
     keep = min(max(n_starts, 1), m_max)
@@ -487,7 +490,7 @@ def it_kernel_batch(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_ste
     out = np.empty(3)
     for p in range(q.shape[0]):
         d2, it, tried, conv = _it_point(q[p], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, keep,
-                                        race_iter, accept_d2, ws, out)
+                                        race_iter, accept_d2, ws, out, periodic)
         lam_out[p, 0] = out[0]
         lam_out[p, 1] = out[1]
         lam_out[p, 2] = out[2]

@@ -16,7 +16,7 @@ from numba import njit
 
 from estimation.geometry import RobotGeometry
 from estimation.it import _descend, _starting_points, _workspace
-from estimation.kinematics import _steering_dist2, steering_from_lambda
+from estimation.kinematics import _steering_dist2, _wrap_half_pi, steering_from_lambda
 from estimation.validation import check_fields
 
 __all__ = ["OracleParams", "oracle_grid", "oracle_kernel_batch"]
@@ -74,7 +74,7 @@ def oracle_grid(geom: RobotGeometry, params: OracleParams = OracleParams()) -> n
 
 
 @njit(cache=True)
-def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam_out, d2_out):
+def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam_out, d2_out, periodic=False):
     n = q.shape[1]
     m = grid.shape[0]
     best_idx = np.empty(refine, dtype=np.int64)
@@ -89,6 +89,8 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
             d2 = 0.0
             for k in range(n):
                 diff = qp[k] - grid_beta[g, k]
+                if periodic:
+                    diff = _wrap_half_pi(diff)
                 d2 += diff * diff
             if cnt < refine or d2 < best_val[cnt - 1]:
                 pos = cnt if cnt < refine else refine - 1
@@ -101,7 +103,8 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
                 if cnt < refine:
                     cnt += 1
         best = np.inf
-        n_starts = _starting_points(qp, E, P, steer_max, m_max, starts, start_d2, start_beta, cw, lam, beta_t)
+        n_starts = _starting_points(qp, E, P, steer_max, m_max, starts, start_d2, start_beta, cw, lam, beta_t,
+                                    periodic)
         n_cand = cnt + n + n_starts
         for c in range(n_cand):
             if c < cnt:
@@ -113,9 +116,9 @@ def oracle_kernel_batch(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam
             else:
                 for i in range(3):
                     lam[i] = starts[c - cnt - n, i]
-            d2 = _steering_dist2(lam, qp, E, P, steer_max, beta_cur)
+            d2 = _steering_dist2(lam, qp, E, P, steer_max, beta_cur, periodic)
             d2, _, _ = _descend(qp, E, P, steer_max, lam, d2, beta_cur, 1e-12, 200, 1.0 / 2**20, grad, lam_t, beta_t,
-                                True)
+                                True, periodic)
             if d2 < best:
                 best = d2
                 lam_out[p, 0] = lam[0]

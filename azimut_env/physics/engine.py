@@ -237,8 +237,11 @@ class AzimutPhysics:
         (``wheel_params`` (N, n, len(WP))), or of robot ``robot`` alone ((n, len(WP)))."""
         wp = np.asarray(wheel_params, dtype=np.float64)
         shape = self.wheel_params.shape if robot is None else self.wheel_params.shape[1:]
-        if wp.shape != shape or not np.all(np.isfinite(wp)):
-            raise ValueError(f"wheel_params must be finite with shape {shape}")
+        finite = np.isfinite(np.delete(wp, [WP.STEER_MIN, WP.STEER_MAX], axis=-1))
+        stops = wp[..., [WP.STEER_MIN, WP.STEER_MAX]]
+        if wp.shape != shape or not np.all(finite) or np.any(np.isnan(stops)):
+            raise ValueError(f"wheel_params must be finite with shape {shape} (the steering stops may be -inf/+inf: "
+                             "unlimited steering)")
         if robot is None:
             self.wheel_params = np.ascontiguousarray(wp)
         else:
@@ -273,7 +276,8 @@ class AzimutPhysics:
 
     def reset_robot(self, robot: int, pose=(0.0, 0.0, 0.0), beta=None, twist=(0.0, 0.0, 0.0)) -> None:
         """Place robot ``robot`` at pose (x, y, θ) [m, m, rad] in the world, wheels at steering
-        angles ``beta`` (n,) [rad] (default 0, clipped into the steering range), moving with the
+        angles ``beta`` (n,) [rad] (default 0, clipped into the steering range; unlimited steering:
+        taken modulo 2π into ]−π, π]), moving with the
         chassis twist (ẋ, ẏ, θ̇) given in the chassis frame, wheels rolling without slip and motors
         at rest on their set-points."""
         robot = self._robot_index(robot)
@@ -285,7 +289,8 @@ class AzimutPhysics:
             raise ValueError("reset_robot needs pose (3,), twist (3,) and beta (n,)")
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist)) and np.all(np.isfinite(beta))):
             raise ValueError("reset_robot: non-finite pose, twist or beta")
-        beta = np.clip(beta, g.steer_min + 1e-9, g.steer_max)
+        beta = (np.pi - np.mod(np.pi - beta, 2 * np.pi) if g.unlimited_steering
+                else np.clip(beta, g.steer_min + 1e-9, g.steer_max))
         x, y, th = pose
         c, s = math.cos(th), math.sin(th)
         v_world = np.array([c * twist[0] - s * twist[1], s * twist[0] + c * twist[1]])

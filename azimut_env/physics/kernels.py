@@ -44,6 +44,12 @@ wheel's propulsion loop implicitly, see ``tire.tire_step_kernel`` and
     ω_k' = ω_k + dt τ_k / I_m,   v' = v + dt ΣF / M,   θ̇' = θ̇ + dt τ_c / I,
     β_k' = β_k + dt (ω_k' − θ̇'),  x' = x + dt v',  θ' = θ + dt θ̇'.
 
+**Unlimited steering** (``WP.STEER_MIN``, ``WP.STEER_MAX`` = −inf, +inf): no stop; the
+steering motor's position loop turns the short way to its set-point (the representative of
+β_cmd modulo 2π nearest θ_m, as swerve modules' continuous-input position loops do), and β is
+kept in ]−π, π] by shifting β and θ_m together by 2π when it leaves (the dynamics see only
+β̇, sin/cos of β and the spring's twist θ_m − β, which the shift leaves unchanged).
+
 **Hard stops**, exact: if β_k' leaves [β_min, β_max] it is set onto the stop and, if β̇_k' still
 points outward, an angular impulse J = −(1 + e) β̇_k' / (1/I_m + 1/I) acts on the module (+J) and
 the chassis (−J), leaving the rebound rate −e β̇_k' (e = ``stop_restitution``, default 0, an
@@ -77,6 +83,12 @@ from azimut_env.physics.tire import TS, tire_step_kernel
 __all__ = ["step_kernel", "summary_kernel"]
 
 _CS_COUNT = len(CS)
+
+
+@njit(cache=True, inline="always")
+def _wrap_two_pi(x: float) -> float:
+    """x modulo 2π into ]−π, π]."""
+    return math.pi - (math.pi - x) % (2.0 * math.pi)
 
 
 @njit(cache=True, error_model="numpy")
@@ -137,9 +149,13 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 beta = js[i, k, JS.BETA]
                 wm = js[i, k, JS.OMEGA]
                 beta_dot = wm - w
-                # steering motor and series spring
+                # steering motor and series spring; without stops (unlimited steering) the motor
+                # turns the short way to its set-point: the turn of β_cmd nearest its angle
+                target = cmd[i, k, CMD.BETA]
+                if p[WP.STEER_MAX] == math.inf:
+                    target = ms[i, k, MS.THETA] + _wrap_two_pi(target - ms[i, k, MS.THETA])
                 theta, omega, tau_s = steer_actuator_kernel(
-                    dc, ms[i, k, MS.THETA], ms[i, k, MS.OMEGA], cmd[i, k, CMD.BETA], beta, beta_dot, on, p[WP.KP],
+                    dc, ms[i, k, MS.THETA], ms[i, k, MS.OMEGA], target, beta, beta_dot, on, p[WP.KP],
                     p[WP.STEER_RATE], p[WP.STEER_ACCEL], p[WP.STEER_TORQUE], p[WP.K_S], p[WP.C_S], p[WP.MOTOR_STALL],
                     p[WP.MOTOR_NO_LOAD], p[WP.MOTOR_INERTIA], dt)
                 ms[i, k, MS.THETA] = theta
@@ -279,6 +295,13 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                             j = -(1.0 + restitution) * rel / (1.0 / i_m + 1.0 / inertia)
                             wm += j / i_m
                             w -= j / inertia
+                elif hi == math.inf and (beta > math.pi or beta <= -math.pi):
+                    # unlimited steering: the joint angle is kept in ]−π, π] (what an absolute
+                    # encoder reads), the motor angle shifted by the same turn (the spring's
+                    # twist θ_m − β is unchanged)
+                    turn = beta - _wrap_two_pi(beta)
+                    beta -= turn
+                    ms[i, k, MS.THETA] -= turn
                 js[i, k, JS.BETA] = beta
                 js[i, k, JS.OMEGA] = wm
             if coupled:  # a later module's stop impulse moved the earlier ones too

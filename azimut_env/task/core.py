@@ -157,7 +157,8 @@ class AzimutTask:
         self._reward_constants = reward_constants(config.control_period, config.lateral_scale, config.heading_scale,
                                                   config.antagonism_cap)
         self._off_track_column = self.reward_names.index(OFF_TRACK)
-        self.sensors = SensorState(params.sensors, config.control_period, N, n)
+        self.sensors = SensorState(params.sensors, config.control_period, N, n,
+                                   wrap_angles=params.geometry.unlimited_steering)
         # the last readings, by the names the task uses (the sensors' arrays, written in place)
         self.beta_m, self.phidot_m, self.motor_m = self.sensors.beta, self.sensors.phidot, self.sensors.motor
         self.lam_hat = np.tile(np.array([0.0, 0.0, 1.0]), (N, 1))

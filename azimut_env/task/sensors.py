@@ -61,8 +61,10 @@ def measure_wheel_speeds(phi: np.ndarray, phi_prev: np.ndarray, true_phidot: np.
 
 @njit(cache=True)
 def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
-                    wheel_noise, normals, out):
-    """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured."""
+                    wheel_noise, normals, out, wrap=False):
+    """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured.
+    ``wrap`` (unlimited steering): the angle readings are taken modulo 2π into ]−π, π], as an
+    absolute encoder reads them."""
     two_pi = 2 * math.pi
     for i in range(beta.shape[0]):
         for k in range(beta.shape[1]):
@@ -71,6 +73,9 @@ def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_n
             if resolution > 0:
                 b = np.round(b / resolution) * resolution
                 m = np.round(m / resolution) * resolution
+            if wrap:
+                b = math.pi - (math.pi - b) % two_pi
+                m = math.pi - (math.pi - m) % two_pi
             if cpr > 0:
                 counts = math.floor(phi[i, k] * (cpr / two_pi)) - math.floor(phi_prev[i, k] * (cpr / two_pi))
                 w = counts * (two_pi / cpr) / dt
@@ -86,7 +91,7 @@ def _as_rows(x, shape) -> np.ndarray:
 
 
 def measure_batch(beta, motor, phi, phi_prev, phidot, dt: float, params: SensorParams,
-                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                rng: np.random.Generator, wrap: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(β, motor angles, φ̇) as measured, each shaped like ``beta``: (n,) for one robot or (N, n).
 
     The same models as :func:`measure_angles` and :func:`measure_wheel_speeds` in one compiled
@@ -102,7 +107,7 @@ def measure_batch(beta, motor, phi, phi_prev, phidot, dt: float, params: SensorP
     out = np.empty((rows, 3, n))
     _measure_kernel(b2, _as_rows(motor, flat), _as_rows(phi, flat), _as_rows(phi_prev, flat), _as_rows(phidot, flat),
                     float(dt), params.steer_noise, params.motor_noise, params.steer_resolution, int(params.wheel_cpr),
-                    params.wheel_speed_noise, normals, out)
+                    params.wheel_speed_noise, normals, out, bool(wrap))
     return out[:, 0].reshape(shape), out[:, 1].reshape(shape), out[:, 2].reshape(shape)
 
 
@@ -129,10 +134,13 @@ class SensorState:
     (the encoders count from there); ``normals`` (N, 3, n): this step's standard normal draws.
     """
 
-    def __init__(self, params: SensorParams, control_period: float, n_robots: int, n: int) -> None:
+    def __init__(self, params: SensorParams, control_period: float, n_robots: int, n: int,
+                 wrap_angles: bool = False) -> None:
         self.params = params
         self._args = (float(control_period), params.steer_noise, params.motor_noise, params.steer_resolution,
                       int(params.wheel_cpr), params.wheel_speed_noise)
+        #: readings of β and the motor angles modulo 2π into ]−π, π] (unlimited steering)
+        self.wrap_angles = bool(wrap_angles)
         self.beta = np.zeros((n_robots, n))
         self.motor = np.zeros((n_robots, n))
         self.phidot = np.zeros((n_robots, n))
@@ -174,7 +182,7 @@ class SensorState:
         encoders then count from ``phi``."""
         out = self._out[rows]
         _measure_kernel(beta + self.steer_bias[rows], motor, phi, self.phi_prev[rows], phidot, *self._args,
-                        self.normals[rows], out)
+                        self.normals[rows], out, self.wrap_angles)
         self.phi_prev[rows] = phi
         self.beta[rows] = out[:, 0]
         self.motor[rows] = out[:, 1]

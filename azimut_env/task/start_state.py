@@ -33,7 +33,10 @@ def start_configuration(track: Track, s0: float, noise: float, geometry: RobotGe
                         rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The starting pose (x, y, θ) [m, m, rad] and steering angles (n,) [rad] at progress ``s0``:
     the track's reference pose plus uniform noise of ±``noise`` (``start_noise``), then the
-    reference steering angles at that heading plus the same noise, within the steering stops."""
+    reference steering angles at that heading plus the same noise, within the steering stops (no
+    stops with unlimited steering)."""
     pose = track.sample(s0)[:3] + rng.uniform(-noise, noise, size=3)
     beta = reference_steering(track, s0, pose[2], geometry) + rng.uniform(-noise, noise, size=geometry.n)
+    if geometry.unlimited_steering:
+        return pose, beta
     return pose, np.clip(beta, geometry.steer_min + 1e-6, geometry.steer_max)

@@ -105,7 +105,7 @@ def advance_target(lam: np.ndarray, proposal: np.ndarray, push: np.ndarray, geom
     """
     beta0 = steering_from_lambda(lam, geom)
     beta1 = steering_from_lambda(proposal, geom)
-    crosses = np.any(np.abs(beta1 - beta0) > 0.5 * np.pi, axis=-1)
+    crosses = np.any(np.abs(beta1 - beta0) > 0.5 * np.pi, axis=-1) & (not geom.unlimited_steering)
     cos_axis = np.abs(proposal @ geom.s_unit.T)  # (N, n): |cos| of the angle to ±ŝ_k
     in_cap = np.any(cos_axis > np.cos(axis_margin), axis=-1)
     step = sphere_angle(lam, proposal)

@@ -8,6 +8,11 @@
 * steering stops: the room each wheel has to brake before its stop (:func:`stop_room`,
   :func:`safe_stop_speed`) and the per-wheel saturation fallback (:func:`saturate`).
 
+Unlimited steering (``RobotGeometry.unlimited_steering``, e.g. the ``swerve`` preset): there is
+no stop to cross, so no arc is blocked by one (each wheel takes the angle of its axis nearest
+where it is, ``RobotGeometry.nearest_steering``) and no wheel brakes for one; the steering axes
+(where β_k is undefined) still stop the robot.
+
 The derivations are in ``docs/icr-controller.md`` (sections "Feasible targets" and "Arcs"). Every
 function is batched over robots (``*_batch`` takes (N, …) rows; the unsuffixed form is its N = 1
 case, with the same bits).
@@ -143,6 +148,8 @@ def arc_check_batch(lam, lam_d, geom: RobotGeometry, axis_margin: float, step: f
             & (j[None, :] >= 1) & (j[None, :] < (m - 1)[:, None]))
     beta = steering_from_lambda(pts.reshape(-1, 3), geom).reshape(nrows, big, geom.n)
     wraps = np.any(np.abs(np.diff(beta, axis=1)) > np.pi / 2, axis=-1) & (j[None, :-1] < (m - 1)[:, None])
+    if geom.unlimited_steering:  # no stop: a wrap of F is the same axis, the wheel goes on turning
+        wraps[:] = False
     first_axis = np.where(near.any(axis=1), np.argmax(near, axis=1), m)
     first_wrap = np.where(wraps.any(axis=1), np.argmax(wraps, axis=1) + 1, m)
     rows = np.arange(nrows)
@@ -193,7 +200,7 @@ def reference_stop_mask(lams, geom: RobotGeometry, axis_margin: float = np.deg2r
     if lams.ndim != 2 or lams.shape[1] != 3 or lams.shape[0] < 2:
         raise ValueError(f"lams must have shape (M + 1 >= 2, 3), got {lams.shape}")
     beta = steering_from_lambda(lams, geom)
-    wrap = np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2, axis=1)
+    wrap = np.any(np.abs(np.diff(beta, axis=0)) > np.pi / 2, axis=1) & (not geom.unlimited_steering)
     unit = lams / np.linalg.norm(lams, axis=1, keepdims=True)
     near = np.any(np.linalg.norm(np.cross(unit[:, None, :], geom.s_unit[None, :, :]), axis=-1)
                   < np.sin(0.5 * axis_margin), axis=1)
@@ -201,7 +208,10 @@ def reference_stop_mask(lams, geom: RobotGeometry, axis_margin: float = np.deg2r
 
 
 def stop_room(beta, beta_rate, geom: RobotGeometry) -> np.ndarray:
-    """Angle [rad] left before the steering stop each wheel is turning toward (inf at rest)."""
+    """Angle [rad] left before the steering stop each wheel is turning toward (inf at rest, and
+    always without stops)."""
+    if geom.unlimited_steering:
+        return np.full(np.broadcast(beta, beta_rate).shape, np.inf)
     return np.where(beta_rate > 0, geom.steer_max - beta, np.where(beta_rate < 0, beta - geom.steer_min, np.inf))
 
 
@@ -224,7 +234,9 @@ def saturate(beta_prev, beta_rate_prev, phidot_prev, beta_want, phidot_want, geo
     room = stop_room(beta_prev + rate * dt, rate, geom)
     v_safe = np.maximum(safe_stop_speed(room, 0.95 * a, dt), np.abs(beta_rate_prev) - a * dt)
     rate = np.sign(rate) * np.minimum(np.abs(rate), v_safe)
-    beta = np.clip(beta_prev + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
+    beta = beta_prev + rate * dt
+    if not geom.unlimited_steering:
+        beta = np.clip(beta, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - beta_prev) / dt
     phidot = np.clip(phidot_want, phidot_prev - limits.wheel_accel_max * dt, phidot_prev + limits.wheel_accel_max * dt)
     phidot = np.clip(phidot, -limits.wheel_speed_max, limits.wheel_speed_max)

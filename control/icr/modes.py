@@ -121,8 +121,8 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
     beta_target = np.zeros((nrows, n))
     if np.any(recon):
         r = np.flatnonzero(recon)
-        cand = ~zero_cmd[r] & (np.max(np.abs(state.beta[r] - steering_from_lambda(
-            reconfig_lam[r], geom, singular_fill=state.beta[r])), axis=-1) > config.reconfig_freeze)
+        cand = ~zero_cmd[r] & (np.max(np.abs(geom.steering_difference(state.beta[r], steering_from_lambda(
+            reconfig_lam[r], geom, singular_fill=state.beta[r]))), axis=-1) > config.reconfig_freeze)
         if np.any(cand):
             rc = r[cand]
             # retarget only if the latest target could not be reached continuously from the
@@ -130,6 +130,7 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
             rt = rc[must_stop(reconfig_lam[rc], lam_d[rc], geom, config)]
             reconfig_lam[rt] = lam_d[rt]
         bt = steering_from_lambda(reconfig_lam[r], geom, singular_fill=state.beta[r])
+        bt = geom.nearest_steering(bt, state.beta[r])  # unlimited steering: the nearer angle of each axis
         beta_target[r] = bt
         settled_cmd = (np.max(np.abs(state.beta[r] - bt), axis=-1) < 1e-6) & (
             np.max(np.abs(state.beta_rate[r]), axis=-1) < 1e-9)

@@ -59,6 +59,8 @@ def coordinated_step(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu
     mu_new = np.where(mu_first[:, None], mu_des[:, None], mu[:, None] + kappa[None, :] * (mu_des - mu)[:, None])
     fill = np.broadcast_to(beta[:, None, :], (nrows, nk, n)).reshape(-1, n)
     beta_new = steering_from_lambda(lam_new.reshape(-1, 3), geom, singular_fill=fill).reshape(nrows, nk, n)
+    if geom.unlimited_steering:  # each wheel's axis at the angle nearest its command: never a flip
+        beta_new = geom.nearest_steering(beta_new, beta[:, None, :])
     dbeta = beta_new - beta[:, None, :]
     flipped = np.any(np.abs(dbeta) > np.pi / 2, axis=-1)
     b_rate = dbeta / dt
@@ -132,7 +134,7 @@ def reconfigure_step(beta0: np.ndarray, beta_rate0: np.ndarray, phidot0: np.ndar
     steer-to-drive coupling r φ̇ = −b β̇, so the contact point rolls on its circle about A_k
     instead of scrubbing, and the chassis stays put.
     """
-    err = beta_target - beta0  # both inside the range: the direct way never crosses a stop
+    err = beta_target - beta0  # both inside the range (or, unlimited, the target nearest beta0): never a stop
     a, vmax = limits.steer_accel_max * accel_fraction, limits.steer_rate_max * rate_fraction
     # discrete braking profile: moving v for one period, then braking at a_plan, covers
     # v²/(2 a_plan) + v dt/2; planning with less deceleration than allowed leaves margin
@@ -146,7 +148,9 @@ def reconfigure_step(beta0: np.ndarray, beta_rate0: np.ndarray, phidot0: np.ndar
     a_step = np.where(braking, np.maximum(a, 0.95 * limits.steer_accel_max), a) * dt
     rate = np.clip(want, beta_rate0 - a_step, beta_rate0 + a_step)
     rate = np.where(exact[:, None], err / dt, rate)  # ``beta_target`` is already a feasible next set-point
-    beta = np.clip(beta0 + rate * dt, geom.steer_min + 1e-9, geom.steer_max)
+    beta = beta0 + rate * dt
+    if not geom.unlimited_steering:
+        beta = np.clip(beta, geom.steer_min + 1e-9, geom.steer_max)
     rate = (beta - beta0) / dt
     phidot_want = -geom.b * np.where(use_measured[:, None], measured_rate, rate) / geom.r
     _, _, phidot = saturate(beta0, beta_rate0, phidot0, beta, phidot_want, geom, limits, dt)

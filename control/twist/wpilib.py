@@ -15,7 +15,9 @@ target ξ̇_d = (v_x, v_y, ω) (chassis frame; the same path follower feeds both
 4. ``desaturateWheelSpeeds``: all speeds scaled so the fastest is within φ̇_max;
 5. ``SwerveModuleState.optimize``: if the heading error to the measured angle exceeds 90°, turn
    the other way (heading + π) and negate the speed. With AZIMUT's hard stops the steering range
-   is ]−π/2, π/2], one representative only: a heading outside it is flipped back into it;
+   is ]−π/2, π/2], one representative only: a heading outside it is flipped back into it. With
+   unlimited steering (``RobotGeometry.unlimited_steering``, swerve modules) there is no flip-back:
+   the module takes the nearer of β and β + π, as WPILib's does, its angle continuing past ±π;
 6. cosine compensation: speed ·= cos(heading error to the measured angle).
 
 Mapping to this robot (conventions of ``estimation.kinematics``): the wheel rolls toward
@@ -134,7 +136,8 @@ def module_states(twist, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
 
 def optimize_module(beta_des, speed, beta_now, geom: RobotGeometry, enabled: bool = True):
     """WPILib ``optimize`` in β: flip by π and negate the speed if the error exceeds π/2; then
-    keep β inside the steering range (hard stops): flip back if it left. Returns (β, speed)."""
+    keep β inside the steering range (hard stops): flip back if it left (not with unlimited
+    steering: β is then within π/2 of ``beta_now``, any real). Returns (β, speed)."""
     beta_des = np.asarray(beta_des, dtype=np.float64)
     speed = np.asarray(speed, dtype=np.float64).copy()
     err = np.mod(beta_des - beta_now + np.pi, 2 * np.pi) - np.pi
@@ -143,6 +146,8 @@ def optimize_module(beta_des, speed, beta_now, geom: RobotGeometry, enabled: boo
         flip = np.abs(err) > np.pi / 2
         beta = np.where(flip, beta - np.sign(err) * np.pi, beta)
         speed = np.where(flip, -speed, speed)
+    if geom.unlimited_steering:
+        return beta, speed
     out_hi, out_lo = beta > geom.steer_max, beta <= geom.steer_min
     while np.any(out_hi | out_lo):
         beta = np.where(out_hi, beta - np.pi, np.where(out_lo, beta + np.pi, beta))
@@ -180,7 +185,9 @@ class SwerveController:
         """Forget the history; start from measured angles (default 0) at rest."""
         n = self.geom.n
         self._twist = np.zeros(3)
-        self._beta = np.zeros(n) if beta is None else self.geom.wrap_steering(np.asarray(beta, dtype=np.float64))
+        beta = None if beta is None else np.asarray(beta, dtype=np.float64)
+        self._beta = np.zeros(n) if beta is None else (beta.copy() if self.geom.unlimited_steering
+                                                        else self.geom.wrap_steering(beta))
         self._rate = np.zeros(n)
         self._phidot = np.zeros(n) if phidot is None else np.asarray(phidot, dtype=np.float64).copy()
         self._started = beta is not None
@@ -196,6 +203,8 @@ class SwerveController:
             raise ValueError(f"beta_meas must be a finite ({g.n},) array")
         if not self._started:
             self.reset(beta_meas)
+        if g.unlimited_steering:  # the measured angle (an absolute encoder's, in ]−π, π]) on the commands' turn
+            beta_meas = self._beta + (np.mod(beta_meas - self._beta + np.pi, 2 * np.pi) - np.pi)
         tw = slew_limit_twist(twist, self._twist, self._slew[0], self._slew[2], dt)
         self._twist = tw
         tw_k = discretize_twist(tw, dt) if cfg.discretize else tw
