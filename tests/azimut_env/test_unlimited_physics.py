@@ -6,7 +6,7 @@ import pytest
 
 from azimut_env.env import AzimutEnv
 from azimut_env.params import RobotParams, action_from_setpoints, setpoints_from_action
-from azimut_env.physics.engine import AzimutPhysics, WP
+from azimut_env.physics.engine import WP, AzimutPhysics
 
 
 @pytest.fixture(scope="module")
