@@ -83,7 +83,7 @@ from azimut_env.task.reward import (
 from azimut_env.task.sensors import SensorState
 from azimut_env.task.start_state import start_configuration
 from azimut_env.task.termination import check_stalls, check_track_limits, episode_step_limit
-from azimut_env.tracks import TQ, Track, make_track, query_tracks
+from azimut_env.tracks import TQ, Track, make_track, named_track, query_tracks
 from azimut_env.validation import check_int
 from estimation import estimate_eta
 
@@ -216,12 +216,13 @@ class AzimutTask:
         return out
 
     def builtin_track(self, name: str, rng: np.random.Generator) -> Track:
-        """The built-in track ``name`` (built once; ``random`` draws a new one from ``rng``)."""
+        """The built-in track or scenario ``name`` (built once, a scenario for this robot;
+        ``random`` draws a new one from ``rng``)."""
         if name == "random":
             return make_track(name, rng=rng)
         track = self._builtin.get(name)
         if track is None:
-            track = self._builtin[name] = make_track(name)
+            track = self._builtin[name] = named_track(name, self.params)
         return track
 
     def reset_robot(self, i: int, rng: np.random.Generator, options: dict[str, Any] | None = None,

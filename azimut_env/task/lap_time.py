@@ -17,8 +17,9 @@ __all__ = ["nominal_duration", "steering_wraps", "reference_lap_time", "REFERENC
 
 def nominal_duration(track: Track, speed_scale: float = 1.0) -> float:
     """The time [s] to drive ``track`` at its reference speed profile (speeds below 5 cm/s count as
-    5 cm/s, so a profile that starts or ends at rest has a finite duration)."""
-    return float(np.sum(np.diff(track.s) / np.maximum(track.speed[:-1] * speed_scale, 0.05)))
+    5 cm/s, so a profile that starts or ends at rest has a finite duration), plus its holds."""
+    drive = float(np.sum(np.diff(track.s) / np.maximum(track.speed[:-1] * speed_scale, 0.05)))
+    return drive + track.hold_time if track.holds else drive
 
 
 #: Fractions of the steering rate and acceleration limits at which the reference ICR controller
@@ -32,7 +33,10 @@ def steering_wraps(track: Track, geometry: RobotGeometry) -> np.ndarray:
     across the steering stops (jumps by more than π/2 between consecutive samples) along the ICR
     path of ``track``'s reference motion (λ from the reference twist in the chassis frame,
     ``eta_from_twist``), one entry per wheel and crossing: where the ICR reference controller must
-    stop and turn that wheel in place, by the swing, from one side of its range to the other."""
+    stop and turn that wheel in place, by the swing, from one side of its range to the other.
+    None without steering stops (unlimited steering)."""
+    if geometry.unlimited_steering:
+        return np.zeros(0)
     tw = track.reference_twist(track.s, speed=np.ones_like(track.s))
     c, s = np.cos(track.heading), np.sin(track.heading)
     body = np.stack([c * tw[:, 0] + s * tw[:, 1], -s * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)

@@ -40,6 +40,10 @@ class Track:
         speed: (M,) reference progress speed v_ref [m/s], >= 0.
         closed: whether the track is a loop (the last sample joins the first).
         progress_radius: ρ [m], the length equivalent of one radian of heading change.
+        holds: ((s, duration), ...): stops where the reference holds the robot still for
+            ``duration`` [s] once it reaches progress s [m] (open tracks; the speed profile should
+            come to rest there). A path follower commands exactly zero while holding
+            (``control.follow.path_follower.PathFollower``); the scenario ``hold`` uses it.
 
     Derived (filled in ``__post_init__``): ``s`` (M,) progress [m]; ``length`` total progress [m];
     ``path_length`` (M,) path arclength [m]; ``tangent`` (M,) path direction ψ [rad] (carried over
@@ -52,6 +56,7 @@ class Track:
     speed: np.ndarray
     closed: bool = False
     progress_radius: float = 0.3
+    holds: tuple = ()
     s: np.ndarray = field(init=False, repr=False)
     path_length: np.ndarray = field(init=False, repr=False)
     tangent: np.ndarray = field(init=False, repr=False)
@@ -129,8 +134,32 @@ class Track:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "length", float(s[-1]))
+        object.__setattr__(self, "holds", self._check_holds(self.holds))
         object.__setattr__(self, "_x", np.ascontiguousarray(xy[:, 0]))
         object.__setattr__(self, "_y", np.ascontiguousarray(xy[:, 1]))
+
+    def _check_holds(self, holds) -> tuple[tuple[float, float], ...]:
+        """``holds`` as a tuple of (s [m], duration [s]) floats: on an open track, s in [0, length]
+        and increasing, durations in ]0, 3600]."""
+        try:
+            pairs = [(float(s), float(d)) for s, d in holds]
+        except (TypeError, ValueError):
+            raise ValueError(f"Track.holds must be a sequence of (s, duration) pairs, got {holds!r}") from None
+        if pairs and self.closed:
+            raise ValueError("Track.holds: holds need an open track")
+        for s, d in pairs:
+            if not (math.isfinite(s) and 0.0 <= s <= self.length):
+                raise ValueError(f"Track.holds: progress {s!r} outside [0, {self.length:.6g}] m")
+            if not (math.isfinite(d) and 0.0 < d <= 3600.0):
+                raise ValueError(f"Track.holds: duration {d!r} must be in ]0, 3600] s")
+        if any(b[0] <= a[0] for a, b in zip(pairs, pairs[1:])):
+            raise ValueError("Track.holds: progress values must increase")
+        return tuple(pairs)
+
+    @property
+    def hold_time(self) -> float:
+        """Total time [s] of the holds."""
+        return float(sum(d for _, d in self.holds))
 
     # ------------------------------------------------------------------ construction
 
@@ -216,7 +245,7 @@ class Track:
         xy, th = self.xy, self.heading
         if self.closed:
             xy, th, v = xy[:-1], th[:-1], v[:-1]
-        return Track(self.name, xy, th, v, closed=self.closed, progress_radius=self.progress_radius)
+        return Track(self.name, xy, th, v, closed=self.closed, progress_radius=self.progress_radius, holds=self.holds)
 
     # ------------------------------------------------------------------ queries
 

@@ -152,7 +152,12 @@ class BatchFollower:
 
     def reset(self, i: int, track: Track, progress: float) -> None:
         """Robot i starts on ``track`` at ``progress`` [m] (integral and farthest progress cleared);
-        ``progress`` as :meth:`PathFollower.reset` takes it (checked before any state changes)."""
+        ``progress`` as :meth:`PathFollower.reset` takes it (checked before any state changes).
+        Tracks with holds (``Track.holds``) are refused: this follower has no clock to hold with
+        (:class:`~control.follow.path_follower.PathFollower` has)."""
+        if track.holds:
+            raise ValueError(f"track {track.name!r} has holds, which the batched follower does not support "
+                             "(use PathFollower)")
         progress = check_start_progress(track, progress)
         key = id(track)
         hit = self._cache.get(key)

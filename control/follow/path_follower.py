@@ -17,6 +17,11 @@ Per step, with the pose (x, y, θ) in the world:
    makes progress along the track);
 4. the world twist is rotated into the chassis frame; ``eta_from_twist`` gives (λ_d, μ_d), using
    ξ̇ = μ (v, −u, w) (§2).
+
+A track's holds (``Track.holds``: (s, duration) pairs) stop this: once the progress reaches a
+hold's s (within ``hold_reach``), the follower outputs exactly zero (twist 0, μ_d = 0, no
+feedback) for the hold's duration, counted in control periods of ``dt``, then follows on
+(``FollowerOutput.holding``). This is the command "stand still" of the ``hold`` scenario.
 """
 
 from __future__ import annotations
@@ -80,6 +85,8 @@ class PathFollowerConfig:
             speed is at most sqrt(a / κ) where the path curvature κ is high (a speed profile that
             ignores curvature is scaled down in tight curves).
         speed_scale: multiplies the track's speed profile [-] (1: the track's nominal speed).
+        hold_reach: progress [m] short of a hold's s at which the hold starts (the reference
+            speed falls to ``corner_speed`` there, so the robot arrives slowly).
     """
 
     k_pos: float = 3.0
@@ -97,10 +104,11 @@ class PathFollowerConfig:
     corner_speed: float = 0.02
     max_lateral_accel: float = 1.0
     speed_scale: float = 1.0
+    hold_reach: float = 0.01
 
     def __post_init__(self) -> None:
         check_fields(self)
-        for name in ("k_int", "moving_speed", "preview", "preview_min"):
+        for name in ("k_int", "moving_speed", "preview", "preview_min", "hold_reach"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"PathFollowerConfig.{name} must be finite and >= 0, got {value!r}")
@@ -123,6 +131,7 @@ class FollowerOutput:
         twist: (3,) chassis-frame twist target (ẋ, ẏ, θ̇) [m/s, m/s, rad/s].
         lam: (3,) target λ_d; mu: target μ_d ≥ 0 [m/s] (from ``eta_from_twist``).
         progress: s [m]; finished: whether the track's end (or one lap) is reached.
+        holding: the track holds the robot still at this step (the twist is exactly zero).
     """
 
     twist: np.ndarray
@@ -130,6 +139,7 @@ class FollowerOutput:
     mu: float
     progress: float
     finished: bool
+    holding: bool = False
 
 
 class PathFollower:
@@ -157,6 +167,8 @@ class PathFollower:
         self.progress: float | None = None
         self._integral = 0.0
         self._max_progress: float | None = None
+        self._hold_next = 0  # index of the next hold of the track
+        self._hold_left = 0  # control periods left in the current hold (0: not holding)
         self.stops = self._find_stops(stop_mask)
 
     def reset(self, progress: float | None = None) -> None:
@@ -170,6 +182,9 @@ class PathFollower:
         self.progress = progress
         self._integral = 0.0
         self._max_progress = None
+        holds = self.track.holds
+        self._hold_next = 0 if progress is None else sum(1 for s, _ in holds if s < progress - self.config.hold_reach)
+        self._hold_left = 0
 
     def _find_stops(self, stop_mask) -> np.ndarray:
         """Sorted progress values [m] where the robot should arrive slowly: sharp path corners
@@ -193,6 +208,19 @@ class PathFollower:
             mask |= extra
         return grid[1:][mask]
 
+    def _holding(self, s: float) -> bool:
+        """Whether this step is one of a hold's (starting it when s reaches the next hold)."""
+        holds = self.track.holds
+        if self._hold_left == 0 and self._hold_next < len(holds):
+            s_hold, duration = holds[self._hold_next]
+            if s >= s_hold - self.config.hold_reach:
+                self._hold_left = max(1, int(round(duration / self.dt)))
+                self._hold_next += 1
+        if self._hold_left > 0:
+            self._hold_left -= 1
+            return True
+        return False
+
     def _distance_to_stop(self, s: float) -> float | None:
         """Progress [m] from s to the next stop point within ``corner_window``, or None."""
         tr, cfg = self.track, self.config
@@ -214,6 +242,11 @@ class PathFollower:
         s = tr.project(pose, s_hint=self.progress)
         self.progress = s
         finished = tr.finished(s)
+        if self._holding(s):
+            zero = np.zeros(3)
+            lam, mu = eta_from_twist(zero)
+            return FollowerOutput(twist=zero, lam=lam, mu=float(mu), progress=float(s), finished=bool(finished),
+                                  holding=True)
         x_r, y_r, th_r, v_r = tr.sample(s)
         v_r *= cfg.speed_scale
         s_ff = s + max(v_r * cfg.preview, cfg.preview_min)
