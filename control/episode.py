@@ -18,7 +18,8 @@ import numpy as np
 from azimut_env.tracks import Track
 from control.icr.config import Mode
 
-__all__ = ["MOVING_MU", "EpisodeLog", "moving_mask", "episode_metrics", "progress_bar"]
+__all__ = ["MOVING_MU", "EpisodeLog", "moving_mask", "episode_metrics", "scenario_metrics", "SCENARIO_METRICS",
+           "progress_bar"]
 
 #: |μ| [m/s] of the true chassis motion above which a step counts as moving (5% of the paper
 #: track's nominal 1 m/s; μ = ‖ξ̇‖ of the twist, ξ̇ = μ (v, −u, w)).
@@ -71,6 +72,8 @@ class EpisodeLog:
     twist_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     violations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: (T,) bool: the step's command was a hold (the track held the robot still: exactly zero)
+    hold: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     events: int = 0
     completed: bool = False
     error: str | None = None
@@ -121,3 +124,69 @@ def episode_metrics(log: EpisodeLog) -> dict:
         "reconfigure_events": int(log.events),
         "return": float(log.ret),
     }
+
+
+#: the keys :func:`scenario_metrics` adds to a row, with their units
+SCENARIO_METRICS = ("peak_steer_rate_cmd", "peak_steer_rate", "setpoint_flips", "travel_reversals", "hold_steps",
+                    "hold_chassis_m", "hold_yaw_rad", "hold_steer_rad", "hold_steer_cmd_rad")
+
+
+def _angle_steps(x: np.ndarray) -> np.ndarray:
+    """Differences of angles (T, n) between consecutive steps, modulo 2π into [−π, π[ (a
+    module's motion, whichever turn its angle is written in)."""
+    return np.mod(np.diff(x, axis=0) + np.pi, 2 * np.pi) - np.pi if x.shape[0] > 1 else np.zeros((0,) + x.shape[1:])
+
+
+def scenario_metrics(log: EpisodeLog, moving_fraction: float = 0.05) -> dict:
+    """The per-scenario metrics of a run (added to :func:`episode_metrics`'s row for the
+    scenarios, ``azimut_env.tracks.SCENARIO_NAMES``; NaN where undefined):
+
+    * ``peak_steer_rate_cmd``, ``peak_steer_rate`` [rad/s]: the largest |β̇| over the modules
+      and steps, of the commands (the controller's β̇_c) and of the wheels (the true β's
+      differences over a period, modulo 2π);
+    * ``setpoint_flips``: module set-points that jump by more than π/2 in one period (a flip of
+      the wheel about its axis; modulo 2π, so a module winding past ±π does not count);
+    * ``travel_reversals``: the times a module's commanded travel direction turns by more than
+      π/2 between consecutive steps where it is commanded to roll (|φ̇_c| above
+      ``moving_fraction`` of the run's largest |φ̇_c|) and the chassis moves (:func:`moving_mask`:
+      not a module turned in place): β's change plus π when φ̇_c changes sign (a ``reverse``
+      command reverses every module by design; elsewhere it is a flip);
+    * the ``hold`` complaint, over the steps whose command was a hold (exactly zero,
+      ``EpisodeLog.hold``): ``hold_steps``; ``hold_chassis_m`` and ``hold_yaw_rad``, the chassis
+      path length [m] and heading travel [rad] during them; ``hold_steer_rad`` and
+      ``hold_steer_cmd_rad``, the largest steering travel of a module [rad] (Σ|Δβ|, true and
+      commanded) during them.
+    """
+    dt = log.dt
+    out: dict = {}
+    rate = np.abs(log.beta_rate) if log.beta_rate.size else np.zeros((0,))
+    out["peak_steer_rate_cmd"] = float(np.max(rate)) if rate.size else float("nan")
+    true_steps = _angle_steps(log.beta_true)
+    out["peak_steer_rate"] = float(np.max(np.abs(true_steps)) / dt) if true_steps.size else float("nan")
+    cmd_steps = _angle_steps(log.beta_cmd)
+    out["setpoint_flips"] = int(np.sum(np.abs(cmd_steps) > 0.5 * np.pi))
+    reversals = 0
+    if log.phidot_cmd.size:
+        ph = log.phidot_cmd
+        rolling = np.abs(ph) > moving_fraction * max(float(np.max(np.abs(ph))), 1e-12)
+        rolling &= moving_mask(log)[:, None]  # the chassis moving (not a module turned in place)
+        travel = log.beta_cmd + np.where(ph < 0, np.pi, 0.0)  # the direction the module rolls, up to α
+        for k in range(ph.shape[1]):
+            idx = np.flatnonzero(rolling[:, k])
+            if idx.size > 1:
+                turn = np.mod(np.diff(travel[idx, k]) + np.pi, 2 * np.pi) - np.pi
+                reversals += int(np.sum(np.abs(turn) > 0.5 * np.pi))
+    out["travel_reversals"] = reversals
+    hold = log.hold if log.hold.shape == log.lateral.shape else np.zeros(log.lateral.shape, dtype=bool)
+    steps = hold[1:] if hold.size > 1 else np.zeros(0, dtype=bool)  # the motion into step k under its command
+    out["hold_steps"] = int(np.sum(hold))
+    if steps.any():
+        dxy = np.diff(log.pose[:, :2], axis=0)[steps]
+        out["hold_chassis_m"] = float(np.sum(np.hypot(dxy[:, 0], dxy[:, 1])))
+        out["hold_yaw_rad"] = float(np.sum(np.abs(np.diff(log.pose[:, 2])[steps])))
+        out["hold_steer_rad"] = float(np.max(np.sum(np.abs(true_steps[steps]), axis=0)))
+        out["hold_steer_cmd_rad"] = float(np.max(np.sum(np.abs(cmd_steps[steps]), axis=0)))
+    else:
+        for key in ("hold_chassis_m", "hold_yaw_rad", "hold_steer_rad", "hold_steer_cmd_rad"):
+            out[key] = float("nan")
+    return out

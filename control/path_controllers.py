@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from azimut_env.tracks import SCENARIO_NAMES
 from control.commands import WheelCommand
 from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.icr.batch import BatchICRController
@@ -44,9 +46,13 @@ def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | N
 
 
 class _PathFollowing:
-    """A path follower per robot (the part both controllers share)."""
+    """A path follower per robot (the part both controllers share). A scenario's track
+    (``azimut_env.tracks.SCENARIO_NAMES``, whose speeds are the robot's own) is followed with
+    :meth:`PathFollowerConfig.for_robot` unless a ``follower_config`` is given. Each command's
+    ``info["hold"]`` (N,) says which robots' followers were holding (``Track.holds``)."""
 
     def __init__(self, speed_scale: float, follower_config: PathFollowerConfig | None) -> None:
+        self._config_given = follower_config is not None
         self.follower_config = _follower_config(speed_scale, follower_config)
         #: the speed scale of the track's profile (a given ``follower_config``'s own)
         self.speed_scale = self.follower_config.speed_scale
@@ -61,13 +67,21 @@ class _PathFollowing:
             self.followers = [None] * num
         tracks, progress, dt = env.tracks, np.atleast_1d(env.progress), env.control_period
         for i in rows:
-            f = PathFollower(tracks[i], self.follower_config, stop_mask=self._stop_mask(env), dt=dt)
+            cfg = self.follower_config
+            if not self._config_given and tracks[i].name in SCENARIO_NAMES:
+                cfg = PathFollowerConfig.for_robot(env.params, speed_scale=self.speed_scale)
+            f = PathFollower(tracks[i], cfg, stop_mask=self._stop_mask(env), dt=dt)
             f.reset(float(progress[i]))
             self.followers[i] = f
 
     def _targets(self, env) -> list:
         poses = env.estimated_pose  # the true pose unless the env's pose_source is "odometry"
-        return [f.step(poses[i]) for i, f in enumerate(self.followers)]
+        targets = [f.step(poses[i]) for i, f in enumerate(self.followers)]
+        self._holding = np.array([t.holding for t in targets], dtype=np.bool_)
+        return targets
+
+    def _with_holds(self, cmd: WheelCommand) -> WheelCommand:
+        return replace(cmd, info={**cmd.info, "hold": self._holding})
 
 
 class ICRPathController(_PathFollowing):
@@ -109,8 +123,9 @@ class ICRPathController(_PathFollowing):
     def act(self, env, obs) -> WheelCommand:
         targets = self._targets(env)
         lam_hat, mu_hat = env.estimated_eta
-        return self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
-                                    np.array([t.lam for t in targets]), np.array([t.mu for t in targets]))
+        return self._with_holds(self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
+                                                     np.array([t.lam for t in targets]),
+                                                     np.array([t.mu for t in targets])))
 
 
 class TwistPathController(_PathFollowing):
@@ -141,4 +156,4 @@ class TwistPathController(_PathFollowing):
 
     def act(self, env, obs) -> WheelCommand:
         twists = np.array([t.twist for t in self._targets(env)])
-        return self.controller.step(None, twists, env.measured_beta)
+        return self._with_holds(self.controller.step(None, twists, env.measured_beta))

@@ -40,7 +40,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from azimut_env.task.core import nominal_duration
-from azimut_env.tracks import TRACK_NAMES, Track, make_track
+from azimut_env.tracks import SCENARIO_NAMES, TRACK_NAMES, Track, make_track
 from azimut_env.vector_env import AzimutVectorEnv
 from control.commands import WheelCommand
 from control.controller import Controller, make_controller
@@ -63,11 +63,12 @@ def _per_robot(value, num: int, what: str) -> list:
     return [value] * num
 
 
-def _track(spec, seed: int) -> Track:
-    if isinstance(spec, Track):
+def _track(spec, seed: int) -> Track | str:
+    """A Track, or a scenario's name (the env builds it for its robot)."""
+    if isinstance(spec, Track) or (isinstance(spec, str) and spec in SCENARIO_NAMES):
         return spec
     if not isinstance(spec, str) or spec not in TRACK_NAMES:
-        raise ValueError(f"unknown track {spec!r}; choose from {', '.join(TRACK_NAMES)}")
+        raise ValueError(f"unknown track {spec!r}; choose from {', '.join(TRACK_NAMES + SCENARIO_NAMES)}")
     return make_track(spec, rng=np.random.default_rng(seed))
 
 
@@ -109,6 +110,8 @@ def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, be
            ("mu_true", abs(float(info["eta_true"][1][i]))),
            ("twist_true", np.array(info["twist"][i], dtype=np.float64)),
            ("mode", int(cmd.mode[i]) if cmd.mode is not None else int(Mode.RUNNING)), ("violations", violation)]
+    if "hold" in cmd.info:  # the path followers' holds (Track.holds): the command was exactly zero
+        row.append(("hold", bool(cmd.info["hold"][i])))
     if cmd.beta_rate is not None:
         row.append(("beta_rate", np.array(cmd.beta_rate[i], dtype=np.float64)))
     if cmd.phiddot is not None:

@@ -101,7 +101,29 @@ KICK_GLOSSARY: dict[str, Column] = {
 }
 
 #: metrics that count something: printed as integers (a mean over seeds with its decimal)
-COUNT_METRICS = frozenset({"limit_violation_steps", "reconfigure_events"})
+COUNT_METRICS = frozenset({"limit_violation_steps", "reconfigure_events", "setpoint_flips", "travel_reversals",
+                           "hold_steps"})
+
+_HOLD = "while the command was a hold (the track held the robot still: the follower commanded exactly zero)"
+# the scenarios' own metrics (control.episode.scenario_metrics; azimut_env.tracks.scenarios)
+GLOSSARY.update({
+    "peak_steer_rate_cmd": Column("peak β̇ cmd [rad/s]", "the largest steering rate the controller commanded, any "
+                                                        "module, any step"),
+    "peak_steer_rate": Column("peak β̇ [rad/s]", "the largest steering rate of the wheels themselves (their true "
+                                                "angles' change over a control period, modulo 2π)"),
+    "setpoint_flips": Column("set-point flips", "module set-points that jumped by more than 90° in one control "
+                                                "period (a flip of the wheel about its axis)"),
+    "travel_reversals": Column("travel reversals", "the times a rolling module's commanded travel direction (its "
+                                                   "steering angle, plus π when its wheel turns backward) turned by "
+                                                   "more than 90° between consecutive steps while the chassis moved; "
+                                                   "by design on the reverse scenario"),
+    "hold_steps": Column("hold steps", f"the control periods {_HOLD}"),
+    "hold_chassis_m": Column("hold: chassis [mm]", f"the path length of the chassis centre {_HOLD}"),
+    "hold_yaw_rad": Column("hold: yaw [deg]", f"the heading travel of the chassis {_HOLD}"),
+    "hold_steer_rad": Column("hold: steer [deg]", f"the largest steering travel Σ|Δβ| of a module {_HOLD}"),
+    "hold_steer_cmd_rad": Column("hold: steer cmd [deg]", f"the largest commanded steering travel of a module "
+                                                          f"{_HOLD}"),
+})
 
 
 def glossary_lines(keys: Iterable[str], glossary: dict[str, Column] | None = None,

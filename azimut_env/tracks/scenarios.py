@@ -110,6 +110,10 @@ def reverse_scenario(sc: ScenarioScale) -> Track:
     reversal and rises again. The return leg is 20° off the way out (not 180°) so that the two
     legs do not overlap (the reference would be ambiguous there) and so that every module must
     turn by 20° or 160° at rest, the choice the per-module ``optimize`` makes one wheel at a time.
+    (Each reversal point is followed by a 1 µm step along the bisector of the two legs: the
+    track's reference direction, central differences of its samples, then turns from one leg to
+    the other through the bisector instead of nearly cancelling at a one-sample cusp, where a
+    path follower would stall short of the point.)
 
     Isolates: wpilibsuite/allwpilib issue #5313, "Swerve Drive Optimize does not consider full
     robot" (2023: per-module optimisation turns one module the other way, a "huge yaw" on it);
@@ -124,8 +128,11 @@ def reverse_scenario(sc: ScenarioScale) -> Track:
     p2 = p1 + d * np.array([math.cos(back), math.sin(back)])
     p3 = p2 + np.array([d, 0.0])
     a, b, c = _line((0.0, 0.0), p1), _line(p1, p2), _line(p2, p3)
-    xy = np.vstack([a, b, c, p3[None]])
-    return _finish("reverse", xy, np.full(len(xy), 0.3), sc, stops_at=(len(a), len(a) + len(b)))
+    bis = 1e-6 * np.array([math.cos(0.5 * back), math.sin(0.5 * back)])  # 80°: between 0° and 160° at both
+    xy = np.vstack([a, b[:1], b[:1] + bis, b[1:], c[:1], c[:1] + bis, c[1:], p3[None]])
+    i1 = len(a)
+    i2 = i1 + len(b) + 1
+    return _finish("reverse", xy, np.full(len(xy), 0.3), sc, stops_at=(i1, i2))
 
 
 def spin_scenario(sc: ScenarioScale) -> Track:

@@ -106,6 +106,23 @@ class PathFollowerConfig:
     speed_scale: float = 1.0
     hold_reach: float = 0.01
 
+    @classmethod
+    def for_robot(cls, params, speed_scale: float = 1.0) -> PathFollowerConfig:
+        """The gains scaled to a robot (``azimut_env.params.RobotParams``), for tracks whose
+        speeds are the robot's own (the scenarios, ``azimut_env.tracks.scenarios``): curves are
+        capped at the friction limit μ g (not 1 m/s²), sharp corners and stops are braked for at
+        half the wheels' acceleration limit r φ̈_max, looked for far enough ahead to brake from
+        the top wheel speed, and the position correction is capped at 0.3 m/s or 20% of the top
+        wheel speed. The other gains are the defaults."""
+        import numpy as np
+
+        r = float(np.min(params.geometry.r))
+        v_max, accel = r * params.limits.wheel_speed_max, r * params.limits.wheel_accel_max
+        decel = 0.5 * accel
+        return cls(max_lateral_accel=params.tire.friction * params.gravity, corner_decel=decel,
+                   corner_window=max(1.0, v_max * v_max / (2.0 * decel) + 0.2),
+                   max_correction=max(0.3, 0.2 * v_max), speed_scale=speed_scale)
+
     def __post_init__(self) -> None:
         check_fields(self)
         for name in ("k_int", "moving_speed", "preview", "preview_min", "hold_reach"):

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from azimut_env.task.core import nominal_duration
-from azimut_env.tracks import make_track
+from azimut_env.tracks import SCENARIO_NAMES, named_track
 from control.episode import episode_metrics
 from control.rollout import run_episode
 from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
@@ -36,7 +36,7 @@ from jobs.campaign.task import file_digest
 from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.outputs import episode_label, output_layout
 from jobs.eval.plots import comparison_plots, write_plots
-from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
+from jobs.eval.report import SCENARIO_COLUMNS, SUMMARY_COLUMNS, limits_text, write_campaign_report
 from jobs.records import provenance
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick",
@@ -45,7 +45,7 @@ __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs"
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
 DEFAULT_DT = 0.02
 def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
-              dt: float = DEFAULT_DT, n_wheels: int = 4) -> dict:
+              dt: float = DEFAULT_DT, n_wheels: int = 4, params=None) -> dict:
     """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
 
     1–``n_wheels`` random wheels (at most 4), an angular impulse of ±(0.2–1.0) N·m·s (as in
@@ -53,7 +53,7 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     duration (or of ``max_time``, whichever is shorter).
     """
     rng = np.random.default_rng([int(seed), 0x6B1C])  # a stream of its own: not the env's
-    horizon = nominal_duration(make_track(track, rng=np.random.default_rng(seed)), speed_scale)
+    horizon = nominal_duration(named_track(track, params, rng=np.random.default_rng(seed)), speed_scale)
     if max_time is not None:
         horizon = min(horizon, float(max_time))
     step = int(rng.uniform(0.2, 0.6) * horizon / dt)
@@ -76,14 +76,19 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     from jobs.args import robot_env_kwargs
 
     robot_kw = robot_env_kwargs(robot, robot_file)
-    n_wheels = _robot_n(robot_kw["robot"]) if robot_kw else 4
-    kick = draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels) if kicks else None
+    params = _robot_params(robot_kw["robot"]) if robot_kw else None
+    n_wheels = params.n if params is not None else 4
+    kick = draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels, params=params) if kicks else None
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
     if robot_kw:
         env_kwargs = {**(env_kwargs or {}), **robot_kw}
     log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
                       env_kwargs=env_kwargs)
     row = episode_metrics(log)
+    if track in SCENARIO_NAMES:
+        from control.episode import scenario_metrics
+
+        row.update(scenario_metrics(log))
     row["track"] = track  # the name asked for (a random track's Track may carry another)
     row["seed"] = int(seed)
     if kick is not None:
@@ -116,12 +121,12 @@ def check_episode_result(result: Any, key: dict) -> None:
             raise TypeError(f"metrics[{name!r}] = {v!r} is not a {'bool' if name == 'completed' else 'number'}")
 
 
-def _robot_n(robot: str) -> int:
-    """The wheel count of a robot (a preset's name or a file's path)."""
+def _robot_params(robot: str | None):
+    """The RobotParams of a robot (a preset's name or a file's path; None: the default)."""
     from azimut_env.params import RobotParams
     from azimut_env.robot_file import resolve_robot
 
-    return resolve_robot(robot, None, RobotParams).n
+    return resolve_robot(robot, None, RobotParams) if robot else RobotParams()
 
 
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
@@ -142,7 +147,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
     inputs = {c: {role: file_digest(p) for role, p in controller_files(c).items()} for c in controllers}
     robot_digest = {"robot_file": file_digest(robot_file)} if robot_file else {}
     for track in tracks:
-        nominal = nominal_duration(make_track(track, rng=np.random.default_rng(0)), speed_scale)
+        params = _robot_params(str(Path(robot_file).resolve()) if robot_file else robot)
+        nominal = nominal_duration(named_track(track, params, rng=np.random.default_rng(0)), speed_scale)
         for controller in controllers:
             for seed in seeds:
                 key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),
@@ -333,6 +339,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                                                  and k not in ("controller", "track", "seed", "status", "error",
                                                                "attempts", "kick")
                                                  and isinstance(ok_rows[0][k], (int, float))]
+    metrics += [c[0] for c in SCENARIO_COLUMNS if c[0] not in metrics and any(c[0] in r for r in ok_rows)]
     cells = summarize(ok_rows, ("controller", "track"), metrics, n_resamples=args.bootstrap)
     by = {(c["controller"], c["track"]): c for c in cells}
     full = []

@@ -39,7 +39,7 @@ import sys
 import time
 from pathlib import Path
 
-from azimut_env.tracks import TRACK_NAMES
+from azimut_env.tracks import ALL_TRACK_NAMES, SCENARIO_NAMES, TRACK_NAMES
 from control.episode import MOVING_MU, EpisodeLog, episode_metrics, moving_mask, progress_bar
 from jobs.args import add_robot_arguments, arg_choice_list, arg_float, arg_int, arg_output_path, require_module
 from jobs.eval import campaign
@@ -54,6 +54,16 @@ __all__ = ["DEFAULT_CONTROLLERS", "POLICY_PREFIXES", "MOVING_MU", "EpisodeLog", 
 DEFAULT_CONTROLLERS = ("icr", "twist")
 #: Default evaluation order: the paper track first.
 DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
+
+
+def arg_tracks(text: str) -> list[str]:
+    """``type=`` of ``--tracks``: built-in tracks and scenarios (``suite``: every scenario, in
+    :data:`SCENARIO_NAMES` order), order kept, no repeats."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    expanded = []
+    for item in items:
+        expanded += list(SCENARIO_NAMES) if item == "suite" else [item]
+    return arg_choice_list(ALL_TRACK_NAMES)(",".join(expanded))
 
 
 _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
@@ -95,8 +105,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated controllers: icr, twist, feedforward, trained policies ppo:PATH or "
                              "sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default the run "
                              "folder's name), or package.module:Class, a controller of yours (default: icr,twist)")
-    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_choice_list(TRACK_NAMES),
-                        help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: all, paper first)")
+    parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_tracks,
+                        help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: these, paper first), "
+                             f"and scenarios among {', '.join(SCENARIO_NAMES)}, scaled to the robot ('suite': all six "
+                             "scenarios; docs/robots.md)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
                         help="env seed (noise, start, random track); default 0")
     add_robot_arguments(parser)
@@ -136,6 +148,9 @@ def check_args(args: argparse.Namespace) -> None:
     for item in args.controllers:
         if is_policy(item):
             require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
+    other_robot = getattr(args, "robot", None) not in (None, "azimut3") or getattr(args, "robot_file", None)
+    if args.kick_runs > 0 and other_robot:
+        raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3) only")
     args.controller_names = check_controllers(list(args.controllers), args.speed_scale)
     campaign.check_args(args)
 
@@ -194,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         controllers = (list(args.controllers) if isinstance(args.controllers, list)
                        else arg_controllers(args.controllers))
-        tracks = _parse_list(args.tracks, TRACK_NAMES, "track(s)")
+        tracks = _parse_list(args.tracks, ALL_TRACK_NAMES, "track(s)")
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
         if args.kick_runs < 0:

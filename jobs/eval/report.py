@@ -18,7 +18,8 @@ from jobs.glossary import COUNT_METRICS, GLOSSARY
 from jobs.glossary import glossary_lines as _glossary_lines
 from jobs.records import provenance_text, write_json
 
-__all__ = ["SUMMARY_COLUMNS", "write_campaign_report", "limits_text", "format_value", "interval_shown"]
+__all__ = ["SUMMARY_COLUMNS", "SCENARIO_COLUMNS", "write_campaign_report", "limits_text", "format_value",
+           "interval_shown"]
 
 #: the metrics of the summary table, in order: (key, format, scale); headers from jobs.glossary
 SUMMARY_COLUMNS = [
@@ -36,6 +37,17 @@ SUMMARY_COLUMNS = [
     ("limit_violation_steps", "{:.1f}", 1.0),
     ("reconfigure_events", "{:.1f}", 1.0),
     ("return", "{:.1f}", 1.0),
+]
+#: the scenarios' own columns (``control.episode.scenario_metrics``), shown when a scenario ran
+SCENARIO_COLUMNS = [
+    ("peak_steer_rate_cmd", "{:.2f}", 1.0),
+    ("peak_steer_rate", "{:.2f}", 1.0),
+    ("setpoint_flips", "{:.1f}", 1.0),
+    ("travel_reversals", "{:.1f}", 1.0),
+    ("hold_chassis_m", "{:.2f}", 1000.0),
+    ("hold_yaw_rad", "{:.3f}", 180.0 / math.pi),
+    ("hold_steer_rad", "{:.2f}", 180.0 / math.pi),
+    ("hold_steer_cmd_rad", "{:.2f}", 180.0 / math.pi),
 ]
 
 
@@ -67,19 +79,19 @@ def _cell(key: str, stats: dict, fmt: str, scale: float) -> str:
     return f"{mean} [{format_value(key, stats['lo'], fmt, scale)}, {format_value(key, stats['hi'], fmt, scale)}]"
 
 
-def _summary_table(cells: list[dict]) -> list[str]:
-    heads = [GLOSSARY[k].header for k, _, _ in SUMMARY_COLUMNS]
+def _summary_table(cells: list[dict], columns: list = SUMMARY_COLUMNS) -> list[str]:
+    heads = [GLOSSARY[k].header for k, _, _ in columns]
     lines = ["| controller | track | episodes ok/failed | " + " | ".join(heads) + " |",
-             "|---|---|---|" + "---|" * len(SUMMARY_COLUMNS)]
+             "|---|---|---|" + "---|" * len(columns)]
     for cell in cells:
         stats = cell["metrics"]
         lines.append(f"| {cell['controller']} | {cell['track']} | {cell['ok']}/{cell['failed']} | "
-                     + " | ".join(_cell(k, stats.get(k, {}), fmt, scale) for k, fmt, scale in SUMMARY_COLUMNS) + " |")
+                     + " | ".join(_cell(k, stats.get(k, {}), fmt, scale) for k, fmt, scale in columns) + " |")
     return lines
 
 
-def _seed_table(rows: list[dict]) -> list[str]:
-    cols = [c for c in SUMMARY_COLUMNS if c[0] != "completed"]
+def _seed_table(rows: list[dict], columns: list = SUMMARY_COLUMNS) -> list[str]:
+    cols = [c for c in columns if c[0] != "completed"]
     lines = ["| controller | track | seed | status | done | " + " | ".join(GLOSSARY[k].header for k, _, _ in cols)
              + " |", "|---|---|---|---|---|" + "---|" * len(cols)]
     for r in rows:
@@ -129,6 +141,9 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     write_json(out / "metrics.json", {"campaign": campaign, "summary": cells, "episodes": rows})
     seeds = campaign["seeds"]
     prov = campaign.get("provenance") or {}
+    from azimut_env.tracks import SCENARIO_NAMES
+
+    table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
     lines = ["# azimut eval", "",
              f"Controllers {', '.join(campaign['controllers'])}; tracks {', '.join(campaign['tracks'])}; "
              f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
@@ -140,7 +155,7 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
              f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
              f"Produced by {provenance_text(prov)}.", "",
              "## Summary", "", _statistics_sentence(cells, campaign), ""]
-    lines += _summary_table(cells)
+    lines += _summary_table(cells, table)
     failed = [r for r in rows if r.get("status") != "ok"]
     if failed:
         lines += ["", "Failed episodes (after a retry):", ""]
@@ -156,7 +171,7 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
                 cell = by_cell.get((controller, track))
                 lines += ["", f"#### {controller} on {track}", ""]
                 if cell is not None:
-                    lines += _summary_table([cell])
+                    lines += _summary_table([cell], table)
                 lines.append("")
                 for f in plots.get((controller, track), []):
                     lines.append(f"![{Path(f).stem}]({f})")
@@ -168,9 +183,9 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
         lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
                   "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
         lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
-    columns = ["controller", "track", "episodes"] + [k for k, _, _ in SUMMARY_COLUMNS]
+    columns = ["controller", "track", "episodes"] + [k for k, _, _ in table]
     if len(seeds) > 1:
-        lines += ["", "## Per-seed rows", ""] + _seed_table(rows)
+        lines += ["", "## Per-seed rows", ""] + _seed_table(rows, table)
         columns += ["seed", "status", "done"]
     lines += [""] + _glossary_lines(columns) + [""]
     (out / "report.md").write_text("\n".join(lines))
