@@ -200,8 +200,9 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
     Unlimited steering (``geom.unlimited_steering``): q may be any angle; each wheel's distance
     to the surface is taken modulo π (:meth:`RobotGeometry.steering_difference`) and S(λ̂) is the
     angle of each axis nearest the measured one. A measured angle outside the steering range
-    (either kind of robot) is the same axis as its wrapped angle with the wheel rolling the other
-    way, so its φ̇ counts with the opposite sign in μ̂.
+    is the same axis as its wrapped angle with the wheel rolling the other
+    way, so its φ̇ counts with the opposite sign in μ̂ (unlimited steering; with stops a measured
+    angle past a stop is wrapped to the other stop, its φ̇ unchanged).
     """
     _check_method(method)
     mu_tol = check_nonnegative("mu_tol [m/s]", mu_tol)
@@ -212,9 +213,12 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
     if not np.isfinite(ph).all():
         raise ValueError("phidot contains NaN or inf")
     ph = ph.reshape(-1, geom.n)
-    if shift is not None:
+    if shift is not None and geom.unlimited_steering:
         # a wheel whose angle was taken by an odd multiple of π rolls the other way at the
-        # wrapped angle: its speed changes sign with it (r φ̇ = μ c(β), c(β + π) = −c(β))
+        # wrapped angle: its speed changes sign with it (r φ̇ = μ c(β), c(β + π) = −c(β)).
+        # (Limited steering: a measured angle past a stop is noise at the stop; wrapping it to
+        # the other stop without turning its speed is the behaviour the default figures were
+        # measured with, kept as it is.)
         ph = np.where(np.mod(np.rint(shift / np.pi), 2.0) != 0.0, -ph, ph)
     lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
     beta = np.empty_like(flat)

@@ -1,0 +1,48 @@
+"""--robot / --robot-file and --tracks scenarios on the command line: refusals in one line (exit
+2), a short run on a preset and a scenario."""
+
+import json
+
+import pytest
+
+from jobs.cli import main
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["eval", "--robot", "quad"], "unknown robot 'quad'"),
+    (["train", "--robot", "quad", "--out", "x"], "unknown robot 'quad'"),
+    (["bench-env", "--robot", "quad"], "unknown robot 'quad'"),
+    (["sim-paper", "--robot", "quad"], "unknown robot 'quad'"),
+    (["eval", "--robot", "tri", "--robot-file", "{toml}"], "not allowed with argument"),
+    (["eval", "--robot-file", "{missing}"], "no such file"),
+    (["eval", "--robot-file", "{bad}"], "missing table [geometry]"),
+    (["eval", "--tracks", "suite,hold"], "repeated entries"),
+    (["eval", "--tracks", "zigzag"], "unknown 'zigzag'"),
+    (["eval", "--robot", "swerve", "--kick-runs", "3", "--no-plots"], "default robot (azimut3) only"),
+])
+def test_refused_in_one_line(tmp_path, capsys, argv, needle):
+    good = tmp_path / "r.toml"
+    from azimut_env.robot_file import preset_source
+
+    good.write_text(preset_source("tri"))
+    bad = tmp_path / "bad.toml"
+    bad.write_text("schema = 1\n")
+    argv = [a.format(toml=good, missing=tmp_path / "no.toml", bad=bad) for a in argv]
+    assert main(argv + ["--out", str(tmp_path / "o")] if argv[0] == "eval" else argv) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_eval_on_a_robot_file_and_a_scenario(tmp_path):
+    from azimut_env.robot_file import preset_source
+
+    robot = tmp_path / "tri.toml"
+    robot.write_text(preset_source("tri"))
+    out = tmp_path / "eval"
+    assert main(["eval", "--robot-file", str(robot), "--tracks", "hold", "--controllers", "twist", "--max-time", "2",
+                 "--no-plots", "--out", str(out)]) in (0, 1)
+    m = json.loads((out / "metrics.json").read_text())
+    row = m["episodes"][0]
+    assert row["track"] == "hold" and "peak_steer_rate" in row and "hold_steps" in row
+    assert m["campaign"]["robot"] == f"file {robot}"
+    assert "hold: steer" in (out / "report.md").read_text()
