@@ -91,7 +91,6 @@ def _wrap_half_pi(x: float) -> float:
     """x modulo π into [−π/2, π/2[ (the distance between two propulsion axes' angles)."""
     return (x + 0.5 * math.pi) % math.pi - 0.5 * math.pi
 
-
 @njit(cache=True)
 def _steering_dist2_upto(lam, q, E, P, steer_max: float, beta_out, bound: float, periodic: bool = False) -> float:
     """‖q − S(λ)‖², the squared joint-space distance to the surface point of λ, eq. (9); S(λ) is
@@ -99,11 +98,8 @@ def _steering_dist2_upto(lam, q, E, P, steer_max: float, beta_out, bound: float,
     partial sum above it, with ``beta_out`` incomplete).
 
     A wheel whose steering axis holds the ICR takes any angle, so it takes the input angle and its
-    term is zero (§3.1.3: β_k is copied from the input).
-
-    ``periodic`` (unlimited steering, ``RobotGeometry.steering_difference``): q_k − β_k is taken
-    modulo π into [−π/2, π/2[ (β and β + π are one propulsion axis and the module takes the
-    nearer one), and ``beta_out`` gets that nearer angle, q_k − (q_k − β_k mod π)."""
+    term is zero (§3.1.3: β_k is copied from the input). ``periodic`` (unlimited steering):
+    q_k − β_k modulo π into [−π/2, π/2[, and ``beta_out`` gets the nearer angle of the axis."""
     d = 0.0
     for k in range(q.shape[0]):
         beta, r2 = _beta_wheel(lam[0], lam[1], lam[2], E, P, k, steer_max)
@@ -207,7 +203,7 @@ def _mu_least_squares(c, y) -> float:
 def _eta_kernel(lam, q, phidot, E, P, b, r, steer_max, mu_tol, f, beta_out, mu_out, qua_out, c, periodic=False):
     """For each row: S(λ) (singular wheels take q_k) and its quality (eq. 29, factor f), μ by least
     squares of r φ̇ = μ c given λ, then the canonical sign of (λ, μ). λ is updated in place.
-    ``periodic``: unlimited steering (see :func:`_steering_dist2_upto`)."""
+    ``periodic``: unlimited steering."""
     n = E.shape[0]
     for i in range(lam.shape[0]):
         d2 = _steering_dist2(lam[i], q[i], E, P, steer_max, beta_out[i], periodic)
