@@ -6,7 +6,8 @@ import pytest
 
 from azimut_env.params import RobotParams
 from azimut_env.robot_file import PRESET_NAMES
-from control.episode import episode_metrics, run_episode
+from control.episode import episode_metrics
+from control.rollout import run_episode
 from control.twist.wpilib import optimize_module
 from estimation.geometry import RobotGeometry
 

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from azimut_env.tracks import Track, scenario_track
-from control.episode import EpisodeLog, run_episode, scenario_metrics
+from control.episode import EpisodeLog, scenario_metrics
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollower
+from control.rollout import run_episode
 
 
 def test_follower_holds_exactly_zero_for_the_duration():
