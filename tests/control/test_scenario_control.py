@@ -79,7 +79,7 @@ def test_hold_motion_metrics():
 
 
 def test_hold_scenario_episode():
-    log = run_episode("twist", "hold", seed=0, max_time=7.0)
+    log = run_episode("twist", "hold", seed=0, max_time=7.0, env_kwargs={"imperfections": "ideal"})
     assert log.hold.sum() == 100  # 2 s of zero command
     m = scenario_metrics(log)
     assert m["hold_steer_cmd_rad"] == 0.0 and m["hold_chassis_m"] < 0.01
