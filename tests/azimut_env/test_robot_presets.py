@@ -103,3 +103,23 @@ def test_presets_are_package_data():
 
     names = {p.name for p in resources.files("azimut_env").joinpath("robots").iterdir()}
     assert {f"{n}.toml" for n in PRESET_NAMES} <= names
+
+
+def test_gym_make_and_make_vec_take_a_preset_or_a_file(tmp_path):
+    import gymnasium as gym
+
+    import azimut_env  # noqa: F401 (registers the env)
+
+    env = gym.make(azimut_env.ENV_ID, robot="hex", track="circle")
+    obs, _ = env.reset(seed=0)
+    assert env.unwrapped.n == 6 and env.action_space.shape == (12,)
+    venv = gym.make_vec(azimut_env.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", robot="tri",
+                        track="circle")
+    assert venv.unwrapped.n == 3 and venv.reset(seed=0)[0].shape[0] == 2
+    path = tmp_path / "r.toml"
+    path.write_text(preset_source("swerve"))
+    assert gym.make(azimut_env.ENV_ID, robot=str(path), track="circle").unwrapped.geometry.unlimited_steering
+    with pytest.raises(ValueError, match="both given"):
+        gym.make(azimut_env.ENV_ID, robot="swerve", params=RobotParams())
+    env.close()
+    venv.close()
