@@ -4,7 +4,8 @@
 A run folder holds ``model.zip`` (the SB3 model), ``vecnormalize.pkl`` (the ``VecNormalize``
 statistics, beside the model file; a checkpoint's ``*_vecnormalize_*`` file is found too) and
 ``run.json`` (algorithm, action space, env keyword arguments). Loading needs only the ``rl`` extra
-(stable-baselines3 and torch).
+(stable-baselines3 and torch). A run of ``azimut train --engine rllib`` holds ``model.pt`` instead
+(TorchScript of the deterministic policy, :mod:`train.rllib_engine`), loaded with torch alone.
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ from train.envs import ACTIONS
 from train.saved_files import check_model_file, check_vecnormalize_file, vecnormalize_path  # re-exported
 
 __all__ = ["TrainedPolicy", "load_policy", "check_policy_spaces", "vecnormalize_path", "PolicyController",
-           "policy_controller", "policy_name", "model_file", "policy_files"]
+           "policy_controller", "policy_name", "model_file", "policy_files",
+           "TorchScriptPolicy"]
 
 #: the spelling of a policy's short name in ``ppo:NAME=PATH``
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -71,9 +73,12 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
     beside it (required: without them the policy acted on raw observations without a word) and
     the model's spaces against its env's (:func:`check_policy_spaces`).
     """
+    path = model_file(path)
+    if path.suffix == ".pt":  # azimut train --engine rllib: the deterministic policy as TorchScript
+        return _load_torchscript(path, algo, device)
     from stable_baselines3 import PPO, SAC
 
-    path = check_model_file(model_file(path))  # a corrupted or truncated archive: one line, before SB3
+    path = check_model_file(path)  # a corrupted or truncated archive: one line, before SB3
     meta_file = next((p / "run.json" for p in (path.parent, path.parent.parent) if (p / "run.json").is_file()), None)
     try:
         meta = json.loads(meta_file.read_text()) if meta_file else {}
@@ -154,9 +159,49 @@ def policy_files(path: str | Path) -> dict[str, Path]:
 
 
 def model_file(path: str | Path) -> Path:
-    """The model file of ``path`` (a model file, or a run folder holding ``model.zip``)."""
+    """The model file of ``path`` (a model file, or a run folder holding ``model.zip``, or
+    ``model.pt`` for an ``--engine rllib`` run)."""
     path = Path(path)
-    return path / "model.zip" if path.is_dir() else path
+    if not path.is_dir():
+        return path
+    return path / "model.pt" if not (path / "model.zip").exists() and (path / "model.pt").is_file() else \
+        path / "model.zip"
+
+
+def _load_torchscript(path: Path, algo: str | None, device: str) -> TrainedPolicy:
+    """The policy of an ``--engine rllib`` run: ``model.pt`` (TorchScript; no observation
+    normalisation) and its ``run.json`` beside it."""
+    import torch
+
+    meta_file = path.parent / "run.json"
+    try:
+        meta = json.loads(meta_file.read_text()) if meta_file.is_file() else {}
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{meta_file}: unreadable run record ({type(exc).__name__})") from None
+    algo = algo or meta.get("algo")
+    action, env_kwargs = meta.get("action"), meta.get("env_kwargs") or {}
+    if algo != "ppo" or action not in ACTIONS or not isinstance(env_kwargs, dict):
+        raise ValueError(f"{meta_file}: an --engine rllib run records algo 'ppo', its action space and env_kwargs")
+    try:
+        module = torch.jit.load(str(path), map_location=device)
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable TorchScript policy ({type(exc).__name__})") from None
+    return TrainedPolicy(model=TorchScriptPolicy(module), algo=algo, action=action, env_kwargs=env_kwargs)
+
+
+class TorchScriptPolicy:
+    """The ``predict`` of an SB3 model for a TorchScript module mapping observations (N, D) to
+    deterministic actions (N, A) (``azimut train --engine rllib``'s ``model.pt``; it acts with
+    its mean action whether or not ``deterministic`` is asked)."""
+
+    def __init__(self, module) -> None:
+        self.module = module
+
+    def predict(self, obs: np.ndarray, deterministic: bool = True):
+        import torch
+
+        with torch.no_grad():
+            return self.module(torch.as_tensor(np.asarray(obs, dtype=np.float32))).numpy(), None
 
 
 def policy_name(arg: str) -> tuple[str, Path]:

@@ -147,7 +147,11 @@ def check_args(args: argparse.Namespace) -> None:
         require_module("rosbags", "--export (the logs extra: pip install 'azimut[logs]')")
     for item in args.controllers:
         if is_policy(item):
-            require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
+            from train.policy import model_file, policy_name
+
+            if model_file(policy_name(item.split(":", 1)[1])[1]).suffix != ".pt":  # RLlib's export: torch only
+                require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
+            require_module("torch", f"--controllers {item} (the [rl] extra)")
     other_robot = getattr(args, "robot", None) not in (None, "azimut3") or getattr(args, "robot_file", None)
     if args.kick_runs > 0 and other_robot:
         raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3) only")

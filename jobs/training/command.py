@@ -29,10 +29,20 @@ from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_
 from train.envs import ACTIONS
 from train.trainer import EVAL_TRACKS, latest_checkpoint
 
-__all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides"]
+__all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides", "ENGINES"]
+
+#: training engines of --engine
+ENGINES = ("sb3", "rllib")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--engine", choices=ENGINES, default="sb3",
+                        help="sb3 (default): Stable-Baselines3 in this process; rllib: Ray RLlib's PPO, experience "
+                             "collected by --env-runners env runners on a local Ray instance or, with --ray-address, "
+                             "a cluster (the [rllib] extra)")
+    parser.add_argument("--env-runners", type=arg_int(0, 4096), default=1,
+                        help="--engine rllib: remote env runners of --num-robots robots each (default 1; 0: sample "
+                             "in the driver)")
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="algorithm (default ppo)")
     parser.add_argument("--action", choices=tuple(ACTIONS), default="raw",
                         help="action space: raw set-points, residual on the ICR controller, or ICR rates (default raw)")
@@ -83,7 +93,12 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--correction-cost must be a finite number >= 0, got {cost}")
     if cost and args.action != "residual":
         raise ValueError(f"--correction-cost applies to --action residual only, not {args.action}")
-    require_module("stable_baselines3", "azimut train")
+    if args.engine == "rllib":
+        _check_rllib_args(args)
+    else:
+        if args.env_runners != 1:
+            raise ValueError("--env-runners applies to --engine rllib only")
+        require_module("stable_baselines3", "azimut train")
     require_module("torch", "azimut train")
     if args.progress_bar:
         require_module("rich", "--progress-bar")
@@ -109,7 +124,8 @@ def check_args(args: argparse.Namespace) -> None:
     if getattr(args, "seeds", None) is None:  # the executor flags drive the seeds campaign only
         given = [flag for flag, value, default in (("--workers", args.workers, 1),
                                                    ("--executor", args.executor, "auto"),
-                                                   ("--ray-address", args.ray_address, None),
+                                                   ("--ray-address", None if args.engine == "rllib"
+                                                    else args.ray_address, None),
                                                    ("--retries", args.retries, 1))
                  if value != default]
         if given:
@@ -134,6 +150,21 @@ def check_args(args: argparse.Namespace) -> None:
             check_hyperparams(args.algo, action_key(args.action), data)
         except ValueError as exc:
             raise ValueError(f"--hyperparams {args.hyperparams}: {exc}") from None
+
+
+def _check_rllib_args(args: argparse.Namespace) -> None:
+    """``--engine rllib`` with the other flags, and RLlib importable (``ValueError``, one line)."""
+    if args.algo != "ppo":
+        raise ValueError(f"--engine rllib trains PPO only, not --algo {args.algo}")
+    for flag, given in (("--seeds", getattr(args, "seeds", None) is not None), ("--resume", args.resume),
+                        ("--correction-cost", bool(args.correction_cost)), ("--progress-bar", args.progress_bar)):
+        if given:
+            raise ValueError(f"{flag} is not available with --engine rllib")
+    try:
+        import ray.rllib  # noqa: F401
+    except Exception as exc:  # noqa: BLE001 (a missing dependency of RLlib raises ImportError or others)
+        raise ValueError(f"--engine rllib needs Ray RLlib (pip install 'azimut[rllib]'), which cannot be imported "
+                         f"here ({type(exc).__name__}: {exc})") from None
 
 
 def hyperparams_overrides(args: argparse.Namespace) -> dict | None:
@@ -170,6 +201,36 @@ def _robot_kwargs(args: argparse.Namespace) -> dict:
     return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
 
 
+def _print_final(record: dict) -> None:
+    for r in record["final_eval"]:
+        lap = ("lap " + format(r["completion_time_s"], ".1f") + " s" if r["completed"]
+               else (r["error"] or "lap not finished in the evaluation time"))
+        print(f"  {r['track']:<8} return {r['return']:.1f}, RMS lat {100 * r['rms_lateral_m']:.2f} cm, "
+              f"internal force {r['mean_internal_force_N']:.2f} N, slip {r['slip_energy_J']:.2f} J, "
+              f"{lap}")
+
+
+def _run_rllib(args: argparse.Namespace) -> int:
+    from jobs.records import provenance
+    from jobs.training.plots import write_learning_curve
+    from train.rllib_engine import train_rllib
+
+    record = train_rllib(args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
+                         tuple(args.eval_tracks), args.eval_every, hyperparams_overrides(args),
+                         env_kwargs=_robot_kwargs(args) or None, ray_address=args.ray_address,
+                         env_runners=args.env_runners, time_limit_min=args.time_limit, quiet=args.quiet,
+                         record_extra={"provenance": provenance()})
+    write_learning_curve(Path(args.out), record)
+    if not record["complete"]:
+        print(f"INCOMPLETE: the --time-limit guard stopped learning at {record['num_timesteps']} of {args.steps} "
+              "steps (run.json 'complete': false)", flush=True)
+    print(f"trained {record['num_timesteps']} steps with RLlib ({args.env_runners} env runner(s)) in "
+          f"{record['learn_wall_s']:.0f} s; policy: {args.out}/model.pt (azimut eval --controllers "
+          f"ppo:{args.out})", flush=True)
+    _print_final(record)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if getattr(args, "seeds", None) is not None:  # one agent per seed, as campaign tasks (jobs.training.seeds)
         from jobs.training.seeds import run_seeds
@@ -178,6 +239,8 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     torch.set_num_threads(args.torch_threads)
+    if args.engine == "rllib":
+        return _run_rllib(args)
     from jobs.records import provenance
     from jobs.training.plots import write_learning_curve
     from train.trainer import train
@@ -194,12 +257,7 @@ def run(args: argparse.Namespace) -> int:
               "steps (run.json 'complete': false)", flush=True)
     print(f"trained {record['num_timesteps']} steps in {record['learn_wall_s']:.0f} s "
           f"({record['steps_per_s_in_learn']:.0f} steps/s inside learn); model: {args.out}/model.zip", flush=True)
-    for r in record["final_eval"]:
-        lap = ("lap " + format(r["completion_time_s"], ".1f") + " s" if r["completed"]
-               else (r["error"] or "lap not finished in the evaluation time"))
-        print(f"  {r['track']:<8} return {r['return']:.1f}, RMS lat {100 * r['rms_lateral_m']:.2f} cm, "
-              f"internal force {r['mean_internal_force_N']:.2f} N, slip {r['slip_energy_J']:.2f} J, "
-              f"{lap}")
+    _print_final(record)
     return 0
 
 
