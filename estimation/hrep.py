@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from estimation.libm import atan2
+
 __all__ = [
     "normalize",
     "unit_and_norm",
@@ -256,8 +258,11 @@ def point_velocity(lam: np.ndarray, mu: np.ndarray, p: np.ndarray) -> np.ndarray
 
 def sphere_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle [rad] between unit vectors of S², in [0, π] (antipodes are π apart, unlike
-    :func:`lambda_distance`): ``atan2(‖a × b‖, a·b)``, accurate at 0 and π. (..., 3) -> (...)."""
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+    :func:`lambda_distance`): ``atan2(‖a × b‖, a·b)``, accurate at 0 and π. (..., 3) -> (...).
+
+    ``atan2`` is the C library's (:mod:`estimation.libm`): the same bits on every CPU, and those
+    of the compiled ICR controller (:mod:`control.icr.kernels`)."""
+    return atan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
 
 
 def _extra_axes(lam: np.ndarray, other: np.ndarray, trailing: int) -> tuple:

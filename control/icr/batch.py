@@ -1,8 +1,9 @@
 """N ICR controllers as one stateful object: :class:`BatchICRController`.
 
 It holds the :class:`~control.icr.state.ICRBatchState` of N robots and steps any subset of them
-with one :func:`~control.icr.controller.icr_control_step_batch` call; each robot is reset on its
-own (after its episode's reset). Row i of a step is what the one-robot
+with one call of the compiled step (:func:`~control.icr.compiled.compiled_control_step_batch`,
+which returns what the NumPy reference :func:`~control.icr.controller.icr_control_step_batch`
+returns, bit for bit); each robot is reset on its own (after its episode's reset). Row i of a step is what the one-robot
 :class:`~control.icr.controller.ICRController` does for robot i: the batched step works row by
 row (per-row masks, no reduction across robots), so stepping N robots together gives the same
 commands, bit for bit, as stepping them one at a time (``tests/control/test_controller_api.py``
@@ -18,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from control.commands import WheelCommand
+from control.icr.compiled import compiled_constants, compiled_control_step_batch
 from control.icr.config import ICRControllerConfig, Mode
-from control.icr.controller import icr_control_step_batch
 from control.icr.state import ICRBatchState, initial_state_batch
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
@@ -61,6 +62,7 @@ class BatchICRController:
         self.num, self.geom, self.limits, self.dt = int(num), geom, limits, float(dt)
         self.config = config or ICRControllerConfig()
         self.state = _blank_state(self.num, geom.n)
+        self._constants = compiled_constants(geom, limits, self.config, self.dt)
         #: (N,) bool: the robots reset at least once (only those can be stepped)
         self.ready = np.zeros(self.num, dtype=np.bool_)
 
@@ -77,15 +79,14 @@ class BatchICRController:
     def step(self, rows: np.ndarray | None, lam_hat, mu_hat, beta, phidot, lam_d, mu_d) -> WheelCommand:
         """One control period of the robots ``rows`` (None: all N); the arrays are theirs, in that
         order (λ̂ (M, 3), μ̂ (M,), β and φ̇ (M, n), target λ_d (M, 3) and μ_d (M,)). Returns
-        their commands ((M, n) arrays, ``info`` as :func:`icr_control_step_batch`'s) with
+        their commands ((M, n) arrays, ``info`` as
+        :func:`~control.icr.controller.icr_control_step_batch`'s) with
         ``mode`` and ``events`` (the sequences started since each robot's reset) set."""
-        every = rows is None
-        rows = np.arange(self.num) if every else np.asarray(rows, dtype=np.intp)
-        if not self.ready[rows].all():
-            raise RuntimeError(f"robots {rows[~self.ready[rows]].tolist()} were never reset: call reset() first")
-        sub = self.state if every else self.state.take(rows)
-        new, cmd = icr_control_step_batch(sub, lam_hat, mu_hat, beta, phidot, lam_d, mu_d, self.geom, self.limits,
-                                          self.config, self.dt)
-        self.state = new if every else self.state.put(rows, new)
+        idx = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.intp)
+        if not self.ready[idx].all():
+            raise RuntimeError(f"robots {idx[~self.ready[idx]].tolist()} were never reset: call reset() first")
+        self.state, cmd = compiled_control_step_batch(self.state, lam_hat, mu_hat, beta, phidot, lam_d, mu_d, self.geom,
+                                                      self.limits, self.config, self.dt, rows=rows,
+                                                      constants=self._constants)
         return WheelCommand(beta=cmd.beta, phidot=cmd.phidot, beta_rate=cmd.beta_rate, beta_accel=cmd.beta_accel,
                             phiddot=cmd.phiddot, info=cmd.info, mode=cmd.info["mode"], events=cmd.info["events"])

@@ -1,0 +1,409 @@
+"""The ICR controller's step compiled: :func:`compiled_control_step_batch`, one numba call for all robots.
+
+It is :func:`control.icr.controller.icr_control_step_batch` (the NumPy implementation, which
+stays the reference) written row by row: the feasible target, the mode transitions and each
+mode's commands of :mod:`control.icr.feasibility`, :mod:`control.icr.modes` and
+:mod:`control.icr.motion`, with the same operations in the same order (the building blocks are
+in :mod:`control.icr.kernels`), so that it returns the same commands, modes, events and state to
+the bit (``tests/control/test_icr_compiled.py`` checks it on recorded episodes). Two things
+differ in how, not in what: the time scaling tries κ from 1 down and stops at the first feasible
+one (the NumPy version evaluates the whole grid and takes the last feasible one: the same κ), and
+an arc check stops at its first blocked sample.
+
+Input checks are the NumPy version's, with the same messages (the finiteness checks run inside
+the kernel, before anything is written). A step may cover a subset of the robots (``rows``): the
+other rows of the state are carried over unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from control.commands import WheelCommand
+from control.icr.config import ICRControllerConfig
+from control.icr.kernels import (
+    ARC_AXIS,
+    ARC_NONE,
+    ARC_STOP,
+    C_ARC_STEP,
+    C_AXIS_MARGIN,
+    C_COUPLING_MEAS,
+    C_FREEZE,
+    C_HOLD_LIMIT,
+    C_HOLD_TOL,
+    C_KICK,
+    C_RECONFIG_TIMEOUT,
+    C_RECONFIG_TOL,
+    C_SIN_HALF_MARGIN,
+    C_STILL_TOL,
+    C_STOP_HYST,
+    C_STOP_MU,
+    C_STOP_TIMEOUT,
+    C_ZERO_MU,
+    L_A_DT,
+    L_ACCEL_LAM,
+    L_BRAKE_DT,
+    L_CO_C1,
+    L_HEADROOM_WSM,
+    L_MU_ACCEL,
+    L_NEG_WSM_SLACK,
+    L_RC_A,
+    L_RC_BRAKE,
+    L_RC_C1,
+    L_RC_VMAX,
+    L_SAM,
+    L_SAT_C1,
+    L_SRM,
+    L_STEER_LO,
+    L_WA_DT,
+    L_WA_DT_SLACK,
+    L_WAM,
+    L_WSM,
+    L_WSM_SLACK,
+    N_LIM,
+    arc_check_row,
+    dot3,
+    norm3,
+    project_off_axes_row,
+    slerp3,
+    speed_coefs_row,
+    steering_row,
+    unit3,
+    wrap_half1,
+)
+from control.icr.kernels_motion import coordinated_row, reconfigure_row
+from control.icr.state import ICRBatchState
+from control.limits import ActuatorLimits
+from estimation.geometry import RobotGeometry
+
+__all__ = ["compiled_control_step_batch", "compiled_constants"]
+
+_RUNNING, _STOPPING, _RECONFIGURING = 0, 1, 2  # Mode
+_EV_NONE, _EV_KICK = 0, 1  # Event (STOP and AXIS are the arc reason + 1)
+
+_ERRORS = ("lam_hat contains NaN or inf", "lam_hat is the zero vector, not a point of Λ", "mu_hat contains NaN or inf",
+           "beta_meas contains NaN or inf", "phidot_meas contains NaN or inf", "lam_d contains NaN or inf",
+           "lam_d is the zero vector, not a point of Λ", "mu_d contains NaN or inf")
+
+
+def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(limit constants (N_LIM,), tuning (17,), κ grid) of the kernel: every constant the NumPy
+    version computes in Python floats, by the same expressions (so with the same bits)."""
+    sam, srm, wsm, wam = (float(limits.steer_accel_max), float(limits.steer_rate_max), float(limits.wheel_speed_max),
+                          float(limits.wheel_accel_max))
+    lim = np.zeros(N_LIM)
+
+    def stop_speed(at: int, accel: float) -> None:
+        lim[at], lim[at + 1], lim[at + 2] = -0.5 * accel * dt, (0.5 * accel * dt) ** 2, 2.0 * accel
+
+    lim[L_SAM], lim[L_SRM], lim[L_WSM], lim[L_WAM] = sam, srm, wsm, wam
+    lim[L_A_DT], lim[L_WA_DT], lim[L_STEER_LO] = sam * dt, wam * dt, geom.steer_min + 1e-9
+    stop_speed(L_SAT_C1, 0.95 * sam)
+    stop_speed(L_CO_C1, 0.8 * sam)
+    lim[L_ACCEL_LAM] = 0.8 * sam
+    a = sam * config.reconfig_accel_fraction
+    lim[L_RC_A], lim[L_RC_VMAX] = a, srm * config.reconfig_rate_fraction
+    stop_speed(L_RC_C1, 0.85 * a)
+    lim[L_RC_BRAKE] = float(np.maximum(a, 0.95 * sam))
+    lim[L_MU_ACCEL] = config.mu_accel_fraction * wam
+    slack = 1.0 - 1e-9
+    lim[L_WSM_SLACK], lim[L_WA_DT_SLACK], lim[L_NEG_WSM_SLACK] = wsm * slack, wam * dt * slack, -wsm * slack
+    lim[L_HEADROOM_WSM] = config.mu_headroom * wsm
+    lim[L_BRAKE_DT] = sam * dt
+    tune = np.array([config.zero_mu_tol, config.axis_margin, config.arc_step, np.sin(0.5 * config.axis_margin),
+                     config.stop_hysteresis, config.stop_hold_time + 1e-9, config.kick_tol, config.stop_mu_tol,
+                     config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
+                     config.reconfig_still_tol, config.reconfig_timeout, config.k_lambda,
+                     float(config.coupling_from_measurement), float(config.mu_own_scale)], dtype=np.float64)
+    return lim, tune, np.linspace(0.0, 1.0, config.n_kappa)
+
+
+@njit(cache=True)
+def _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d) -> int:
+    """0, or 1 + the index of the first failed check in :data:`_ERRORS` (the NumPy version's order)."""
+    for i in range(lam_hat.shape[0]):
+        for j in range(3):
+            if not math.isfinite(lam_hat[i, j]):
+                return 1
+    for i in range(lam_hat.shape[0]):
+        if norm3(lam_hat[i]) == 0:
+            return 2
+    for i in range(mu_hat.shape[0]):
+        if not math.isfinite(mu_hat[i]):
+            return 3
+    for arr, code in ((beta_meas, 4), (phidot_meas, 5)):
+        for i in range(arr.shape[0]):
+            for k in range(arr.shape[1]):
+                if not math.isfinite(arr[i, k]):
+                    return code
+    for i in range(lam_d.shape[0]):
+        for j in range(3):
+            if not math.isfinite(lam_d[i, j]):
+                return 6
+    for i in range(lam_d.shape[0]):
+        if norm3(lam_d[i]) == 0:
+            return 7
+    for i in range(mu_d.shape[0]):
+        if not math.isfinite(mu_d[i]):
+            return 8
+    return 0
+
+
+@njit(cache=True)
+def _must_stop(lam, lam_d, E, P, steer_max, s_unit, tune) -> bool:
+    """:func:`control.icr.feasibility.must_stop` of one arc."""
+    reason, free, theta = arc_check_row(lam, lam_d, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN], tune[C_ARC_STEP])
+    return reason == ARC_AXIS or (reason == ARC_STOP and theta - free >= tune[C_STOP_HYST])
+
+
+@njit(cache=True)
+def _clamp_mu(lam_d, mu_d, E, P, b, r, steer_max, lim) -> float:
+    """:func:`control.icr.feasibility.clamp_mu` of one target (with ``mu_headroom``)."""
+    n = E.shape[0]
+    c = np.empty(n)
+    speed_coefs_row(lam_d, c, False, E, P, b, steer_max, c, np.empty(3), np.empty(n))
+    bound = np.inf
+    for k in range(n):
+        ck = abs(c[k])
+        bound = min(bound, lim[L_HEADROOM_WSM] * r[k] / (ck if ck > 0 else np.inf))
+    return min(max(mu_d, -bound), bound)
+
+
+@njit(cache=True)
+def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0,
+                 bmeas0, has_bmeas0, held_time0, mu_hat, beta_meas, lam_d_in, mu_d_in, E, P, b, r, steer_min,
+                 steer_max, s_unit, lim, tune, kappa, dt,
+                 mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1,
+                 has_bmeas1, held_time1, beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap,
+                 event_out, kappa_out, saturated, held_out) -> None:
+    """The step of the robots ``rows`` (state arrays ``*0`` (N, …) in, ``*1`` out, already copies of
+    ``*0``; the inputs and the per-step outputs are (M, …), row m of them is robot rows[m])."""
+    n = E.shape[0]
+    ld = np.empty(3)
+    scratch = np.empty(3)
+    bt = np.empty(n)
+    measured_rate = np.zeros(n)
+    for m in range(rows.shape[0]):
+        i = rows[m]
+        lam = lam0[i]
+        # ---- feasible target (control.icr.feasibility.feasible_target)
+        unit3(lam_d_in[m], scratch)
+        md = mu_d_in[m]
+        zero = abs(md) < tune[C_ZERO_MU]
+        if zero:
+            scratch[0], scratch[1], scratch[2] = lam[0], lam[1], lam[2]
+            md = 0.0
+        sign = -1.0 if dot3(lam, scratch) < 0 else 1.0
+        for j in range(3):
+            scratch[j] = scratch[j] * sign
+        md = md * sign
+        axis_k = project_off_axes_row(scratch, lam, s_unit, tune[C_AXIS_MARGIN], ld)
+        sign = -1.0 if dot3(lam, ld) < 0 else 1.0
+        for j in range(3):
+            ld[j] = ld[j] * sign
+        md = _clamp_mu(ld, md * sign, E, P, b, r, steer_max, lim)
+        lam_target[m, 0], lam_target[m, 1], lam_target[m, 2] = ld[0], ld[1], ld[2]
+        mu_target[m] = md
+        axis_cap[m] = axis_k
+        # ---- mode transitions (control.icr.modes.mode_transitions)
+        mode = mode0[i]
+        mode_time = mode_time0[i] + dt
+        events = events0[i]
+        has_rl = has_rl0[i]
+        rlam = rlam1[i]  # the copy of rlam0[i]: written below
+        s_lam = np.empty(3)
+        s_lam[0], s_lam[1], s_lam[2] = lam[0], lam[1], lam[2]
+        s_mu = mu0[i]
+        s_lam_rate = lam_rate0[i].copy()
+        held = False
+        held_time = 0.0
+        kicked = False
+        for k in range(n):
+            kicked = kicked or abs(wrap_half1(beta_meas[m, k] - beta0[i, k])) > tune[C_KICK]
+        running = mode == _RUNNING
+        blocked = ARC_NONE
+        if running and not zero:
+            reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
+                                                tune[C_ARC_STEP])
+            near_stop = reason == ARC_STOP and theta - free < tune[C_STOP_HYST]
+            ht = held_time0[i] + dt
+            hold = near_stop and ht <= tune[C_HOLD_LIMIT]
+            if hold:
+                slerp3(lam, ld, free, ld)
+                reason = ARC_NONE
+            blocked = reason
+            held = hold
+            held_time = ht if hold else 0.0
+        trig = running and (kicked or blocked != ARC_NONE)
+        event = (_EV_KICK if kicked else blocked + 1) if trig else _EV_NONE
+        if trig:
+            events += 1
+            mode = _STOPPING
+            mode_time = 0.0
+        if mode == _STOPPING and mu0[i] == 0.0 and norm3(lam_rate0[i]) < 1e-9 and (
+                abs(mu_hat[m]) < tune[C_STOP_MU] or mode_time > tune[C_STOP_TIMEOUT]):
+            mode = _RECONFIGURING
+            mode_time = 0.0
+        recon = mode == _RECONFIGURING
+        if recon and not has_rl:
+            rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
+            has_rl = True
+        for k in range(n):
+            bt[k] = 0.0
+        if recon:
+            if not zero:
+                steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
+                far = 0.0
+                for k in range(n):
+                    far = max(far, abs(beta0[i, k] - bt[k]))
+                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune):
+                    rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
+            steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
+            settled_cmd = True
+            settled_meas = True
+            for k in range(n):
+                settled_cmd = settled_cmd and abs(beta0[i, k] - bt[k]) < 1e-6 and abs(rate0[i, k]) < 1e-9
+                err = abs(wrap_half1(beta_meas[m, k] - bt[k]))
+                still = has_bmeas0[i] and abs(wrap_half1(beta_meas[m, k] - bmeas0[i, k])) < tune[C_STILL_TOL]
+                settled_meas = settled_meas and (err < tune[C_RECONFIG_TOL] or (err < tune[C_HOLD_TOL] and still))
+            # (NumPy takes the max over the wheels; max(...) < tol is every wheel < tol)
+            if settled_cmd and (settled_meas or mode_time > tune[C_RECONFIG_TIMEOUT]) and not zero:
+                s_lam[0], s_lam[1], s_lam[2] = rlam[0], rlam[1], rlam[2]
+                s_mu = 0.0
+                s_lam_rate[:] = 0.0
+                mode = _RUNNING
+                mode_time = 0.0
+                has_rl = False
+                sign = -1.0 if dot3(s_lam, ld) < 0 else 1.0
+                for j in range(3):
+                    ld[j] = ld[j] * sign
+                md = md * sign
+        # ---- each mode's commands (control.icr.modes.mode_commands)
+        kap = 0.0
+        sat = False
+        mu_new = 0.0
+        if mode == _RECONFIGURING:
+            if zero:
+                for k in range(n):
+                    br = rate0[i, k]
+                    bt[k] = beta0[i, k] + np.sign(br) * max(abs(br) - lim[L_BRAKE_DT], 0.0) * dt
+            use_meas = False
+            if tune[C_COUPLING_MEAS] != 0.0:
+                use_meas = has_bmeas0[i]
+                for k in range(n):
+                    measured_rate[k] = wrap_half1(beta_meas[m, k] - bmeas0[i, k]) / dt
+            reconfigure_row(beta0[i], rate0[i], phidot0[i], bt, zero, measured_rate, use_meas, b, r, steer_min,
+                            steer_max, lim, dt, beta1[i], rate1[i], phidot1[i])
+            lam1[i, 0], lam1[i, 1], lam1[i, 2] = s_lam[0], s_lam[1], s_lam[2]
+            lam_rate1[i, :] = 0.0
+        else:
+            stopping = mode == _STOPPING
+            tgt = s_lam if stopping else ld
+            mn, kap, sat = coordinated_row(s_lam, s_mu, s_lam_rate, beta0[i], rate0[i], phidot0[i], tgt,
+                                           0.0 if stopping else md, stopping, E, P, b, r, steer_min, steer_max, lim,
+                                           tune, kappa, dt, lam1[i], lam_rate1[i], beta1[i], rate1[i], phidot1[i])
+            if stopping and abs(mn) < 1e-9:
+                mn = 0.0
+            if stopping and abs(mn) < 1e-6 * max(1.0, abs(s_mu)) and norm3(lam_rate1[i]) < 1e-6:
+                mn = 0.0
+                lam_rate1[i, :] = 0.0
+            mu_new = mn
+        mu1[i] = mu_new
+        for k in range(n):
+            beta_c[m, k] = beta1[i, k]
+            rate_c[m, k] = rate1[i, k]
+            phidot_c[m, k] = phidot1[i, k]
+            accel[m, k] = (rate1[i, k] - rate0[i, k]) / dt
+            phiddot[m, k] = (phidot1[i, k] - phidot0[i, k]) / dt
+            bmeas1[i, k] = beta_meas[m, k]
+        mode1[i] = mode
+        mode_time1[i] = mode_time
+        events1[i] = events
+        has_rl1[i] = has_rl
+        if not has_rl:
+            rlam[:] = 0.0
+        has_bmeas1[i] = True
+        held_time1[i] = held_time
+        event_out[m] = event
+        kappa_out[m] = kap
+        saturated[m] = sat
+        held_out[m] = held
+
+
+def _rows_array(rows, num: int) -> np.ndarray:
+    return np.arange(num, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
+
+
+def _float_rows(x, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.ascontiguousarray(x, dtype=np.float64)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    return arr
+
+
+def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
+                                geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float,
+                                rows=None, constants=None) -> tuple[ICRBatchState, WheelCommand]:
+    """:func:`control.icr.controller.icr_control_step_batch`, compiled (see the module docstring).
+
+    Args:
+        state: the N robots' state; rows: the robots to step (integer indices; None: all). The
+            other arguments are those of the NumPy version, for the M stepped robots in the
+            order of ``rows``. constants: :func:`compiled_constants` of (geom, limits, config,
+            dt), when the caller keeps them (else computed here).
+
+    Returns:
+        (the new state of all N robots, the (M, n) commands with the NumPy version's ``info``).
+
+    Raises:
+        ValueError: as the NumPy version (non-finite input, wrong shapes, a zero λ_d, dt <= 0),
+            changing nothing.
+    """
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+    idx = _rows_array(rows, state.num)
+    M, n = idx.shape[0], geom.n
+    lam_hat = np.asarray(lam_hat, dtype=np.float64)
+    if lam_hat.ndim != 2 or lam_hat.shape[1] != 3:
+        raise ValueError(f"lam_hat must have shape (N, 3), got {lam_hat.shape}")
+    if lam_hat.shape[0] != M:
+        raise ValueError(f"lam_hat must have shape ({M}, 3)")
+    mu_hat = _float_rows(mu_hat, "mu_hat", (M,))
+    beta_meas = _float_rows(beta_meas, "beta_meas", (M, n))
+    phidot_meas = _float_rows(phidot_meas, "phidot_meas", (M, n))
+    lam_d = np.ascontiguousarray(lam_d, dtype=np.float64)
+    if lam_d.ndim != 2 or lam_d.shape[1] != 3:
+        raise ValueError(f"lam_d must have shape (N, 3), got {lam_d.shape}")
+    if lam_d.shape[0] != M:
+        raise ValueError(f"lam_d must have shape ({M}, 3)")
+    mu_d = _float_rows(mu_d, "mu_d", (M,))
+    code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d)
+    if code:
+        raise ValueError(_ERRORS[code - 1])
+    lim, tune, kappa = constants if constants is not None else compiled_constants(geom, limits, config, dt)
+    s = state
+    new = ICRBatchState(mode=s.mode.copy(), lam=s.lam.copy(), mu=s.mu.copy(), lam_rate=s.lam_rate.copy(),
+                        beta=s.beta.copy(), beta_rate=s.beta_rate.copy(), phidot=s.phidot.copy(),
+                        mode_time=s.mode_time.copy(), reconfig_lam=s.reconfig_lam.copy(),
+                        has_reconfig_lam=s.has_reconfig_lam.copy(), events=s.events.copy(),
+                        beta_meas=s.beta_meas.copy(), has_beta_meas=s.has_beta_meas.copy(),
+                        held_time=s.held_time.copy())
+    out = [np.empty((M, n)) for _ in range(5)]
+    lam_target, mu_target = np.empty((M, 3)), np.empty(M)
+    axis_cap, event = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)
+    kap, saturated, held = np.empty(M), np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_)
+    _step_kernel(idx, s.mode, s.lam, s.mu, s.lam_rate, s.beta, s.beta_rate, s.phidot, s.mode_time, s.reconfig_lam,
+                 s.has_reconfig_lam, s.events, s.beta_meas, s.has_beta_meas, s.held_time, mu_hat, beta_meas, lam_d,
+                 mu_d, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_min), float(geom.steer_max),
+                 geom.s_unit, lim, tune, kappa, float(dt),
+                 new.mode, new.lam, new.mu, new.lam_rate, new.beta, new.beta_rate, new.phidot, new.mode_time,
+                 new.reconfig_lam, new.has_reconfig_lam, new.events, new.beta_meas, new.has_beta_meas, new.held_time,
+                 *out, lam_target, mu_target, axis_cap, event, kap, saturated, held)
+    info = {"lam_target": lam_target, "mu_target": mu_target, "axis_cap": axis_cap, "mode": new.mode[idx],
+            "events": new.events[idx], "kappa": kap, "saturated": saturated, "event": event, "held_at_stop": held}
+    return new, WheelCommand(beta=out[0], phidot=out[2], beta_rate=out[1], beta_accel=out[3], phiddot=out[4],
+                             info=info)

@@ -1,0 +1,278 @@
+"""Compiled building blocks of the ICR controller's step, one robot (one row) at a time.
+
+Each function here is the numba twin of a NumPy function of :mod:`control.icr.feasibility`,
+:mod:`estimation.hrep` or :mod:`estimation.kinematics` applied to one row, with the same
+operations in the same order, so that it returns the same bits: the vector norm ``√((x₀² + x₁²)
++ x₂²)`` (NumPy's row sums run left to right), the cross product ``a₁b₂ − a₂b₁`` ..., every
+renormalisation the NumPy path does (a function that takes λ normalises it again, and
+normalising a unit vector may change its last bit), the constants NumPy computes in Python
+floats (passed in, computed by the same expressions). ``atan2`` is the C library's on both
+sides (:mod:`estimation.libm`); ``sin``, ``cos`` and ``sqrt`` agree without help.
+
+The step that strings them together is :mod:`control.icr.compiled`; the NumPy implementation
+stays the reference (``tests/control/test_icr_compiled.py`` compares the two on recorded
+episodes, bit for bit).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _grad_wheel, _speed_coef
+
+__all__ = ["norm3", "unit3", "dot3", "sphere_angle3", "slerp3", "wrap_half1", "steering_row", "speed_coefs_row",
+           "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1", "saturate_row",
+           "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
+
+# indices into the limit constants ``lim`` (control.icr.compiled.compiled_constants)
+L_SAM, L_SRM, L_WSM, L_WAM, L_A_DT, L_WA_DT, L_STEER_LO = 0, 1, 2, 3, 4, 5, 6
+L_SAT_C1, L_SAT_C2, L_SAT_C3 = 7, 8, 9  # safe_stop_speed at 0.95·a (saturate)
+L_CO_C1, L_CO_C2, L_CO_C3 = 10, 11, 12  # safe_stop_speed at 0.8·a (coordinated_step)
+L_ACCEL_LAM = 13  # 0.8·steer_accel_max
+L_RC_A, L_RC_VMAX, L_RC_C1, L_RC_C2, L_RC_C3, L_RC_BRAKE = 14, 15, 16, 17, 18, 19  # reconfigure_step
+L_MU_ACCEL = 20  # mu_accel_fraction·wheel_accel_max
+L_WSM_SLACK, L_WA_DT_SLACK, L_NEG_WSM_SLACK = 21, 22, 23  # mu_own_step
+L_HEADROOM_WSM = 24  # mu_headroom·wheel_speed_max
+L_BRAKE_DT = 25  # steer_accel_max·dt (a stop command braking the steering in RECONFIGURING)
+N_LIM = 26
+
+# the tuning as a float array (indices C_*)
+(C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_LIMIT, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
+ C_FREEZE, C_RECONFIG_TOL, C_HOLD_TOL, C_STILL_TOL, C_RECONFIG_TIMEOUT, C_K_LAMBDA, C_COUPLING_MEAS,
+ C_MU_OWN) = range(17)
+
+#: :class:`control.icr.feasibility.ArcReason` codes
+ARC_NONE, ARC_STOP, ARC_AXIS = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def dot3(a, b) -> float:
+    """``np.sum(a * b, axis=-1)`` of one row: (a₀b₀ + a₁b₁) + a₂b₂."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def norm3(a) -> float:
+    """``np.linalg.norm(a, axis=-1)`` of one row."""
+    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+@njit(cache=True, inline="always")
+def unit3(a, out) -> None:
+    """``a / np.linalg.norm(a, axis=-1)[:, None]`` of one row (``control.checks.check_unit_batch``,
+    ``estimation.kinematics._check_lambda``), into ``out`` (may be ``a``)."""
+    nrm = norm3(a)
+    out[0] = a[0] / nrm
+    out[1] = a[1] / nrm
+    out[2] = a[2] / nrm
+
+
+@njit(cache=True, inline="always")
+def cross3(a, b, out) -> None:
+    """``np.cross(a, b)`` of one row."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def sphere_angle3(a, b) -> float:
+    """:func:`estimation.hrep.sphere_angle` of one pair: atan2(‖a × b‖, a·b)."""
+    c0 = a[1] * b[2] - a[2] * b[1]
+    c1 = a[2] * b[0] - a[0] * b[2]
+    c2 = a[0] * b[1] - a[1] * b[0]
+    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot3(a, b))
+
+
+@njit(cache=True)
+def slerp3(lam, lam_d, angle, out) -> None:
+    """:func:`estimation.hrep.slerp` of one pair and one angle [rad], into ``out``."""
+    d = dot3(lam, lam_d)
+    t0 = lam_d[0] - d * lam[0]
+    t1 = lam_d[1] - d * lam[1]
+    t2 = lam_d[2] - d * lam[2]
+    tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if tn < 1e-15:
+        out[0], out[1], out[2] = lam[0], lam[1], lam[2]
+        return
+    c, s = math.cos(angle), math.sin(angle)
+    out[0] = c * lam[0] + s * (t0 / tn)
+    out[1] = c * lam[1] + s * (t1 / tn)
+    out[2] = c * lam[2] + s * (t2 / tn)
+
+
+@njit(cache=True, inline="always")
+def wrap_half1(x: float) -> float:
+    """:func:`control.icr.feasibility.wrap_half` of one angle: (x + π/2) mod π − π/2."""
+    return np.mod(x + np.pi / 2, np.pi) - np.pi / 2
+
+
+@njit(cache=True)
+def steering_row(lam, E, P, steer_max, fill, use_fill, out, scratch) -> None:
+    """:func:`estimation.kinematics.steering_from_lambda` of one λ (normalised first, as that
+    function does) into ``out`` (n,); a singular wheel takes ``fill[k]`` (``use_fill``) or 0.
+    ``scratch``: (3,) work space."""
+    unit3(lam, scratch)
+    for k in range(E.shape[0]):
+        beta, r2 = _beta_wheel(scratch[0], scratch[1], scratch[2], E, P, k, steer_max)
+        if r2 < SINGULAR_TOL * SINGULAR_TOL:
+            beta = fill[k] if use_fill else 0.0
+        out[k] = beta
+
+
+@njit(cache=True)
+def speed_coefs_row(lam, beta, have_beta, E, P, b, steer_max, out, scratch, beta_work) -> None:
+    """:func:`estimation.kinematics.wheel_speed_coefficients` of one λ into ``out`` (n,): with the
+    steering angles ``beta`` (``have_beta``) or F(λ) (computed from the normalised λ, which
+    :func:`steering_row` normalises again, as the NumPy path does). ``scratch`` (3,),
+    ``beta_work`` (n,): work space."""
+    unit3(lam, scratch)
+    if have_beta:
+        for k in range(E.shape[0]):
+            out[k] = _speed_coef(scratch, E, P, b, k, beta[k])
+        return
+    lam_u = np.empty(3)
+    steering_row(scratch, E, P, steer_max, beta_work, False, beta_work, lam_u)
+    for k in range(E.shape[0]):
+        out[k] = _speed_coef(scratch, E, P, b, k, beta_work[k])
+
+
+@njit(cache=True)
+def gradient_norm_max(lam, E, P) -> float:
+    """max_k ‖∂F_k/∂λ‖ at λ (normalised first): ``np.max(np.linalg.norm(steering_gradient(λ),
+    axis=-1), axis=-1)`` of one row."""
+    u = np.empty(3)
+    g = np.empty(3)
+    unit3(lam, u)
+    best = -np.inf
+    for k in range(E.shape[0]):
+        _grad_wheel(u, E, P, k, g)
+        best = max(best, norm3(g))
+    return best
+
+
+@njit(cache=True)
+def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step):
+    """:func:`control.icr.feasibility.arc_check_batch` of one arc: (reason code, free [rad],
+    theta [rad]). The arc is sampled at m = max(2, ⌈θ/step⌉ + 1) points (the NumPy version pads
+    the rows of a batch to the longest; the padding never counts)."""
+    n = E.shape[0]
+    lam = np.empty(3)
+    lam_d = np.empty(3)
+    unit3(lam_in, lam)
+    unit3(lam_d_in, lam_d)
+    theta = sphere_angle3(lam, lam_d)
+    m = max(2, np.int64(math.ceil(theta / step)) + 1)
+    delta = theta / (m - 1)
+    pt = np.empty(3)
+    cr = np.empty(3)
+    scratch = np.empty(3)
+    beta_prev = np.empty(n)
+    beta_now = np.empty(n)
+    first_axis = m
+    first_wrap = m
+    for j in range(m):
+        angle = theta if j >= m - 1 else j * delta
+        slerp3(lam, lam_d, angle, pt)
+        if 1 <= j < m - 1:
+            for k in range(n):
+                cross3(pt, s_unit[k], cr)
+                if norm3(cr) < sin_half_margin:
+                    first_axis = j
+                    break
+        steering_row(pt, E, P, steer_max, beta_now, False, beta_now, scratch)
+        if j >= 1:
+            for k in range(n):
+                if abs(beta_now[k] - beta_prev[k]) > np.pi / 2:
+                    first_wrap = j
+                    break
+        # the first blocked sample decides (an axis at j beats a wrap after j; a wrap at j beats an axis at j)
+        if first_axis < m or first_wrap < m:
+            break
+        for k in range(n):
+            beta_prev[k] = beta_now[k]
+    if first_axis == m and first_wrap == m:
+        return ARC_NONE, theta, theta
+    if first_axis <= first_wrap - 1:
+        j = max(first_axis - 1, 0)
+        return ARC_AXIS, (theta if j >= m - 1 else j * delta), theta
+    j = min(max(first_wrap - 1, 0), m - 1)
+    return ARC_STOP, (theta if j >= m - 1 else j * delta), theta
+
+
+@njit(cache=True)
+def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
+    """:func:`control.icr.feasibility.project_off_axes_batch` of one target: the projected λ_d
+    into ``out``; returns the wheel whose cap held it, or −1."""
+    lam_d = np.empty(3)
+    lam = np.empty(3)
+    unit3(lam_d_in, lam_d)
+    unit3(lam_in, lam)
+    out[0], out[1], out[2] = lam_d[0], lam_d[1], lam_d[2]
+    sk = np.empty(3)
+    through = np.empty(3)
+    for k in range(s_unit.shape[0]):
+        s = s_unit[k]
+        sign = 1.0 if dot3(s, lam_d) >= 0 else -1.0
+        sk[0], sk[1], sk[2] = s[0] * sign, s[1] * sign, s[2] * sign
+        ang = sphere_angle3(sk, lam_d)
+        if ang < margin:
+            if ang > 1e-9:
+                through[0], through[1], through[2] = lam_d[0], lam_d[1], lam_d[2]
+            else:
+                sg = 1.0 if dot3(lam, sk) >= 0 else -1.0
+                through[0], through[1], through[2] = lam[0] * sg, lam[1] * sg, lam[2] * sg
+            if sphere_angle3(sk, through) < 1e-9:
+                # λ on the axis too (NumPy's 1-d norm may sum in another order here: a measure-zero case)
+                if abs(sk[2]) < 0.9:
+                    t0, t1, t2 = sk[1] * 1.0 - sk[2] * 0.0, sk[2] * 0.0 - sk[0] * 1.0, sk[0] * 0.0 - sk[1] * 0.0
+                else:
+                    t0, t1, t2 = sk[1] * 0.0 - sk[2] * 0.0, sk[2] * 1.0 - sk[0] * 0.0, sk[0] * 0.0 - sk[1] * 1.0
+                tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+                c1, s1 = math.cos(1.0), math.sin(1.0)
+                through[0] = sk[0] * c1 + t0 / tn * s1
+                through[1] = sk[1] * c1 + t1 / tn * s1
+                through[2] = sk[2] * c1 + t2 / tn * s1
+            slerp3(sk, through, margin, out)
+            return k
+    return -1
+
+
+@njit(cache=True, inline="always")
+def stop_room1(beta, rate, steer_min, steer_max) -> float:
+    """:func:`control.icr.feasibility.stop_room` of one wheel."""
+    if rate > 0:
+        return steer_max - beta
+    if rate < 0:
+        return beta - steer_min
+    return np.inf
+
+
+@njit(cache=True, inline="always")
+def safe_stop_speed1(room, c1, c2, c3) -> float:
+    """:func:`control.icr.feasibility.safe_stop_speed` of one wheel, with the constants
+    c1 = −0.5·a·dt, c2 = (0.5·a·dt)², c3 = 2.0·a computed by the caller as NumPy does."""
+    return c1 + math.sqrt(c2 + c3 * max(room, 0.0))
+
+
+@njit(cache=True)
+def saturate_row(beta_prev, rate_prev, phidot_prev, beta_want, phidot_want, steer_min, steer_max, lim, dt,
+                 beta_out, rate_out, phidot_out) -> None:
+    """:func:`control.icr.feasibility.saturate` of one robot's wheels. ``lim``: the constants of
+    :func:`compiled_constants` (control.icr.compiled)."""
+    a_dt, srm, wsm, wa_dt = lim[L_A_DT], lim[L_SRM], lim[L_WSM], lim[L_WA_DT]
+    for k in range(beta_prev.shape[0]):
+        rate = (beta_want[k] - beta_prev[k]) / dt
+        rate = min(max(rate, rate_prev[k] - a_dt), rate_prev[k] + a_dt)
+        rate = min(max(rate, -srm), srm)
+        room = stop_room1(beta_prev[k] + rate * dt, rate, steer_min, steer_max)
+        v_safe = max(safe_stop_speed1(room, lim[L_SAT_C1], lim[L_SAT_C2], lim[L_SAT_C3]), abs(rate_prev[k]) - a_dt)
+        rate = np.sign(rate) * min(abs(rate), v_safe)
+        beta = min(max(beta_prev[k] + rate * dt, lim[L_STEER_LO]), steer_max)
+        rate_out[k] = (beta - beta_prev[k]) / dt
+        beta_out[k] = beta
+        ph = min(max(phidot_want[k], phidot_prev[k] - wa_dt), phidot_prev[k] + wa_dt)
+        phidot_out[k] = min(max(ph, -wsm), wsm)
