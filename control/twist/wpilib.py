@@ -27,6 +27,10 @@ r φ̇ = v(A_k)·d − ω b_k (``offset_correction``, on by default: it is the e
 kinematics and only helps the baseline). The steer-to-drive coupling −b β̇ is an ICR-controller
 feature (WPILib modules are coaxial); it can be turned on with ``coupling=True``.
 
+``atan2`` and ``hypot`` are the C library's (:mod:`estimation.libm`), so that
+:class:`SwerveController` (the reference, one robot) and the compiled step of :class:`SwerveBatch`
+(:mod:`control.twist.compiled`) give the same bits on every CPU.
+
 The baseline sends these set-points as they are: WPILib does not rate-limit module angles (the
 motor controllers do). Steps where the set-points change faster than the actuator limits are
 counted by the evaluation as commanded-limit violations; the env's motors saturate them.
@@ -43,6 +47,7 @@ from azimut_env.validation import check_bool, check_fields
 from control.commands import WheelCommand
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
+from estimation.libm import atan2, hypot
 
 __all__ = ["SwerveConfig", "SwerveController", "SwerveBatch", "discretize_twist", "module_states", "optimize_module",
            "desaturate", "slew_limit", "slew_limit_twist"]
@@ -100,7 +105,7 @@ def slew_limit_twist(twist, previous, linear: float, angular: float, dt: float) 
     when the robot stops), ω by at most ``angular``·dt."""
     twist, previous = np.asarray(twist, dtype=np.float64), np.asarray(previous, dtype=np.float64)
     dv = twist[:2] - previous[:2]
-    norm = float(np.hypot(*dv))
+    norm = float(hypot(dv[0], dv[1]))
     if norm > linear * dt:
         dv *= linear * dt / norm
     return np.array([previous[0] + dv[0], previous[1] + dv[1],
@@ -118,7 +123,7 @@ def discretize_twist(twist, dt: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         h = np.where(small, 1.0 - th * th / 12.0, -(half * np.sin(th)) / np.where(small, 1.0, cos_m1))
     # translation rotated by Rotation2d(h, −half) and scaled by hypot(h, half) (WPILib Pose2d.log)
-    nrm = np.hypot(h, half)
+    nrm = hypot(h, half)
     c, s = h / nrm, -half / nrm
     tx = (x * c - y * s) * nrm
     ty = (x * s + y * c) * nrm
@@ -131,7 +136,7 @@ def module_states(twist, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
     tw = np.asarray(twist, dtype=np.float64)
     vx = tw[0] - tw[2] * geom.axis_xy[:, 1]
     vy = tw[1] + tw[2] * geom.axis_xy[:, 0]
-    return np.arctan2(vy, vx), np.hypot(vx, vy)
+    return atan2(vy, vx), hypot(vx, vy)
 
 
 def optimize_module(beta_des, speed, beta_now, geom: RobotGeometry, enabled: bool = True):
@@ -233,8 +238,8 @@ class SwerveController:
 
 
 class SwerveBatch:
-    """N baselines, one :class:`SwerveController` per robot (each its own Python state), reset and
-    stepped by row, with the commands stacked into (M, n) arrays.
+    """N baselines stepped by row in one compiled call (:func:`control.twist.compiled.swerve_step_kernel`,
+    :meth:`SwerveController.step` of each robot, bit for bit), with the commands in (M, n) arrays.
 
     Args:
         num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`.
@@ -246,33 +251,59 @@ class SwerveBatch:
             raise ValueError(f"num must be an int >= 1, got {num!r}")
         if config is not None and not isinstance(config, SwerveConfig):
             raise TypeError(f"config must be a SwerveConfig or None, got {type(config).__name__}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+        from control.twist.compiled import FLAGS
+
         self.num, self.geom, self.limits, self.dt, self.config = int(num), geom, limits, float(dt), config
-        self.controllers: list[SwerveController | None] = [None] * self.num
+        cfg = config or SwerveConfig()
+        self._flags = np.array([getattr(cfg, name) for name in FLAGS], dtype=np.bool_)
+        self._slew = SwerveController(geom, limits, dt, cfg)._slew
+        self._deadband = float(cfg.speed_deadband)
+        n = geom.n
+        #: per robot: the slew-limited twist (N, 3) and the last commands β, β̇, φ̇ (N, n)
+        self.twist, self.beta = np.zeros((self.num, 3)), np.zeros((self.num, n))
+        self.rate, self.phidot = np.zeros((self.num, n)), np.zeros((self.num, n))
+        self._ready = np.zeros(self.num, dtype=np.bool_)
 
     @property
     def ready(self) -> np.ndarray:
         """(N,) bool: the robots reset at least once (only those can be stepped)."""
-        return np.array([c is not None for c in self.controllers], dtype=np.bool_)
+        return self._ready.copy()
 
     def reset(self, rows, beta, phidot) -> None:
-        """A fresh controller for each robot of ``rows``, started from its measured β, φ̇ (M, n)."""
-        for k, i in enumerate(np.asarray(rows, dtype=np.intp)):
-            ctl = SwerveController(self.geom, self.limits, self.dt, self.config)
-            ctl.reset(beta[k], phidot[k])
-            self.controllers[i] = ctl
+        """Restart the robots ``rows`` from their measured β, φ̇ (M, n), at rest (as
+        :meth:`SwerveController.reset`)."""
+        rows = np.asarray(rows, dtype=np.intp)
+        beta = np.asarray(beta, dtype=np.float64)
+        self.twist[rows] = 0.0
+        self.beta[rows] = self.geom.wrap_steering(beta.reshape(rows.size, self.geom.n))
+        self.rate[rows] = 0.0
+        self.phidot[rows] = np.asarray(phidot, dtype=np.float64).reshape(rows.size, self.geom.n)
+        self._ready[rows] = True
 
     def step(self, rows, twists, beta_meas) -> WheelCommand:
         """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
         (M, 3) given their measured β (M, n); ``info["twist"]`` (M, 3) the discretised twists."""
-        rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.intp)
-        if any(self.controllers[i] is None for i in rows):
+        from control.twist.compiled import swerve_step_kernel
+
+        idx = np.arange(self.num, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
+        if not self._ready[idx].all():
             raise RuntimeError("a robot of this batch was never reset: call reset() first")
-        cmds = [self.controllers[i].step(twists[k], beta_meas[k]) for k, i in enumerate(rows)]
-        n = self.geom.n
-
-        def stack(name: str) -> np.ndarray:
-            return np.array([getattr(c, name) for c in cmds]).reshape(len(cmds), n)
-
-        return WheelCommand(beta=stack("beta"), phidot=stack("phidot"), beta_rate=stack("beta_rate"),
-                            beta_accel=stack("beta_accel"), phiddot=stack("phiddot"),
-                            info={"twist": np.array([c.info["twist"] for c in cmds]).reshape(len(cmds), 3)})
+        g, M = self.geom, idx.size
+        twists = np.ascontiguousarray(twists, dtype=np.float64)
+        beta_meas = np.ascontiguousarray(beta_meas, dtype=np.float64)
+        if twists.shape != (M, 3):
+            raise ValueError(f"twists must have shape ({M}, 3), got {twists.shape}")
+        if beta_meas.shape != (M, g.n):
+            raise ValueError(f"beta_meas must have shape ({M}, {g.n}), got {beta_meas.shape}")
+        out = np.empty((5, M, g.n))
+        twist_out = np.empty((M, 3))
+        code = swerve_step_kernel(idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self._slew,
+                                  self._flags, self._deadband, g.alpha, g.axis_xy, g.b, g.r, float(g.steer_min),
+                                  float(g.steer_max), float(self.limits.wheel_speed_max), self.dt, out[0], out[1],
+                                  out[2], out[3], out[4], twist_out)
+        if code:
+            raise ValueError("twist must be finite" if code == 1 else "beta_meas must be finite")
+        return WheelCommand(beta=out[0], phidot=out[1], beta_rate=out[2], beta_accel=out[3], phiddot=out[4],
+                            info={"twist": twist_out})
