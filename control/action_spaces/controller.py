@@ -21,14 +21,8 @@ import functools
 import numpy as np
 
 from azimut_env.validation import check_bool, check_positive, check_range
-from control.action_spaces.shaping import (
-    SHAPED_TARGET_CONFIG,
-    advance_target,
-    exp_step,
-    initial_frame,
-    shape_target,
-    transport_frame,
-)
+from control.action_spaces.shaping import SHAPED_TARGET_CONFIG, initial_frame
+from control.action_spaces.targets import rate_targets, residual_targets, shaped_targets
 from control.commands import WheelCommand
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollowerConfig
@@ -119,6 +113,7 @@ class ActionController:
         stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=self.icr_config.axis_margin)
         # residual only: the path followers of all robots, one compiled call per step
         self.follower = BatchFollower(N, self.follower_config, stop_mask, dt) if action == "residual" else None
+        self._cos_margin = float(np.cos(self.icr_config.axis_margin))
 
     @property
     def ready(self) -> np.ndarray:
@@ -146,22 +141,22 @@ class ActionController:
                 self.follower.reset(int(i), tracks[i], float(progress[i]))
 
     def _targets(self, env, a: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(λ_d, μ_d, held) of the ICR controllers of ``rows`` for the clipped actions ``a``."""
-        geom, cfg, dt = self.geometry, self.icr_config, self.dt
-        held = np.zeros(rows.size, dtype=np.bool_)
+        """(λ_d, μ_d, held) of the ICR controllers of ``rows`` for the clipped actions ``a``: one
+        compiled call (:mod:`control.action_spaces.targets`; the NumPy reference is
+        :mod:`control.action_spaces.shaping`, equal to the bit)."""
+        geom, dt = self.geometry, self.dt
+        M = rows.size
+        lam_d, mu_d, held = np.empty((M, 3)), np.empty(M), np.zeros(M, dtype=np.bool_)
+        shape = (geom.a_minus_l, geom.a_perp, float(geom.steer_max), geom.s_unit, self._cos_margin)
         if self.kind == "residual":
-            lam_f, mu_f = eta_from_twist(self.follower.step(env.true_pose, rows))
-            prop = exp_step(lam_f, initial_frame(lam_f), a[:, :2] * self.residual_angle, 1.0)
-            lam_d, _, held = advance_target(lam_f, prop, np.zeros(rows.size), geom, cfg.axis_margin, np.inf)
-            return lam_d, mu_f + a[:, 2] * self.residual_mu, held
+            twists = self.follower.step(env.true_pose, rows)
+            residual_targets(twists, a, self.residual_angle, self.residual_mu, *shape, lam_d, mu_d, held)
+            return lam_d, mu_d, held
+        idx = rows.astype(np.int64)
         if self.kind == "icr_rate":
-            lam, e1 = self._lam_s[rows], self._e1[rows]
-            prop = exp_step(lam, e1, a[:, :2] * self.lambda_rate_max, dt)
-            lam_new, push, held = advance_target(lam, prop, self._push[rows], geom, cfg.axis_margin, self.cross_push)
-            self._lam_s[rows], self._push[rows] = lam_new, push
-            self._e1[rows] = transport_frame(e1, lam_new)
-            self._mu_s[rows] = np.clip(self._mu_s[rows] + a[:, 2] * self.mu_accel * dt, -self.mu_max, self.mu_max)
-            return lam_new, self._mu_s[rows].copy(), held
+            rate_targets(idx, a, self._lam_s, self._e1, self._push, self._mu_s, self.lambda_rate_max, self.mu_accel,
+                         self.mu_max, dt, self.cross_push, *shape, lam_d, mu_d, held)
+            return lam_d, mu_d, held
         if self.kind == "icr_target":
             lam_t, mu_t = icr_target_from_action(a, self.mu_max, self.min_norm, self.signed_mu)
         else:
@@ -170,11 +165,10 @@ class ActionController:
             return lam_t, mu_t, held
         # one bounded step ahead of the controller's own reference λ; unsigned ICR targets: λ_d is
         # the direction of motion (μ_d ≥ 0), else the nearer representative
-        lam_new, mu_t, push, held = shape_target(self.icr.state.lam[rows], lam_t, mu_t, self._push[rows], geom,
-                                                 cfg.axis_margin, self.target_rate * dt, self.cross_push,
-                                                 nearer=self.kind == "twist" or self.signed_mu)
-        self._push[rows] = push
-        return lam_new, mu_t, held
+        lam_t, mu_t = np.ascontiguousarray(lam_t), np.ascontiguousarray(mu_t, dtype=np.float64)
+        shaped_targets(idx, self.icr.state.lam, lam_t, mu_t, self._push, self.kind == "twist" or self.signed_mu,
+                       self.target_rate * dt, self.cross_push, *shape, lam_d, mu_d, held)
+        return lam_d, mu_d, held
 
     def command(self, env, actions: np.ndarray, rows: np.ndarray) -> WheelCommand:
         """The wheel commands ((M, n) arrays) of the robots ``rows`` for their clipped actions

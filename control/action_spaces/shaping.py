@@ -20,7 +20,8 @@ The shaped target is a state (λ_s, μ_s) per robot that the action *moves*:
   ŝ_k: all the curves of constant β_k are, eq. (15)), a spherical polygon is convex, so the
   controller's own arc λ -> λ_s stays inside the cell and needs no stop either.
 
-All functions are batched over N robots ((N, 3) arrays) and pure.
+All functions are batched over N robots ((N, 3) arrays) and pure. They are the reference of the
+compiled targets the action spaces use (:mod:`control.action_spaces.targets`, equal to the bit).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from control.icr.config import ICRControllerConfig
 from estimation.geometry import RobotGeometry
 from estimation.hrep import exp_map, nearer_representative, sphere_angle
 from estimation.kinematics import steering_from_lambda
+from estimation.libm import atan2
 
 __all__ = ["shape_target", "advance_target", "step_toward", "exp_step", "transport_frame", "initial_frame",
            "SHAPED_TARGET_CONFIG"]
@@ -82,7 +84,7 @@ def step_toward(lam: np.ndarray, target: np.ndarray, max_angle: float) -> np.nda
     dot = np.clip(np.sum(lam * target, axis=-1), -1.0, 1.0)
     tang = target - dot[:, None] * lam
     tn = np.linalg.norm(tang, axis=-1)
-    theta = np.arctan2(tn, dot)
+    theta = atan2(tn, dot)  # the C library's (estimation.libm), as the compiled twin
     ang = np.minimum(theta, max_angle)
     e = tang / np.where(tn > 1e-15, tn, 1.0)[:, None]
     out = np.cos(ang)[:, None] * lam + np.sin(ang)[:, None] * e
@@ -106,7 +108,8 @@ def advance_target(lam: np.ndarray, proposal: np.ndarray, push: np.ndarray, geom
     beta0 = steering_from_lambda(lam, geom)
     beta1 = steering_from_lambda(proposal, geom)
     crosses = np.any(np.abs(beta1 - beta0) > 0.5 * np.pi, axis=-1) & (not geom.unlimited_steering)
-    cos_axis = np.abs(proposal @ geom.s_unit.T)  # (N, n): |cos| of the angle to ±ŝ_k
+    # (N, n): |cos| of the angle to ±ŝ_k (a row sum, not a BLAS product: the compiled twin's bits)
+    cos_axis = np.abs(np.sum(proposal[:, None, :] * geom.s_unit[None, :, :], axis=-1))
     in_cap = np.any(cos_axis > np.cos(axis_margin), axis=-1)
     step = sphere_angle(lam, proposal)
     blocked = crosses | in_cap
