@@ -27,6 +27,7 @@ import numpy as np
 
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, robot_label
+from jobs.bench_speed import JOBS, check_baseline, load_average, reference_steps_per_s, run_baseline_bench
 
 __all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
            "add_arguments", "run"]
@@ -90,10 +91,10 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
     actions = rng.uniform(-1, 1, size=(calls + 20,) + wrapped.action_space.shape).astype(np.float32)
     for k in range(20):  # warm-up (numba kernels load or compile)
         wrapped.step(actions[k])
-    t0 = clock()
+    t0, c0 = clock(), time.process_time()
     for k in range(calls):
         wrapped.step(actions[20 + k])
-    total = clock() - t0
+    total, cpu = clock() - t0, time.process_time() - c0
     if kind is not None:  # a second, instrumented loop for the split (instance attributes shadow the methods)
         ctl = wrapped.controller  # the action space's ActionController
         inner = ctl.icr if ctl.icr is not None else ctl.swerve
@@ -112,6 +113,7 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
         acc["env"], inst = total, total
     per = 1e6 / (calls * num_envs)
     return {"action": action, "num_envs": num_envs, "steps_per_s": calls * num_envs / total,
+            "cpu_steps_per_s": calls * num_envs / cpu,
             "targets_us": acc["targets"] * per, "controller_us": acc["controller"] * per, "env_us": acc["env"] * per,
             "other_us": (inst - sum(acc.values())) * per, "instrumented_us": inst * per}
 
@@ -146,11 +148,11 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     env.reset(seed=seed)
     for key in acc:
         acc[key] = 0.0
-    done, resets, elapsed = 0, 0, 0.0
+    done, resets, elapsed, cpu = 0, 0, 0.0, 0.0
     chunk_rates = []
     chunk = max(1, steps // 5)
     while done < steps:
-        t0 = clock()
+        t0, c0 = clock(), time.process_time()
         n_chunk = 0
         term = trunc = False
         for _ in range(chunk):
@@ -160,6 +162,7 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
             if term or trunc:
                 break
         dt = clock() - t0
+        cpu += time.process_time() - c0
         elapsed += dt
         chunk_rates.append(n_chunk / dt)
         if term or trunc:  # resets are not timed, in the total or in the stages
@@ -174,6 +177,7 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     staged = per["physics"] + per["observe"]
     return {
         "steps_per_s": 1.0 / total,
+        "cpu_steps_per_s": done / cpu,
         "us_per_step": total * 1e6,
         "physics_us": per["physics"] * 1e6,
         "estimation_us": per["estimation"] * 1e6,
@@ -292,22 +296,6 @@ def memory_per_robot(num_envs: int = 512, track: str = "paper", substeps: int = 
     return float(out.stdout.strip().splitlines()[-1])
 
 
-def reference_steps_per_s(env_id: str = "Pendulum-v1", steps: int = 5000, seed: int = 0) -> float:
-    """Steps/s of a Gymnasium reference env measured in the same run (a yardstick for the
-    machine's speed at that moment: compare ratios, not absolute figures, on a shared machine)."""
-    import gymnasium as gym
-
-    env = gym.make(env_id).unwrapped
-    env.reset(seed=seed)
-    env.action_space.seed(seed)
-    actions = [env.action_space.sample() for _ in range(steps)]
-    t0 = time.perf_counter()
-    for a in actions:
-        _, _, term, trunc, _ = env.step(a)
-        if term or trunc:
-            env.reset()
-    return steps / (time.perf_counter() - t0)
-
 
 def _int_list(text: str) -> list[int]:
     try:
@@ -343,6 +331,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
     parser.add_argument("--reference", default="Pendulum-v1",
                         help="a Gymnasium env timed in the same run as a yardstick ('' to skip)")
+    parser.add_argument("--baseline", default=None, metavar="DIR",
+                        help="instead, time azimut eval's default campaign and azimut train --action residual with "
+                             "this checkout and with DIR (a checkout of an earlier commit), alternated")
+    parser.add_argument("--jobs", default=list(JOBS), type=arg_choice_list(tuple(JOBS)),
+                        help="with --baseline: the jobs to time (default eval,train)")
+    parser.add_argument("--repeats", type=arg_int(1, 100), default=2, help="with --baseline: runs per side (default 2)")
+    parser.add_argument("--train-steps", type=arg_int(4096, 100_000_000), default=32768,
+                        help="with --baseline: azimut train's --steps (default 32768)")
+    parser.add_argument("--cold", action="store_true",
+                        help="with --baseline: no warm-up run (the first run compiles the numba kernels)")
     parser.add_argument("--convergence", action="store_true",
                         help="instead of timing, measure the physics' convergence in the substep count (30 s open-loop "
                              "replay, 4..128 substeps against 256)")
@@ -351,6 +349,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def check_args(args: argparse.Namespace) -> None:
     """The reference env must exist and the substeps be inside the physics' stability budget
     before minutes of timing are spent (``--convergence`` sweeps its own substep counts)."""
+    if args.baseline:
+        check_baseline(args.baseline)
     if not args.convergence:
         from azimut_env.physics.stability import check_substeps
         from jobs.args import robot_params
@@ -377,19 +377,30 @@ def run_action_bench(args: argparse.Namespace) -> int:
           f"new track per episode), uniform random actions, same-step autoresets; us per robot-step "
           f"(instrumented loop) and robot-steps/s (uninstrumented loop). The machine may be shared: compare ratios "
           f"within one run.")
-    print(f"{'action':<12}{'steps/s':>9}{'targets':>9}{'ctl':>9}{'env':>9}{'other':>9}{'total':>9}")
+    print(f"load average {load_average()}")
+    print(f"{'action':<12}{'steps/s':>9}{'x raw':>7}{'CPU st/s':>10}{'x raw':>7}{'targets':>9}{'ctl':>9}{'env':>9}"
+          f"{'other':>9}{'total':>9}")
+    raw = None
     for action in args.action:
         r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed,
                                     _robot_kwargs(args))
-        print(f"{action:<12}{r['steps_per_s']:>9.0f}{r['targets_us']:>9.1f}{r['controller_us']:>9.1f}"
-              f"{r['env_us']:>9.1f}{r['other_us']:>9.1f}{r['instrumented_us']:>9.1f}", flush=True)
+        raw = r if action == "raw" else raw
+        rel = [f"{r[k] / raw[k]:>7.2f}" if raw else f"{'-':>7}" for k in ("steps_per_s", "cpu_steps_per_s")]
+        keys = ("targets_us", "controller_us", "env_us", "other_us", "instrumented_us")
+        cells = "".join(f"{r[k]:>9.1f}" for k in keys)
+        print(f"{action:<12}{r['steps_per_s']:>9.0f}{rel[0]}{r['cpu_steps_per_s']:>10.0f}{rel[1]}{cells}", flush=True)
+    print(f"load average {load_average()}")
     print("(targets: the policy action -> ICR target stage, i.e. the residual's per-robot path followers or the "
-          "target shaping; ctl: the batched ICR controller; env: AzimutVectorEnv.step; goal 5000 robot-steps/s "
-          "for residual and icr-rate at 16 robots)")
+          "target shaping; ctl: the batched ICR controller; env: AzimutVectorEnv.step; x raw: against the raw "
+          "actions of the same run ('raw' first), in wall and in CPU time; goal 0.5x raw for residual, icr-rate and "
+          "twist at 16 robots)")
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.baseline:
+        run_baseline_bench(check_baseline(args.baseline), args.jobs, args.repeats, args.train_steps, args.cold)
+        return 0
     if args.action:
         return run_action_bench(args)
     if args.convergence:
@@ -416,7 +427,8 @@ def run(args: argparse.Namespace) -> int:
                        ("other_us", "other")):
         print(f"{label:<16}{r[key]:>10.1f}{r[key] / per:>8.0%}")
     print(f"{'total':<16}{per:>10.1f}")
-    print(f"steps/s: {r['steps_per_s']:.0f} overall, {r['best_chunk_steps_per_s']:.0f} in the best chunk "
+    print(f"steps/s: {r['steps_per_s']:.0f} overall ({r['cpu_steps_per_s']:.0f} in CPU time), "
+          f"{r['best_chunk_steps_per_s']:.0f} in the best chunk "
           f"({int(r['resets'])} resets, not timed)  (bar 1500, goal 5000)")
     if args.num_envs:
         single = r["steps_per_s"]
@@ -451,9 +463,17 @@ def run(args: argparse.Namespace) -> int:
             cells = "".join(f"{v[k + '_us']:>11.2f}" for k in VECTOR_STAGES)
             print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
     if args.reference:
-        ref = reference_steps_per_s(args.reference)
-        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run (Azimut-v1 single env at "
-              f"{r['steps_per_s'] / ref:.2f}x of it)")
+        import gymnasium as gym
+
+        try:
+            ref, ref_cpu = reference_steps_per_s(args.reference, with_cpu=True)
+        except gym.error.DependencyNotInstalled as exc:
+            print(f"reference {args.reference}: not timed, a dependency is missing ({str(exc).splitlines()[0]}); "
+                  "LunarLanderContinuous-v3 needs box2d: pip install 'gymnasium[box2d]'")
+            return 0
+        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run ({ref_cpu:.0f} in CPU time); the "
+              f"single env at {r['steps_per_s'] / ref:.2f}x of it ({r['cpu_steps_per_s'] / ref_cpu:.2f}x in CPU time; "
+              f"goal 0.75x LunarLanderContinuous-v3); load average {load_average()}")
     return 0
 
 
