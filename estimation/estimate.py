@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from estimation.geometry import RobotGeometry
 from estimation.hrep import _canonicalize_batch
@@ -15,7 +16,8 @@ from estimation.oracle import OracleParams, oracle_kernel_batch, oracle_tables
 from estimation.quality import QUALITY_F
 from estimation.validation import check_nonnegative
 
-__all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "IT_BEST", "IT_PAPER"]
+__all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "estimate_eta_rows",
+           "IT_BEST", "IT_PAPER"]
 
 #: Method names accepted by :func:`estimate_icr`. "IT+" is the improved IT (``IT_BEST``).
 METHODS = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
@@ -229,3 +231,35 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
     if shift is not None and geom.unlimited_steering:
         beta += shift  # S(λ̂) as the angles nearest the measured ones
     return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,)), qua.reshape(batch)
+
+
+@njit(cache=True)
+def _eta_it_rows(q, phidot, E, P, b, r, steer_min, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts,
+                 race, accept_d2, mu_tol, f, lam, mu, beta, qua) -> None:
+    """:func:`estimate_eta` with IT on (N, n) rows in one compiled call: the angles outside the
+    steering range wrapped as :func:`_prepare` wraps them, IT, then μ̂, S(λ̂), qua and the sign."""
+    N, n = q.shape
+    flat, ph = np.empty((N, n)), np.empty((N, n))
+    for i in range(N):
+        for k in range(n):
+            x = q[i, k]
+            if x > steer_max or x <= steer_min:
+                x = steer_max - np.mod(steer_max - x, np.pi)  # RobotGeometry.wrap_steering
+            flat[i, k] = x
+            ph[i, k] = phidot[i, k]
+    d2, iters, starts = np.empty(N), np.empty(N, dtype=np.int64), np.empty(N, dtype=np.int64)
+    it_kernel_batch(flat, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race, accept_d2, lam,
+                    d2, iters, starts, np.empty(N, dtype=np.bool_))
+    _eta_kernel(lam, flat, ph, E, P, b, r, steer_max, mu_tol, f, beta, mu, qua, np.empty(n))
+
+
+def estimate_eta_rows(q: np.ndarray, phidot: np.ndarray, geom: RobotGeometry, mu_tol: float, lam: np.ndarray,
+                      mu: np.ndarray, beta: np.ndarray, qua: np.ndarray, params: ITParams = IT_PAPER) -> None:
+    """:func:`estimate_eta` (IT) of (N, n) measurements the caller already checked (finite float64
+    arrays of the right shapes: the env's sensor readings), written into ``lam`` (N, 3), ``mu``
+    (N,), ``beta`` (N, n), ``qua`` (N,): the same bits, without the per-call checks and
+    allocations (the env's hot path; ``tests/estimation/test_estimators.py`` pins it against
+    :func:`estimate_eta`)."""
+    _eta_it_rows(q, phidot, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_min), float(geom.steer_max),
+                 params.eps_delta, params.eps_lambda, int(params.max_iter), params.min_step, int(params.n_starts),
+                 params.race_iter_or_paper, params.accept_d2(geom.n), float(mu_tol), QUALITY_F, lam, mu, beta, qua)

@@ -86,6 +86,7 @@ from azimut_env.task.termination import check_stalls, check_track_limits, episod
 from azimut_env.tracks import TQ, Track, make_track, named_track, query_tracks
 from azimut_env.validation import check_int
 from estimation import estimate_eta
+from estimation.estimate import estimate_eta_rows
 
 # Plain-int columns of the IntEnum layouts for the per-step paths (numpy indexes with an int
 # several µs faster than with an IntEnum member; the enums stay the names).
@@ -433,7 +434,12 @@ class AzimutTask:
                              ms[rows, :, _MS_PHIDOT])
 
     def _estimate(self, rows: slice) -> None:
-        """The IT-estimated H state of ``rows``: one batched ``estimation.estimate_eta`` call."""
+        """The IT-estimated H state of ``rows``: ``estimation.estimate_eta`` (every robot: its
+        compiled twin ``estimate_eta_rows``, writing in place, the same bits)."""
+        if rows == slice(None):  # every robot: written in place, one compiled call
+            estimate_eta_rows(self.beta_m, self.phidot_m, self.params.geometry, 1e-3, self.lam_hat, self.mu_hat,
+                              self.beta_est, self.qua)
+            return
         lam, mu, beta_est, qua = estimate_eta(self.beta_m[rows], self.phidot_m[rows], self.params.geometry,
                                               mu_tol=1e-3)
         self.lam_hat[rows] = lam

@@ -232,3 +232,21 @@ def test_it_plus_closes_the_gap_to_oracle():
     assert q_plus.min() >= 35.0
     assert q_plus.mean() > q_it.mean() + 0.5
     assert np.all(q_or >= q_plus - 1e-6)
+
+
+@pytest.mark.parametrize("robot", ["azimut3", "swerve", "tri"])
+def test_estimate_eta_rows_is_estimate_eta_bit_for_bit(robot):
+    """The env's in-place IT estimate equals estimate_eta, angles outside the steering range included."""
+    from azimut_env.params import RobotParams
+    from estimation.estimate import estimate_eta, estimate_eta_rows
+
+    geom = RobotParams.preset(robot).geometry
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-2.5, 2.5, (300, geom.n))
+    q[:50] = rng.uniform(-0.3, 0.3, (50, 1)) + rng.normal(0, 0.02, (50, geom.n))  # near a motion's configuration
+    phidot = rng.normal(0, 5, q.shape)
+    want = estimate_eta(q, phidot, geom, mu_tol=1e-3)
+    got = (np.empty((300, 3)), np.empty(300), np.empty((300, geom.n)), np.empty(300))
+    estimate_eta_rows(q, phidot, geom, 1e-3, *got)
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
