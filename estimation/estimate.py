@@ -234,23 +234,38 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
 
 
 @njit(cache=True)
-def _eta_it_rows(q, phidot, E, P, b, r, steer_min, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts,
-                 race, accept_d2, mu_tol, f, lam, mu, beta, qua) -> None:
+def _eta_it_rows(q, phidot, E, P, b, r, steer_min, steer_max, unlimited, eps_delta, eps_lambda, max_iter, min_step,
+                 n_starts, race, accept_d2, mu_tol, f, lam, mu, beta, qua) -> None:
     """:func:`estimate_eta` with IT on (N, n) rows in one compiled call: the angles outside the
-    steering range wrapped as :func:`_prepare` wraps them, IT, then μ̂, S(λ̂), qua and the sign."""
+    steering range wrapped as :func:`_prepare` wraps them (unlimited steering: a wheel taken by an
+    odd multiple of π has its speed turned, and S(λ̂) is moved back by the shift), IT, then μ̂,
+    S(λ̂), qua and the sign."""
     N, n = q.shape
-    flat, ph = np.empty((N, n)), np.empty((N, n))
+    flat, ph, shift = np.empty((N, n)), np.empty((N, n)), np.zeros((N, n))
+    wrapped = False
+    for i in range(N):
+        for k in range(n):
+            wrapped = wrapped or q[i, k] > steer_max or q[i, k] <= steer_min
     for i in range(N):
         for k in range(n):
             x = q[i, k]
+            w = x
             if x > steer_max or x <= steer_min:
-                x = steer_max - np.mod(steer_max - x, np.pi)  # RobotGeometry.wrap_steering
-            flat[i, k] = x
-            ph[i, k] = phidot[i, k]
+                w = steer_max - np.mod(steer_max - x, np.pi)  # RobotGeometry.wrap_steering
+            flat[i, k] = w
+            shift[i, k] = x - w
+            p = phidot[i, k]
+            if unlimited and wrapped and np.mod(np.rint(shift[i, k] / np.pi), 2.0) != 0.0:
+                p = -p
+            ph[i, k] = p
     d2, iters, starts = np.empty(N), np.empty(N, dtype=np.int64), np.empty(N, dtype=np.int64)
     it_kernel_batch(flat, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race, accept_d2, lam,
-                    d2, iters, starts, np.empty(N, dtype=np.bool_))
-    _eta_kernel(lam, flat, ph, E, P, b, r, steer_max, mu_tol, f, beta, mu, qua, np.empty(n))
+                    d2, iters, starts, np.empty(N, dtype=np.bool_), unlimited)
+    _eta_kernel(lam, flat, ph, E, P, b, r, steer_max, mu_tol, f, beta, mu, qua, np.empty(n), unlimited)
+    if unlimited and wrapped:
+        for i in range(N):
+            for k in range(n):
+                beta[i, k] = beta[i, k] + shift[i, k]
 
 
 def estimate_eta_rows(q: np.ndarray, phidot: np.ndarray, geom: RobotGeometry, mu_tol: float, lam: np.ndarray,
@@ -261,5 +276,6 @@ def estimate_eta_rows(q: np.ndarray, phidot: np.ndarray, geom: RobotGeometry, mu
     allocations (the env's hot path; ``tests/estimation/test_estimators.py`` pins it against
     :func:`estimate_eta`)."""
     _eta_it_rows(q, phidot, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_min), float(geom.steer_max),
-                 params.eps_delta, params.eps_lambda, int(params.max_iter), params.min_step, int(params.n_starts),
-                 params.race_iter_or_paper, params.accept_d2(geom.n), float(mu_tol), QUALITY_F, lam, mu, beta, qua)
+                 bool(geom.unlimited_steering), params.eps_delta, params.eps_lambda, int(params.max_iter),
+                 params.min_step, int(params.n_starts), params.race_iter_or_paper, params.accept_d2(geom.n),
+                 float(mu_tol), QUALITY_F, lam, mu, beta, qua)

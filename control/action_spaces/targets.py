@@ -5,7 +5,8 @@ Each kernel is the NumPy reference of :mod:`control.action_spaces.shaping` (and 
 ``ActionController._targets`` in :mod:`control.action_spaces.controller`) written row by row,
 with the same operations in the same order (the building blocks and their conventions are
 those of :mod:`control.icr.kernels`), so that it returns the same bits
-(``tests/control/test_targets_compiled.py`` compares them on random batches):
+(``tests/control/test_targets_compiled.py`` compares them on random batches). ``unlimited``:
+the robot's ``RobotGeometry.unlimited_steering`` (no stop to cross, only the axis caps block):
 
 * :func:`residual_targets`: the follower's twist as (λ_f, μ_f), turned on the sphere by the
   residual (:func:`~control.action_spaces.shaping.exp_step` in the
@@ -67,7 +68,7 @@ def _exp_step(lam, e1, r1, r2, dt, out) -> None:
 
 
 @njit(cache=True)
-def _advance(lam, prop, push, cross_push, E, P, steer_max, s_unit, cos_margin, out):
+def _advance(lam, prop, push, cross_push, E, P, steer_max, s_unit, cos_margin, unlimited, out):
     """:func:`~control.action_spaces.shaping.advance_target` of one row: writes λ_s into ``out``;
     returns (push, held)."""
     n = E.shape[0]
@@ -77,7 +78,7 @@ def _advance(lam, prop, push, cross_push, E, P, steer_max, s_unit, cos_margin, o
     crosses = False
     in_cap = False
     for k in range(n):
-        crosses = crosses or abs(b1[k] - b0[k]) > 0.5 * np.pi
+        crosses = crosses or (abs(b1[k] - b0[k]) > 0.5 * np.pi and not unlimited)
         in_cap = in_cap or abs(dot3(prop, s_unit[k])) > cos_margin
     step = sphere_angle3(lam, prop)
     push = push + step if crosses and not in_cap else 0.0
@@ -90,8 +91,8 @@ def _advance(lam, prop, push, cross_push, E, P, steer_max, s_unit, cos_margin, o
 
 
 @njit(cache=True)
-def residual_targets(twists, actions, residual_angle, residual_mu, E, P, steer_max, s_unit, cos_margin, lam_out,
-                     mu_out, held_out) -> None:
+def residual_targets(twists, actions, residual_angle, residual_mu, E, P, steer_max, s_unit, cos_margin, unlimited,
+                     lam_out, mu_out, held_out) -> None:
     """The residual action space's targets of M robots: the follower's chassis twists (M, 3) and
     the clipped actions (M, 3) -> λ_d (M, 3), μ_d (M,), held (M,)."""
     lam_f, frame, prop = np.empty(3), np.empty(3), np.empty(3)
@@ -104,14 +105,14 @@ def residual_targets(twists, actions, residual_angle, residual_mu, E, P, steer_m
             lam_f[0], lam_f[1], lam_f[2] = 0.0, 0.0, 1.0
         _initial_frame(lam_f, frame)
         _exp_step(lam_f, frame, actions[m, 0] * residual_angle, actions[m, 1] * residual_angle, 1.0, prop)
-        _, held = _advance(lam_f, prop, 0.0, np.inf, E, P, steer_max, s_unit, cos_margin, lam_out[m])
+        _, held = _advance(lam_f, prop, 0.0, np.inf, E, P, steer_max, s_unit, cos_margin, unlimited, lam_out[m])
         held_out[m] = held
         mu_out[m] = mu + actions[m, 2] * residual_mu
 
 
 @njit(cache=True)
 def rate_targets(rows, actions, lam_s, e1, push, mu_s, lambda_rate_max, mu_accel, mu_max, dt, cross_push, E, P,
-                 steer_max, s_unit, cos_margin, lam_out, mu_out, held_out) -> None:
+                 steer_max, s_unit, cos_margin, unlimited, lam_out, mu_out, held_out) -> None:
     """The ICR-rate action space's step for the robots ``rows``: the clipped actions (M, 3) move
     each robot's (λ_s, μ_s) and tangent frame e₁ ((N, …), updated in place); λ_d (M, 3),
     μ_d (M,), held (M,) out."""
@@ -120,7 +121,7 @@ def rate_targets(rows, actions, lam_s, e1, push, mu_s, lambda_rate_max, mu_accel
         i = rows[m]
         lam = lam_s[i]
         _exp_step(lam, e1[i], actions[m, 0] * lambda_rate_max, actions[m, 1] * lambda_rate_max, dt, prop)
-        p, held = _advance(lam, prop, push[i], cross_push, E, P, steer_max, s_unit, cos_margin, lam_out[m])
+        p, held = _advance(lam, prop, push[i], cross_push, E, P, steer_max, s_unit, cos_margin, unlimited, lam_out[m])
         push[i] = p
         held_out[m] = held
         new = lam_out[m]
@@ -140,7 +141,7 @@ def rate_targets(rows, actions, lam_s, e1, push, mu_s, lambda_rate_max, mu_accel
 
 @njit(cache=True)
 def shaped_targets(rows, lam_ref, lam_t, mu_t, push, nearer, max_angle, cross_push, E, P, steer_max, s_unit,
-                   cos_margin, lam_out, mu_out, held_out) -> None:
+                   cos_margin, unlimited, lam_out, mu_out, held_out) -> None:
     """:func:`~control.action_spaces.shaping.shape_target` for the robots ``rows``: the
     controller's reference λ (N, 3), the absolute targets (M, 3), (M,) and each robot's push
     (N,, updated in place) -> λ_s (M, 3), μ_t (M,), held (M,)."""
@@ -167,7 +168,7 @@ def shaped_targets(rows, lam_ref, lam_t, mu_t, push, nearer, max_angle, cross_pu
                 prop[k] = prop[k] / nrm
         else:
             prop[0], prop[1], prop[2] = lam[0], lam[1], lam[2]
-        p, held = _advance(lam, prop, push[i], cross_push, E, P, steer_max, s_unit, cos_margin, lam_out[m])
+        p, held = _advance(lam, prop, push[i], cross_push, E, P, steer_max, s_unit, cos_margin, unlimited, lam_out[m])
         push[i] = p
         held_out[m] = held
         mu_out[m] = mu

@@ -58,6 +58,7 @@ from control.icr.kernels import (
     L_SAT_C1,
     L_SRM,
     L_STEER_LO,
+    L_UNLIMITED,
     L_WA_DT,
     L_WA_DT_SLACK,
     L_WAM,
@@ -66,10 +67,12 @@ from control.icr.kernels import (
     N_LIM,
     arc_check_row,
     dot3,
+    nearest1,
     norm3,
     project_off_axes_row,
     slerp3,
     speed_coefs_row,
+    steering_difference1,
     steering_row,
     unit3,
     wrap_half1,
@@ -114,6 +117,7 @@ def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRC
     lim[L_WSM_SLACK], lim[L_WA_DT_SLACK], lim[L_NEG_WSM_SLACK] = wsm * slack, wam * dt * slack, -wsm * slack
     lim[L_HEADROOM_WSM] = config.mu_headroom * wsm
     lim[L_BRAKE_DT] = sam * dt
+    lim[L_UNLIMITED] = 1.0 if geom.unlimited_steering else 0.0
     tune = np.array([config.zero_mu_tol, config.axis_margin, config.arc_step, np.sin(0.5 * config.axis_margin),
                      config.stop_hysteresis, config.stop_hold_time + 1e-9, config.kick_tol, config.stop_mu_tol,
                      config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
@@ -154,9 +158,10 @@ def _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d) -> int:
 
 
 @njit(cache=True)
-def _must_stop(lam, lam_d, E, P, steer_max, s_unit, tune) -> bool:
+def _must_stop(lam, lam_d, E, P, steer_max, s_unit, tune, unlimited) -> bool:
     """:func:`control.icr.feasibility.must_stop` of one arc."""
-    reason, free, theta = arc_check_row(lam, lam_d, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN], tune[C_ARC_STEP])
+    reason, free, theta = arc_check_row(lam, lam_d, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN], tune[C_ARC_STEP],
+                                        unlimited)
     return reason == ARC_AXIS or (reason == ARC_STOP and theta - free >= tune[C_STOP_HYST])
 
 
@@ -183,6 +188,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
     """The step of the robots ``rows`` (state arrays ``*0`` (N, …) in, ``*1`` out, already copies of
     ``*0``; the inputs and the per-step outputs are (M, …), row m of them is robot rows[m])."""
     n = E.shape[0]
+    unlimited = lim[L_UNLIMITED] != 0.0
     ld = np.empty(3)
     scratch = np.empty(3)
     bt = np.empty(n)
@@ -228,7 +234,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         blocked = ARC_NONE
         if running and not zero:
             reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
-                                                tune[C_ARC_STEP])
+                                                tune[C_ARC_STEP], unlimited)
             near_stop = reason == ARC_STOP and theta - free < tune[C_STOP_HYST]
             ht = held_time0[i] + dt
             hold = near_stop and ht <= tune[C_HOLD_LIMIT]
@@ -259,10 +265,12 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
                 steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
                 far = 0.0
                 for k in range(n):
-                    far = max(far, abs(beta0[i, k] - bt[k]))
-                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune):
+                    far = max(far, abs(steering_difference1(beta0[i, k], bt[k], unlimited)))
+                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune, unlimited):
                     rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
             steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
+            for k in range(n):  # unlimited steering: the nearer angle of each axis
+                bt[k] = nearest1(bt[k], beta0[i, k], unlimited)
             settled_cmd = True
             settled_meas = True
             for k in range(n):

@@ -23,9 +23,9 @@ from numba import njit
 
 from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _grad_wheel, _speed_coef
 
-__all__ = ["norm3", "unit3", "dot3", "sphere_angle3", "slerp3", "wrap_half1", "steering_row", "speed_coefs_row",
-           "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1", "saturate_row",
-           "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
+__all__ = ["norm3", "unit3", "dot3", "nearest1", "steering_difference1", "sphere_angle3", "slerp3", "wrap_half1",
+           "steering_row", "speed_coefs_row", "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1",
+           "saturate_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
 
 # indices into the limit constants ``lim`` (control.icr.compiled.compiled_constants)
 L_SAM, L_SRM, L_WSM, L_WAM, L_A_DT, L_WA_DT, L_STEER_LO = 0, 1, 2, 3, 4, 5, 6
@@ -37,7 +37,8 @@ L_MU_ACCEL = 20  # mu_accel_fraction·wheel_accel_max
 L_WSM_SLACK, L_WA_DT_SLACK, L_NEG_WSM_SLACK = 21, 22, 23  # mu_own_step
 L_HEADROOM_WSM = 24  # mu_headroom·wheel_speed_max
 L_BRAKE_DT = 25  # steer_accel_max·dt (a stop command braking the steering in RECONFIGURING)
-N_LIM = 26
+L_UNLIMITED = 26  # 1.0: unlimited steering (RobotGeometry.unlimited_steering), else 0.0
+N_LIM = 27
 
 # the tuning as a float array (indices C_*)
 (C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_LIMIT, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
@@ -62,12 +63,16 @@ def norm3(a) -> float:
 
 @njit(cache=True, inline="always")
 def unit3(a, out) -> None:
-    """``a / np.linalg.norm(a, axis=-1)[:, None]`` of one row (``control.checks.check_unit_batch``,
-    ``estimation.kinematics._check_lambda``), into ``out`` (may be ``a``)."""
-    nrm = norm3(a)
-    out[0] = a[0] / nrm
-    out[1] = a[1] / nrm
-    out[2] = a[2] / nrm
+    """a/‖a‖ of one row into ``out`` (may be ``a``): :func:`estimation.hrep.unit_and_norm` (the
+    row scaled by the power of two that brings its largest component into [0.5, 1) first), which
+    is bit for bit ``a / np.linalg.norm(a)`` (``control.checks.check_unit_batch``) wherever that
+    neither overflows nor underflows."""
+    _, e = math.frexp(max(abs(a[0]), abs(a[1]), abs(a[2])))
+    s0, s1, s2 = math.ldexp(a[0], -e), math.ldexp(a[1], -e), math.ldexp(a[2], -e)
+    nrm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    out[0] = s0 / nrm
+    out[1] = s1 / nrm
+    out[2] = s2 / nrm
 
 
 @njit(cache=True, inline="always")
@@ -102,6 +107,23 @@ def slerp3(lam, lam_d, angle, out) -> None:
     out[0] = c * lam[0] + s * (t0 / tn)
     out[1] = c * lam[1] + s * (t1 / tn)
     out[2] = c * lam[2] + s * (t2 / tn)
+
+
+@njit(cache=True, inline="always")
+def nearest1(beta: float, reference: float, unlimited: bool) -> float:
+    """:meth:`estimation.geometry.RobotGeometry.nearest_steering` of one wheel."""
+    if not unlimited:
+        return beta
+    return reference + (np.mod(beta - reference + np.pi / 2, np.pi) - np.pi / 2)
+
+
+@njit(cache=True, inline="always")
+def steering_difference1(q: float, beta: float, unlimited: bool) -> float:
+    """:meth:`estimation.geometry.RobotGeometry.steering_difference` of one wheel."""
+    d = q - beta
+    if not unlimited:
+        return d
+    return np.mod(d + np.pi / 2, np.pi) - np.pi / 2
 
 
 @njit(cache=True, inline="always")
@@ -155,10 +177,11 @@ def gradient_norm_max(lam, E, P) -> float:
 
 
 @njit(cache=True)
-def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step):
+def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step, unlimited):
     """:func:`control.icr.feasibility.arc_check_batch` of one arc: (reason code, free [rad],
     theta [rad]). The arc is sampled at m = max(2, ⌈θ/step⌉ + 1) points (the NumPy version pads
-    the rows of a batch to the longest; the padding never counts)."""
+    the rows of a batch to the longest; the padding never counts). ``unlimited``: no stop, only
+    the axes block."""
     n = E.shape[0]
     lam = np.empty(3)
     lam_d = np.empty(3)
@@ -184,7 +207,7 @@ def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, st
                     first_axis = j
                     break
         steering_row(pt, E, P, steer_max, beta_now, False, beta_now, scratch)
-        if j >= 1:
+        if j >= 1 and not unlimited:
             for k in range(n):
                 if abs(beta_now[k] - beta_prev[k]) > np.pi / 2:
                     first_wrap = j
@@ -242,8 +265,10 @@ def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
 
 
 @njit(cache=True, inline="always")
-def stop_room1(beta, rate, steer_min, steer_max) -> float:
-    """:func:`control.icr.feasibility.stop_room` of one wheel."""
+def stop_room1(beta, rate, steer_min, steer_max, unlimited) -> float:
+    """:func:`control.icr.feasibility.stop_room` of one wheel (inf without stops)."""
+    if unlimited:
+        return np.inf
     if rate > 0:
         return steer_max - beta
     if rate < 0:
@@ -268,10 +293,13 @@ def saturate_row(beta_prev, rate_prev, phidot_prev, beta_want, phidot_want, stee
         rate = (beta_want[k] - beta_prev[k]) / dt
         rate = min(max(rate, rate_prev[k] - a_dt), rate_prev[k] + a_dt)
         rate = min(max(rate, -srm), srm)
-        room = stop_room1(beta_prev[k] + rate * dt, rate, steer_min, steer_max)
+        unlimited = lim[L_UNLIMITED] != 0.0
+        room = stop_room1(beta_prev[k] + rate * dt, rate, steer_min, steer_max, unlimited)
         v_safe = max(safe_stop_speed1(room, lim[L_SAT_C1], lim[L_SAT_C2], lim[L_SAT_C3]), abs(rate_prev[k]) - a_dt)
         rate = np.sign(rate) * min(abs(rate), v_safe)
-        beta = min(max(beta_prev[k] + rate * dt, lim[L_STEER_LO]), steer_max)
+        beta = beta_prev[k] + rate * dt
+        if not unlimited:
+            beta = min(max(beta, lim[L_STEER_LO]), steer_max)
         rate_out[k] = (beta - beta_prev[k]) / dt
         beta_out[k] = beta
         ph = min(max(phidot_want[k], phidot_prev[k] - wa_dt), phidot_prev[k] + wa_dt)

@@ -34,12 +34,14 @@ from control.icr.kernels import (
     L_SAM,
     L_SRM,
     L_STEER_LO,
+    L_UNLIMITED,
     L_WA_DT_SLACK,
     L_WAM,
     L_WSM,
     L_WSM_SLACK,
     dot3,
     gradient_norm_max,
+    nearest1,
     norm3,
     safe_stop_speed1,
     saturate_row,
@@ -68,7 +70,9 @@ def reconfigure_row(beta0, rate0, phidot0, target, exact, measured_rate, use_mea
         rate = min(max(want, rate0[k] - a_step), rate0[k] + a_step)
         if exact:
             rate = err / dt
-        beta = min(max(beta0[k] + rate * dt, lim[L_STEER_LO]), steer_max)
+        beta = beta0[k] + rate * dt
+        if lim[L_UNLIMITED] == 0.0:
+            beta = min(max(beta, lim[L_STEER_LO]), steer_max)
         rate = (beta - beta0[k]) / dt
         beta_out[k] = beta
         rate_out[k] = rate
@@ -97,6 +101,10 @@ def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
     unit3(lam_new, lam_new)
     mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
     steering_row(lam_new, E, P, steer_max, beta, True, beta_new, vd)
+    unlimited = lim[L_UNLIMITED] != 0.0
+    if unlimited:  # each wheel's axis at the angle nearest its command: never a flip
+        for k in range(n):
+            beta_new[k] = nearest1(beta_new[k], beta[k], True)
     speed_coefs_row(lam_new, beta_new, True, E, P, b, steer_max, c, vd, c)
     flipped = False
     ratio = 0.0
@@ -109,8 +117,8 @@ def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
         ph = (mu_new * c[k] - b[k] * br) / r[k]
         phid[k] = ph
         phdd = (ph - phidot[k]) / dt
-        v_stop = safe_stop_speed1(stop_room1(beta_new[k], br, steer_min, steer_max), lim[L_CO_C1], lim[L_CO_C2],
-                                  lim[L_CO_C3])
+        room = stop_room1(beta_new[k], br, steer_min, steer_max, unlimited)
+        v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
         ratio = max(ratio, abs(br) / lim[L_SRM], abs(ba) / lim[L_SAM], abs(ph) / lim[L_WSM], abs(phdd) / lim[L_WAM],
                     abs(br) / max(v_stop, 1e-12))
     return mu_new, (np.inf if flipped else ratio), flipped

@@ -8,7 +8,8 @@ calls it, gives every robot the reference's commands bit for bit
 
 Per robot the state is the slew-limited twist of the last step (3,), and the last commands β, β̇,
 φ̇ (n,); ``flags`` holds the options of :class:`~control.twist.wpilib.SwerveConfig` in the order
-of :data:`FLAGS`.
+of :data:`FLAGS`. With unlimited steering (``RobotGeometry.unlimited_steering``) the measured
+angle is first brought onto the commands' turn and there is no flip-back into a range.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ FLAGS = ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_
 
 @njit(cache=True)
 def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_rate, state_phidot, slew, flags,
-                       deadband, alpha, axis_xy, b, r, steer_min, steer_max, wheel_speed_max, dt,
+                       deadband, alpha, axis_xy, b, r, steer_min, steer_max, unlimited, wheel_speed_max, dt,
                        beta_out, phidot_out, rate_out, accel_out, phiddot_out, twist_out) -> int:
     """Step the robots ``rows``: twist targets (M, 3) and measured β (M, n) in, the state (N, …)
     updated in place, the commands (M, n) and the discretised twists (M, 3) out. Returns 0, or
@@ -83,12 +84,14 @@ def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_r
             bk = state_beta[i, k] if hold else heading[k] + np.pi / 2 - alpha[k]
             sp = speed[k]
             now = beta_meas[m, k]
+            if unlimited:  # the measured angle (in ]−π, π]) on the commands' turn
+                now = state_beta[i, k] + (np.mod(now - state_beta[i, k] + np.pi, 2 * np.pi) - np.pi)
             err = np.mod(bk - now + np.pi, 2 * np.pi) - np.pi  # optimize_module
             beta = now + err
             if flags[1] and abs(err) > np.pi / 2:
                 beta = beta - np.sign(err) * np.pi
                 sp = -sp
-            while beta > steer_max or beta <= steer_min:
+            while not unlimited and (beta > steer_max or beta <= steer_min):
                 beta = beta - np.pi if beta > steer_max else beta + np.pi
                 sp = -sp
             if hold:

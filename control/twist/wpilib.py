@@ -277,7 +277,8 @@ class SwerveBatch:
         rows = np.asarray(rows, dtype=np.intp)
         beta = np.asarray(beta, dtype=np.float64)
         self.twist[rows] = 0.0
-        self.beta[rows] = self.geom.wrap_steering(beta.reshape(rows.size, self.geom.n))
+        beta = beta.reshape(rows.size, self.geom.n)
+        self.beta[rows] = beta if self.geom.unlimited_steering else self.geom.wrap_steering(beta)
         self.rate[rows] = 0.0
         self.phidot[rows] = np.asarray(phidot, dtype=np.float64).reshape(rows.size, self.geom.n)
         self._ready[rows] = True
@@ -301,7 +302,8 @@ class SwerveBatch:
         twist_out = np.empty((M, 3))
         code = swerve_step_kernel(idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self._slew,
                                   self._flags, self._deadband, g.alpha, g.axis_xy, g.b, g.r, float(g.steer_min),
-                                  float(g.steer_max), float(self.limits.wheel_speed_max), self.dt, out[0], out[1],
+                                  float(g.steer_max), bool(g.unlimited_steering), float(self.limits.wheel_speed_max),
+                                  self.dt, out[0], out[1],
                                   out[2], out[3], out[4], twist_out)
         if code:
             raise ValueError("twist must be finite" if code == 1 else "beta_meas must be finite")

@@ -104,6 +104,16 @@ def test_path_following_episodes_bit_for_bit(monkeypatch):
     assert seen["events"] >= 3
 
 
+def test_unlimited_steering_bit_for_bit(monkeypatch):
+    """The swerve preset (no steering stops: nearest axis angles, no stop room, no clipping)."""
+    from control.path_controllers import ICRPathController
+    from control.rollout import run_episodes
+
+    rec = _Recorder(monkeypatch)
+    run_episodes(ICRPathController(), ["square", "figure8"], [0, 1], max_time=8.0, env_kwargs={"robot": "swerve"})
+    assert _replay(rec)["steps"] == 400
+
+
 @pytest.mark.parametrize("action", ["residual", "icr_rate", "icr_target"])
 def test_rl_action_spaces_bit_for_bit(monkeypatch, action):
     """Random actions through the RL action spaces (the residual, ICR-rate and shaped ICR-target

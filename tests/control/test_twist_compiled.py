@@ -65,6 +65,15 @@ def test_eval_twist_episodes_bit_for_bit(monkeypatch):
     assert _check(rec) == 3 * 400
 
 
+def test_unlimited_steering_bit_for_bit(monkeypatch):
+    from control.path_controllers import TwistPathController
+    from control.rollout import run_episodes
+
+    rec = _Recorder(monkeypatch)
+    run_episodes(TwistPathController(), ["square", "figure8"], [0, 1], max_time=8.0, env_kwargs={"robot": "swerve"})
+    assert _check(rec) == 2 * 400
+
+
 @pytest.mark.parametrize("config", [SwerveConfig(), SwerveConfig(discretize=False, optimize=False, coupling=True,
                                                                   cosine_compensation=False, desaturate=False,
                                                                   offset_correction=False, speed_deadband=0.0)])
