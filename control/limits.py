@@ -10,10 +10,11 @@ limits bound the commands and their finite differences over a period: |β̇_c| �
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from azimut_env.params import ActuatorLimits
 
-__all__ = ["ActuatorLimits", "limit_array", "limit_violations"]
+__all__ = ["ActuatorLimits", "limit_array", "limit_violations", "limit_exceeded"]
 
 
 def limit_array(limits: ActuatorLimits) -> np.ndarray:
@@ -31,3 +32,24 @@ def limit_violations(beta_rate, beta_accel, phidot, phiddot, limits: ActuatorLim
     vals = [np.asarray(x, dtype=np.float64) for x in (beta_rate, beta_accel, phidot, phiddot)]
     lim = limit_array(limits) * (1.0 + rtol)
     return np.stack([np.any(np.abs(v) > m, axis=-1) for v, m in zip(vals, lim)], axis=-1)
+
+
+@njit(cache=True)
+def _exceeded_kernel(beta_rate, beta_accel, phidot, phiddot, lim, out) -> None:
+    for i in range(out.shape[0]):
+        hit = False
+        for k in range(phidot.shape[1]):
+            hit = hit or (abs(beta_rate[i, k]) > lim[0] or abs(beta_accel[i, k]) > lim[1] or abs(phidot[i, k]) > lim[2]
+                          or abs(phiddot[i, k]) > lim[3])
+        out[i] = hit
+
+
+def limit_exceeded(beta_rate, beta_accel, phidot, phiddot, limits: ActuatorLimits, rtol: float = 1e-6) -> np.ndarray:
+    """(N,) bool: robot i's command exceeds some limit, ``limit_violations(...).any(axis=-1)`` of
+    (N, n) arrays in one compiled call (the same comparisons)."""
+    vals = [np.ascontiguousarray(x, dtype=np.float64) for x in (beta_rate, beta_accel, phidot, phiddot)]
+    if vals[0].ndim != 2 or any(v.shape != vals[0].shape for v in vals):
+        raise ValueError(f"the commands must be (N, n) arrays of one shape, got {[v.shape for v in vals]}")
+    out = np.empty(vals[0].shape[0], dtype=np.bool_)
+    _exceeded_kernel(*vals, limit_array(limits) * (1.0 + rtol), out)
+    return out

@@ -28,7 +28,7 @@ from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollowerConfig
 from control.icr.batch import BatchICRController
 from control.icr.controller import ICRControllerConfig, reference_stop_mask
-from control.limits import limit_violations
+from control.limits import limit_exceeded
 from control.twist.wpilib import SwerveBatch, SwerveConfig
 from estimation.hrep import eta_from_twist
 
@@ -191,7 +191,7 @@ class ActionController:
             cmd = self.swerve.step(rows, a * self.scale, beta)
             modes = np.full(rows.size, -1, dtype=np.int64)
             held, lag = np.zeros(rows.size, dtype=np.bool_), np.zeros(rows.size)
-        exceeded = limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, self.limits).any(axis=-1)
+        exceeded = limit_exceeded(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, self.limits)
         info = dict(cmd.info, controller_mode=modes, limit_exceeded=exceeded, target_held=held, mu_lag=lag)
         return WheelCommand(beta=cmd.beta, phidot=cmd.phidot, beta_rate=cmd.beta_rate, beta_accel=cmd.beta_accel,
                             phiddot=cmd.phiddot, info=info, mode=cmd.mode, events=cmd.events)

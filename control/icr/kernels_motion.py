@@ -5,8 +5,10 @@
 
 One difference in how, not in what: the time scaling tries κ from 1 down and stops at the first
 feasible one, the largest (the NumPy version evaluates the whole grid and takes the last feasible
-one: the same κ); when none is, it evaluates them all and takes the smallest limit ratio, the
-lowest κ among equals (NumPy's ``argmin``).
+one: the same κ); when none is, it takes the smallest limit ratio, the lowest κ among equals
+(NumPy's ``argmin``), and a candidate stops being computed once its wheels so far exceed both
+the feasibility bound and the best ratio found (:func:`kappa_ratio`); the chosen candidate is then
+computed in full (:func:`kappa_candidate`).
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ from control.icr.kernels import (
     stop_room1,
     unit3,
 )
+from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _speed_coef
 
-__all__ = ["coordinated_row", "reconfigure_row", "kappa_candidate", "mu_own_row"]
+__all__ = ["coordinated_row", "reconfigure_row", "kappa_candidate", "kappa_ratio", "mu_own_row"]
 
 
 @njit(cache=True)
@@ -125,6 +128,48 @@ def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
 
 
 @njit(cache=True)
+def kappa_ratio(q, kappa, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot, E, P, b, r, steer_min,
+                steer_max, lim, dt, threshold, u) -> float:
+    """The limit ratio of :func:`kappa_candidate`'s candidate q (inf where a wheel flips), or,
+    as soon as the wheels seen so far put it above ``threshold``, that partial maximum (a lower
+    bound above the threshold: the candidate is neither feasible nor a better fallback, and the
+    other wheels need not be computed). The same arithmetic as :func:`kappa_candidate`."""
+    kq = kappa[q]
+    vd = np.empty(3)
+    for j in range(3):
+        vd[j] = (v_prev[j] + kq * (v_des[j] - v_prev[j])) * dt
+    nv = norm3(vd)
+    safe = nv if nv > 0 else 1.0
+    cn, sn = math.cos(nv), math.sin(nv)
+    for j in range(3):
+        u[j] = cn * lam[j] + sn * vd[j] / safe
+    unit3(u, u)  # λ of the candidate
+    unit3(u, u)  # normalised again, as steering_from_lambda and wheel_speed_coefficients do
+    mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
+    unlimited = lim[L_UNLIMITED] != 0.0
+    ratio = 0.0
+    for k in range(beta.shape[0]):
+        bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
+        if r2 < SINGULAR_TOL * SINGULAR_TOL:
+            bk = beta[k]
+        bk = nearest1(bk, beta[k], unlimited)
+        db = bk - beta[k]
+        if abs(db) > np.pi / 2:
+            return np.inf
+        br = db / dt
+        ba = (br - beta_rate[k]) / dt
+        ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
+        phdd = (ph - phidot[k]) / dt
+        room = stop_room1(bk, br, steer_min, steer_max, unlimited)
+        v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
+        ratio = max(ratio, abs(br) / lim[L_SRM], abs(ba) / lim[L_SAM], abs(ph) / lim[L_WSM], abs(phdd) / lim[L_WAM],
+                    abs(br) / max(v_stop, 1e-12))
+        if ratio > threshold:
+            return ratio
+    return ratio
+
+
+@njit(cache=True)
 def coordinated_row(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_first, E, P, b, r, steer_min, steer_max,
                  lim, tune, kappa, dt, lam_out, lam_rate_out, beta_out, rate_out, phidot_out):
     """:func:`control.icr.motion.coordinated_step` of one robot: writes λ, λ̇, β_c, β̇_c, φ̇_c;
@@ -158,10 +203,12 @@ def coordinated_row(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_
     nk = kappa.shape[0]
     lam_new, v, beta_new, b_rate, phid, c = np.empty(3), np.empty(3), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     best_q, best_ratio, found = -1, np.inf, False
+    u = np.empty(3)
     for q in range(nk - 1, -1, -1):
-        mu_q, ratio, flipped = kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate,
-                                                phidot, E, P, b, r, steer_min, steer_max, lim, dt, lam_new, v,
-                                                beta_new, b_rate, phid, c)
+        # a candidate above both the feasibility bound and the best fallback so far cannot be chosen
+        threshold = np.inf if best_q < 0 else max(1.0 - 1e-9, best_ratio)
+        ratio = kappa_ratio(q, kappa, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot, E, P, b, r,
+                            steer_min, steer_max, lim, dt, threshold, u)
         if ratio <= 1.0 - 1e-9:
             best_q, found = q, True
             break

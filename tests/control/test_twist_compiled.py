@@ -107,3 +107,14 @@ def test_the_batch_refuses_bad_input(geom, limits):
     with pytest.raises(ValueError, match="shape"):
         batch.step(None, np.zeros((1, 3)), np.zeros((2, geom.n)))
     np.testing.assert_array_equal(batch.beta, before)
+
+
+def test_limit_exceeded_is_limit_violations_any(limits):
+    from control.limits import limit_exceeded, limit_violations
+
+    rng = np.random.default_rng(3)
+    scales = (limits.steer_rate_max, limits.steer_accel_max, limits.wheel_speed_max, limits.wheel_accel_max)
+    vals = [rng.normal(0, 0.3 * s, (500, 4)) for s in scales]
+    want = limit_violations(*vals, limits).any(axis=-1)
+    np.testing.assert_array_equal(limit_exceeded(*vals, limits), want)
+    assert 0 < want.sum() < 500
