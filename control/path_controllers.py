@@ -2,16 +2,17 @@
 controller (``icr``) or the WPILib-style twist baseline (``twist``).
 
 Both implement :class:`control.controller.Controller` for the N robots of an env. Each robot has
-its own :class:`~control.follow.path_follower.PathFollower` (on its own track, from the pose the
-env's observation uses, ``estimated_pose``), so the two controllers get the same targets and a
-comparison isolates how the wheels are coordinated:
+its own path follower (on its own track, from the pose the env's observation uses,
+``estimated_pose``), all N stepped in one compiled call (:class:`~control.follow.batch.BatchFollower`,
+equal to the bit to one :class:`~control.follow.path_follower.PathFollower` per robot), so the two
+controllers get the same targets and a comparison isolates how the wheels are coordinated:
 
 * :class:`ICRPathController`: (λ_d, μ_d) of the follower's twist into the ICR controller
   (:class:`~control.icr.batch.BatchICRController`, all robots in one batched step); the
   follower slows down before the points where the reference motion needs a stop and
   reconfiguration (its ``stop_mask``, :func:`~control.icr.controller.reference_stop_mask`);
-* :class:`TwistPathController`: the follower's twist into one
-  :class:`~control.twist.wpilib.SwerveController` per robot.
+* :class:`TwistPathController`: the follower's twist into the twist baseline
+  (:class:`~control.twist.wpilib.SwerveBatch`, all robots in one compiled step).
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ import numpy as np
 
 from azimut_env.tracks import SCENARIO_NAMES
 from control.commands import WheelCommand
-from control.follow.path_follower import PathFollower, PathFollowerConfig
+from control.follow.batch import BatchFollower
+from control.follow.path_follower import PathFollowerConfig
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig
 from control.icr.feasibility import reference_stop_mask
@@ -46,7 +48,8 @@ def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | N
 
 
 class _PathFollowing:
-    """A path follower per robot (the part both controllers share). A scenario's track
+    """The path followers of all robots (the part both controllers share), one
+    :class:`~control.follow.batch.BatchFollower`. A scenario's track
     (``azimut_env.tracks.SCENARIO_NAMES``, whose speeds are the robot's own) is followed with
     :meth:`PathFollowerConfig.for_robot` unless a ``follower_config`` is given. Each command's
     ``info["hold"]`` (N,) says which robots' followers were holding (``Track.holds``)."""
@@ -56,28 +59,28 @@ class _PathFollowing:
         self.follower_config = _follower_config(speed_scale, follower_config)
         #: the speed scale of the track's profile (a given ``follower_config``'s own)
         self.speed_scale = self.follower_config.speed_scale
-        self.followers: list[PathFollower | None] = []
+        self.followers: BatchFollower | None = None
 
     def _stop_mask(self, env):
         return None
 
     def _reset_followers(self, env, rows: np.ndarray) -> None:
         num = int(np.shape(env.measured_beta)[0])
-        if len(self.followers) != num:
-            self.followers = [None] * num
-        tracks, progress, dt = env.tracks, np.atleast_1d(env.progress), env.control_period
+        if self.followers is None or self.followers.num != num:
+            self.followers = BatchFollower(num, self.follower_config, stop_mask=self._stop_mask(env),
+                                           dt=env.control_period)
+        tracks, progress = env.tracks, np.atleast_1d(env.progress)
         for i in rows:
             cfg = self.follower_config
             if not self._config_given and tracks[i].name in SCENARIO_NAMES:
                 cfg = PathFollowerConfig.for_robot(env.params, speed_scale=self.speed_scale)
-            f = PathFollower(tracks[i], cfg, stop_mask=self._stop_mask(env), dt=dt)
-            f.reset(float(progress[i]))
-            self.followers[i] = f
+            self.followers.reset(int(i), tracks[i], float(progress[i]), cfg)
 
-    def _targets(self, env) -> list:
-        poses = env.estimated_pose  # the true pose unless the env's pose_source is "odometry"
-        targets = [f.step(poses[i]) for i, f in enumerate(self.followers)]
-        self._holding = np.array([t.holding for t in targets], dtype=np.bool_)
+    def _targets(self, env):
+        """Every robot's follower output (:class:`~control.follow.batch.FollowerBatchOutput`)."""
+        # the true pose unless the env's pose_source is "odometry"
+        targets = self.followers.step_all(env.estimated_pose)
+        self._holding = targets.holding
         return targets
 
     def _with_holds(self, cmd: WheelCommand) -> WheelCommand:
@@ -114,8 +117,8 @@ class ICRPathController(_PathFollowing):
     def reset(self, env, rows) -> None:
         rows = np.asarray(rows, dtype=np.intp)
         self._reset_followers(env, rows)
-        if self.controller is None or self.controller.num != len(self.followers):
-            self.controller = BatchICRController(len(self.followers), env.geometry, env.limits, env.control_period,
+        if self.controller is None or self.controller.num != self.followers.num:
+            self.controller = BatchICRController(self.followers.num, env.geometry, env.limits, env.control_period,
                                                  self.icr_config)
         lam_hat, _ = env.estimated_eta
         self.controller.reset(rows, lam_hat[rows], env.measured_beta[rows], env.measured_phidot[rows])
@@ -124,8 +127,7 @@ class ICRPathController(_PathFollowing):
         targets = self._targets(env)
         lam_hat, mu_hat = env.estimated_eta
         return self._with_holds(self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
-                                                     np.array([t.lam for t in targets]),
-                                                     np.array([t.mu for t in targets])))
+                                                     targets.lam, targets.mu))
 
 
 class TwistPathController(_PathFollowing):
@@ -149,11 +151,10 @@ class TwistPathController(_PathFollowing):
     def reset(self, env, rows) -> None:
         rows = np.asarray(rows, dtype=np.intp)
         self._reset_followers(env, rows)
-        if self.controller is None or self.controller.num != len(self.followers):
-            self.controller = SwerveBatch(len(self.followers), env.geometry, env.limits, env.control_period,
+        if self.controller is None or self.controller.num != self.followers.num:
+            self.controller = SwerveBatch(self.followers.num, env.geometry, env.limits, env.control_period,
                                           self.swerve_config)
         self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
 
     def act(self, env, obs) -> WheelCommand:
-        twists = np.array([t.twist for t in self._targets(env)])
-        return self._with_holds(self.controller.step(None, twists, env.measured_beta))
+        return self._with_holds(self.controller.step(None, self._targets(env).twist, env.measured_beta))

@@ -23,6 +23,7 @@ from azimut_env.tracks.library import (
 from azimut_env.tracks.query import (
                       TQ,
                       interp1,
+                      np_interp1,
                       project_window_kernel,
                       query_batch_kernel,
                       query_one_kernel,
@@ -35,6 +36,6 @@ from azimut_env.tracks.scenarios import ALL_TRACK_NAMES, SCENARIO_NAMES, named_t
 from azimut_env.tracks.track import Track
 
 __all__ = ["Track", "TQ", "make_track", "query_tracks", "TRACK_NAMES", "SCENARIO_NAMES", "ALL_TRACK_NAMES",
-           "scenario_track", "named_track", "wrap_angle", "wrap_pi", "interp1",
+           "scenario_track", "named_track", "wrap_angle", "wrap_pi", "interp1", "np_interp1",
            "wrap_progress", "project_window_kernel", "query_one_kernel", "query_batch_kernel", "paper_track",
            "circle_track", "figure8_track", "square_track", "crab_track", "random_track"]

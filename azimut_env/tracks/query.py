@@ -5,8 +5,8 @@ The tracks enter as :meth:`~azimut_env.tracks.Track.packed` arrays (6, m) = rows
 One kernel: :func:`query_one_kernel` for one robot (:meth:`Track.query`), and
 :func:`query_batch_kernel`, its loop over robots, for N robots on one track
 (:meth:`Track.query_batch`) or on N tracks (:func:`query_tracks`).
-The scalar helpers :func:`interp1`, :func:`wrap_pi` and :func:`wrap_progress` are public for other
-compiled code that reads packed tracks (``control.follow.batch``).
+The scalar helpers :func:`interp1`, :func:`np_interp1`, :func:`wrap_pi` and :func:`wrap_progress` are
+public for other compiled code that reads packed tracks (``control.follow.batch``).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "wrap_progress", "project_window_kernel", "query_one_kernel",
-           "query_batch_kernel", "query_tracks"]
+__all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "np_interp1", "wrap_progress", "project_window_kernel",
+           "query_one_kernel", "query_batch_kernel", "query_tracks"]
 
 
 class TQ(IntEnum):
@@ -48,6 +48,31 @@ def interp1(S, col, s):
     j = np.searchsorted(S, s, side="right") - 1
     t = (s - S[j]) / (S[j + 1] - S[j])
     return col[j] + t * (col[j + 1] - col[j])
+
+
+@njit(cache=True)
+def np_interp1(S, col, x):
+    """``np.interp(x, S, col)`` for a scalar x on strictly increasing S, with NumPy's own
+    arithmetic (``slope · (x − S[j]) + col[j]``, ``col[j]`` at a sample; :func:`interp1` rounds
+    differently), so compiled code that must equal a NumPy reference bit for bit reads tracks with
+    it (``control.follow.batch``)."""
+    m = S.shape[0]
+    if math.isnan(x):
+        return x
+    if x <= S[0]:
+        return col[0]
+    if x >= S[m - 1]:
+        return col[m - 1]
+    j = np.searchsorted(S, x, side="right") - 1
+    if S[j] == x:
+        return col[j]
+    slope = (col[j + 1] - col[j]) / (S[j + 1] - S[j])
+    y = slope * (x - S[j]) + col[j]
+    if math.isnan(y):  # NumPy's fallbacks: from the other end of the interval, then the flat value
+        y = slope * (x - S[j + 1]) + col[j + 1]
+        if math.isnan(y) and col[j] == col[j + 1]:
+            y = col[j]
+    return y
 
 
 @njit(cache=True)

@@ -307,7 +307,9 @@ class Track:
             offsets = np.zeros(idx.size)
         d = self.xy[wrapped] - pose[:2]
         dth = wrap_angle(self.heading[wrapped] - pose[2])
-        cost = np.einsum("ij,ij->i", d, d) + (self.progress_radius * dth) ** 2
+        # sums written out, not einsum or BLAS dot products, whose SIMD or FMA kernels round
+        # differently on some CPUs: the compiled follower (control.follow.batch) repeats these bits
+        cost = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + (self.progress_radius * dth) ** 2
         j = int(np.argmin(cost))
         i = int(wrapped[j])
         s = self.s[i] + offsets[j] + base
@@ -315,11 +317,11 @@ class Track:
         i2 = min(i, m - 2)
         seg = np.array([self.xy[i2 + 1, 0] - self.xy[i2, 0], self.xy[i2 + 1, 1] - self.xy[i2, 1],
                         self.progress_radius * (self.heading[i2 + 1] - self.heading[i2])])
-        seg_len = float(np.linalg.norm(seg))
+        seg_len = math.sqrt(seg[0] * seg[0] + seg[1] * seg[1] + seg[2] * seg[2])
         if seg_len > 0:
             rel = np.array([pose[0] - self.xy[i, 0], pose[1] - self.xy[i, 1],
                             self.progress_radius * float(wrap_angle(pose[2] - self.heading[i]))])
-            step = float(rel @ seg) / seg_len
+            step = float(rel[0] * seg[0] + rel[1] * seg[1] + rel[2] * seg[2]) / seg_len
             s += float(np.clip(step, -seg_len, seg_len))
         if not self.closed:
             s = float(np.clip(s, 0.0, self.length))

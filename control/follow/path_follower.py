@@ -296,9 +296,12 @@ class PathFollower:
         self._max_progress = s if self._max_progress is None else max(self._max_progress, s)
         if moved and not finished:
             lim = cfg.max_integral / cfg.k_int if cfg.k_int > 0 else 0.0
-            self._integral = float(np.clip(self._integral + float(err @ normal) * self.dt, -lim, lim))
+            # the dot product and norm written out (a BLAS call may round differently on some
+            # CPUs): the compiled follower, control.follow.batch, computes these same bits
+            e_n = float(err[0] * normal[0] + err[1] * normal[1])
+            self._integral = float(np.clip(self._integral + e_n * self.dt, -lim, lim))
         corr = cfg.k_pos * err + cfg.k_int * self._integral * normal
-        norm = float(np.linalg.norm(corr))
+        norm = math.sqrt(corr[0] * corr[0] + corr[1] * corr[1])
         if norm > cfg.max_correction:
             corr *= cfg.max_correction / norm
         w_corr = float(np.clip(cfg.k_heading * float(wrap_angle(th_r - pose[2])),

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from azimut_env.tracks import Track, scenario_track
+from azimut_env.tracks import Track
 from control.episode import EpisodeLog, scenario_metrics
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollower
@@ -21,9 +21,13 @@ def test_follower_holds_exactly_zero_for_the_duration():
     assert not f.step(np.array([0.995, 0.0, 0.0])).holding  # once, then on
 
 
-def test_batch_follower_refuses_holds():
-    with pytest.raises(ValueError, match="holds"):
-        BatchFollower(1).reset(0, scenario_track("hold"), 0.0)
+def test_batch_follower_holds_as_the_follower():
+    tr = Track("h", [[0, 0], [2, 0]], 0.0, 0.5, holds=((1.0, 0.5),))
+    batch = BatchFollower(1, dt=0.02)
+    batch.reset(0, tr, 0.0)
+    outs = [batch.step_all(np.array([[0.995, 0.0, 0.0]])) for _ in range(26)]
+    assert all(o.holding[0] and np.all(o.twist == 0.0) and o.mu[0] == 0.0 for o in outs[:25])
+    assert not outs[25].holding[0]
 
 
 def _log(beta_cmd, phidot, beta_true=None, hold=None, pose=None, dt=0.02):
