@@ -22,6 +22,10 @@ whose worker dies is retried ``retries`` times (default once), then recorded as 
 stopping the others. Each task limits its own threads (numba, torch, OpenMP/MKL/OpenBLAS) so
 that ``workers`` processes on as many cores do not oversubscribe them.
 
+Tasks that name a ``batch`` function (:class:`~jobs.campaign.task.Task`) and share its ``group``
+run together, as one call per worker (``azimut eval``: a controller's episodes as one vector env);
+each still gets its own record, and one that fails is retried alone.
+
 A task is a :class:`~jobs.campaign.task.Task`; its records, checked when read back (a record that
 is not valid is recomputed), are :class:`~jobs.campaign.store.TaskStore`'s. Statistics over seeds
 (:func:`bootstrap_ci`, :func:`summarize`) are in :mod:`jobs.campaign.statistics`. All are
@@ -111,6 +115,52 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
     return rec
 
 
+def _execute_unit(fn: str, batch: str, keys: list, extras: list, threads: int | None) -> list[dict]:
+    """Run a unit of tasks (:func:`_units`) in the current process: one task through ``fn``, or
+    several through their ``batch`` function in one call (each record then carries the batch's
+    wall and CPU time and its size, ``batch``). A batch that raises fails all its tasks (the
+    executors retry them one by one)."""
+    if len(keys) == 1 or not batch:
+        return [_execute(fn, key, extra, threads) for key, extra in zip(keys, extras)]
+    limit_threads(threads)
+    start, cpu = time.perf_counter(), time.process_time()
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    try:
+        results = resolve(batch)([dict(k) for k in keys], [dict(e) for e in extras])
+        if not isinstance(results, list) or len(results) != len(keys) or not all(isinstance(r, dict)
+                                                                                  for r in results):
+            raise TypeError(f"batch function {batch} must return a list of {len(keys)} dicts")
+        recs = [{"status": "ok", "result": r} for r in results]
+    except Exception as exc:  # noqa: BLE001 - as _execute: data, retried task by task
+        recs = [{"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+                for _ in keys]
+    for rec in recs:
+        rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker,
+                   batch=len(keys))
+    return recs
+
+
+def _units(todo: Sequence[Task], workers: int | None) -> list[list[Task]]:
+    """The tasks to run, grouped: tasks with the same ``batch`` function and ``group`` form one
+    unit (split into ``workers`` units of near-equal size, so that parallel executors still have
+    one per worker; ``workers`` None: no batches), the others one each; longest units first."""
+    groups: dict[tuple[str, str, str], list[Task]] = {}
+    units: list[list[Task]] = []
+    for task in todo:
+        if task.batch and workers is not None:
+            groups.setdefault((task.fn, task.batch, task.group), []).append(task)
+        else:
+            units.append([task])
+    for members in groups.values():
+        parts = min(max(1, workers), len(members))
+        units += [members[k::parts] for k in range(parts)]
+    return sorted(units, key=lambda u: -sum(t.cost for t in u))
+
+
+def _unit_args(unit: list[Task]) -> tuple:
+    return unit[0].fn, unit[0].batch, [dict(t.key) for t in unit], [dict(t.extra) for t in unit]
+
+
 #: how often a worker process checks that the campaign's driver is still alive [s]
 PARENT_POLL_S = 0.5
 
@@ -176,16 +226,18 @@ def _finish(task: Task, rec: dict, attempts: int) -> dict:
     return out
 
 
-def _serial(todo, threads, retries):
-    for task in todo:
-        for attempt in range(1, retries + 2):
-            rec = _execute(task.fn, task.key, task.extra, threads)
-            if rec["status"] == "ok" or attempt == retries + 1:
+def _serial(units, threads, retries):
+    pending = deque((unit, 1) for unit in units)
+    while pending:
+        unit, attempt = pending.popleft()
+        for task, rec in zip(unit, _execute_unit(*_unit_args(unit), threads)):
+            if rec["status"] != "ok" and attempt <= retries:
+                pending.appendleft(([task], attempt + 1))  # a failed task again, alone
+            else:
                 yield task, rec, attempt
-                break
 
 
-def _process(todo, workers, threads, retries):
+def _process(units, workers, threads, retries):
     ctx = multiprocessing.get_context("spawn")
 
     def new_slot():
@@ -193,8 +245,8 @@ def _process(todo, workers, threads, retries):
                                       initargs=(threads, os.getpid()))
 
     slots = [None] * workers
-    pending = deque((task, 1) for task in todo)
-    running: dict[cf.Future, tuple[int, Task, int]] = {}
+    pending = deque((unit, 1) for unit in units)
+    running: dict[cf.Future, tuple[int, list[Task], int]] = {}
     try:
         while pending or running:
             for i in range(workers):
@@ -204,22 +256,23 @@ def _process(todo, workers, threads, retries):
                     continue
                 if slots[i] is None:
                     slots[i] = new_slot()
-                task, attempt = pending.popleft()
-                fut = slots[i].submit(_execute, task.fn, dict(task.key), dict(task.extra), threads)
-                running[fut] = (i, task, attempt)
+                unit, attempt = pending.popleft()
+                fut = slots[i].submit(_execute_unit, *_unit_args(unit), threads)
+                running[fut] = (i, unit, attempt)
             done, _ = cf.wait(list(running), return_when=cf.FIRST_COMPLETED)
             for fut in done:
-                i, task, attempt = running.pop(fut)
+                i, unit, attempt = running.pop(fut)
                 try:
-                    rec = fut.result()
+                    recs = fut.result()
                 except Exception as exc:  # noqa: BLE001 - the worker died (BrokenProcessPool) or could not pickle
-                    rec = {"status": "failed", "error": f"worker lost: {type(exc).__name__}: {exc}"}
+                    recs = [{"status": "failed", "error": f"worker lost: {type(exc).__name__}: {exc}"} for _ in unit]
                     slots[i].shutdown(wait=False, cancel_futures=True)
                     slots[i] = None
-                if rec["status"] != "ok" and attempt <= retries:
-                    pending.appendleft((task, attempt + 1))
-                else:
-                    yield task, rec, attempt
+                for task, rec in zip(unit, recs):
+                    if rec["status"] != "ok" and attempt <= retries:
+                        pending.appendleft(([task], attempt + 1))
+                    else:
+                        yield task, rec, attempt
     finally:
         for ex in slots:
             if ex is not None:
@@ -241,7 +294,7 @@ def _local_import_path() -> str:
     return os.pathsep.join(out)
 
 
-def _ray(todo, workers, threads, retries, ray_address):
+def _ray(units, workers, threads, retries, ray_address):
     import logging
 
     import ray
@@ -262,27 +315,28 @@ def _ray(todo, workers, threads, retries, ray_address):
     env = thread_env(threads) if threads else {}
     if not ray_address:
         env["PYTHONPATH"] = _local_import_path()
-    remote = ray.remote(_execute).options(num_cpus=1, max_retries=0, runtime_env={"env_vars": env})
+    remote = ray.remote(_execute_unit).options(num_cpus=1, max_retries=0, runtime_env={"env_vars": env})
     limit = workers if not ray_address or workers > 1 else max(1, int(ray.cluster_resources().get("CPU", 1)))
-    pending = deque((task, 1) for task in todo)
-    running: dict[Any, tuple[Task, int]] = {}
+    pending = deque((unit, 1) for unit in units)
+    running: dict[Any, tuple[list[Task], int]] = {}
     try:
         while pending or running:
             while pending and len(running) < limit:
-                task, attempt = pending.popleft()
-                running[remote.remote(task.fn, dict(task.key), dict(task.extra), threads)] = (task, attempt)
+                unit, attempt = pending.popleft()
+                running[remote.remote(*_unit_args(unit), threads)] = (unit, attempt)
             done, _ = ray.wait(list(running), num_returns=1)
             for ref in done:
-                task, attempt = running.pop(ref)
+                unit, attempt = running.pop(ref)
                 try:
-                    rec = ray.get(ref)
+                    recs = ray.get(ref)
                 except ray.exceptions.RayError as exc:  # worker crashed, node lost, object lost
-                    rec = {"status": "failed",
-                           "error": f"worker lost: {type(exc).__name__}: {str(exc).splitlines()[0]}"}
-                if rec["status"] != "ok" and attempt <= retries:
-                    pending.appendleft((task, attempt + 1))
-                else:
-                    yield task, rec, attempt
+                    recs = [{"status": "failed",
+                             "error": f"worker lost: {type(exc).__name__}: {str(exc).splitlines()[0]}"} for _ in unit]
+                for task, rec in zip(unit, recs):
+                    if rec["status"] != "ok" and attempt <= retries:
+                        pending.appendleft(([task], attempt + 1))
+                    else:
+                        yield task, rec, attempt
     finally:
         for ref in running:
             ray.cancel(ref, force=True)
@@ -332,13 +386,16 @@ def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, ex
         if rec is not None and rec.get("status") == "ok":
             records[task.id] = rec
     todo = sorted((t for t in tasks if t.id not in records), key=lambda t: -t.cost)  # longest first
+    # batchable tasks together, in as many units as workers (a cluster of unknown size: none)
+    units = _units(todo, 1 if executor == "serial" else None if executor == "ray" and ray_address and workers <= 1
+                   else workers)
     total, done = len(tasks), len(records)
     if executor == "serial":
-        stream = _serial(todo, threads, retries)
+        stream = _serial(units, threads, retries)
     elif executor == "process":
-        stream = _process(todo, workers, threads, retries)
+        stream = _process(units, workers, threads, retries)
     else:
-        stream = _ray(todo, workers, threads, retries, ray_address)
+        stream = _ray(units, workers, threads, retries, ray_address)
     try:
         for task, rec, attempts in stream:
             rec = _finish(task, rec, attempts)

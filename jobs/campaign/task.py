@@ -38,6 +38,11 @@ class Task:
             ``check(result, key)`` raising ``ValueError``/``TypeError``/``KeyError`` when the
             result is not what the campaign reads (a saved record that fails it is recomputed on
             resume); empty: only the record's envelope is checked (:meth:`TaskStore.load`).
+        batch: ``"package.module:function"`` that runs several tasks of the same ``fn`` and
+            ``group`` at once, ``batch(keys, extras) -> [result, ...]`` (one per key, in order),
+            each result what ``fn(**key, **extra)`` returns (``azimut eval``: the episodes of one
+            controller stepped as one vector env); empty: the task runs alone. Not part of the id.
+        group: tasks with the same ``batch`` and ``group`` may run together (no effect on results).
     """
 
     fn: str
@@ -46,10 +51,14 @@ class Task:
     label: str = ""
     cost: float = 1.0
     check: str = ""
+    batch: str = ""
+    group: str = ""
 
     def __post_init__(self):
         if not isinstance(self.fn, str) or ":" not in self.fn:
             raise ValueError(f"Task.fn must be 'module:function', got {self.fn!r}")
+        if not isinstance(self.batch, str) or (self.batch and ":" not in self.batch):
+            raise ValueError(f"Task.batch must be '' or 'module:function', got {self.batch!r}")
         try:
             canonical(dict(self.key))
         except TypeError as exc:

@@ -4,7 +4,9 @@
 An episode is defined by its key, ``(controller, track, seed, speed_scale, domain_randomization,
 kicks, max_time)``: the env is reset with ``seed`` (sensor and start noise, the ``random``
 track, domain randomisation) and the kick, if any, is drawn from ``seed`` too, so an episode's
-metrics are the same whichever executor, worker or position in the queue runs it.
+metrics are the same whichever executor, worker or position in the queue runs it. The episodes of
+one controller with the same options (all but track and seed) run as one batch on a vector env
+(:func:`episode_batch`, one per worker), with the metrics each gets alone, bit for bit.
 
 The report folder holds ``report.md`` (the summary table, mean and 95% bootstrap interval over
 seeds per controller × track × metric; then per track the plots that overlay the controllers,
@@ -29,17 +31,18 @@ import numpy as np
 from azimut_env.task.core import nominal_duration
 from azimut_env.tracks import SCENARIO_NAMES, named_track
 from control.episode import episode_metrics
-from control.rollout import run_episode
+from control.rollout import run_episode, run_episodes
 from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
-from jobs.campaign.task import file_digest
+from jobs.campaign.task import canonical, file_digest
 from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.outputs import episode_label, output_layout
 from jobs.eval.plots import comparison_plots, write_plots
 from jobs.eval.report import SCENARIO_COLUMNS, SUMMARY_COLUMNS, limits_text, write_campaign_report
 from jobs.records import provenance
 
-__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "draw_kick",
+__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "episode_batch",
+           "draw_kick",
            "episode_tasks", "run_eval_campaign", "write_campaign_report", "comparison_plots"]
 
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
@@ -63,16 +66,10 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     return {"step": max(step, 1), "wheels": wheels, "impulse": impulse}
 
 
-def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
-                 domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
-                 return_log: bool = False, robot: str | None = None, robot_file: str | None = None,
-                 inputs: dict | None = None) -> dict:
-    """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
-    ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
-    ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
-    name) or ``robot_file`` (a description file) pick the robot (default: azimut3). ``inputs``:
-    the content digests of the files the episode reads (:func:`episode_tasks`), in its key so
-    that a changed file is a new episode; not read here."""
+def _episode_setup(track: str, seed: int, speed_scale: float, domain_randomization: float, kicks: bool,
+                   max_time: float | None, robot: str | None,
+                   robot_file: str | None) -> tuple[dict | None, dict | None]:
+    """An episode's kick (None: none) and env keyword arguments (None: the defaults)."""
     from jobs.args import robot_env_kwargs
 
     robot_kw = robot_env_kwargs(robot, robot_file)
@@ -82,8 +79,11 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
     if robot_kw:
         env_kwargs = {**(env_kwargs or {}), **robot_kw}
-    log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
-                      env_kwargs=env_kwargs)
+    return kick, env_kwargs
+
+
+def _episode_result(log, track: str, seed: int, kick: dict | None, return_log: bool) -> dict:
+    """The campaign result of one episode's log: ``{"metrics": row}`` (and the log)."""
     row = episode_metrics(log)
     if track in SCENARIO_NAMES:
         from control.episode import scenario_metrics
@@ -97,6 +97,48 @@ def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.
     if return_log:
         out["artifacts"] = {"log": log}
     return out
+
+
+def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
+                 domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
+                 return_log: bool = False, robot: str | None = None, robot_file: str | None = None,
+                 inputs: dict | None = None) -> dict:
+    """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
+    ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
+    ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
+    name) or ``robot_file`` (a description file) pick the robot (default: azimut3). ``inputs``:
+    the content digests of the files the episode reads (:func:`episode_tasks`), in its key so
+    that a changed file is a new episode; not read here."""
+    kick, env_kwargs = _episode_setup(track, seed, speed_scale, domain_randomization, kicks, max_time, robot,
+                                      robot_file)
+    log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
+                      env_kwargs=env_kwargs)
+    return _episode_result(log, track, seed, kick, return_log)
+
+
+#: the key entries that every episode of one batch shares (all but the track and the seed)
+_SHARED = ("controller", "speed_scale", "domain_randomization", "kicks", "max_time", "robot", "robot_file", "inputs")
+
+
+def episode_batch(keys: list[dict], extras: list[dict]) -> list[dict]:
+    """Several episodes of one controller (keys that differ only in ``track`` and ``seed``), stepped
+    as one batch (:func:`control.rollout.run_episodes`, one vector env): each result is the one
+    :func:`episode_task` returns for its key, bit for bit (the robots of a vector env do not
+    interact, and the built-in controllers treat their robots independently)."""
+    shared = {name: keys[0].get(name) for name in _SHARED}
+    if any({name: k.get(name) for name in _SHARED} != shared for k in keys):
+        raise ValueError("episode_batch: the episodes of a batch must differ only in track and seed")
+    opts = {name: shared[name] for name in ("speed_scale", "domain_randomization", "kicks", "max_time", "robot",
+                                             "robot_file")}
+    opts["speed_scale"] = 1.0 if opts["speed_scale"] is None else opts["speed_scale"]
+    opts["domain_randomization"] = opts["domain_randomization"] or 0.0
+    opts["kicks"] = bool(opts["kicks"])
+    setups = [_episode_setup(k["track"], int(k["seed"]), **opts) for k in keys]
+    logs = run_episodes(build_controller(shared["controller"], opts["speed_scale"]), [k["track"] for k in keys],
+                        [int(k["seed"]) for k in keys], kicks=[kick for kick, _ in setups],
+                        max_time=opts["max_time"], env_kwargs=setups[0][1])
+    return [_episode_result(log, k["track"], int(k["seed"]), kick, bool(e.get("return_log", False)))
+            for log, k, e, (kick, _) in zip(logs, keys, extras, setups)]
 
 
 def check_episode_result(result: Any, key: dict) -> None:
@@ -162,10 +204,12 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                     key["inputs"] = {**inputs[controller], **robot_digest}
                 cost = min(nominal, max_time) if max_time else nominal
                 cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
+                group = {k: v for k, v in key.items() if k not in ("track", "seed")}
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
                                   label=episode_label(names.get(controller, controller), track, seed), cost=cost,
-                                  check="jobs.eval.campaign:check_episode_result"))
+                                  check="jobs.eval.campaign:check_episode_result",
+                                  batch="jobs.eval.campaign:episode_batch", group=canonical(group)))
     return tasks
 
 
@@ -313,7 +357,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                    f"int. force {m['mean_internal_force_N']:.2f} N, "
                    f"qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
                    f"limit-exceeded steps {m['limit_violation_steps']}, stop+reconfig {m['reconfigure_events']}, "
-                   f"{rec['elapsed_s']:.1f} s")
+                   f"{rec['elapsed_s']:.1f} s" + (f" (a batch of {rec['batch']})" if rec.get("batch") else ""))
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
         name = names.get(k["controller"], k["controller"])

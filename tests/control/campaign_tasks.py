@@ -35,3 +35,20 @@ def raise_once(seed: int, marker_dir: str) -> dict:
         marker.write_text("x")
         raise RuntimeError("first attempt fails")
     return seeded_sum(seed)
+
+
+def seeded_sum_batch(keys: list[dict], extras: list[dict]) -> list[dict]:
+    """:func:`seeded_sum` of several keys in one call (a campaign batch); records the batch's
+    seeds in ``log_dir`` (the first extra's) as ``batch-<seeds>``; a key with ``fail_batch``
+    makes the whole batch raise (its tasks are then retried alone)."""
+    log_dir = extras[0].get("log_dir")
+    if log_dir is not None:
+        (Path(log_dir) / ("batch-" + "-".join(str(k["seed"]) for k in keys))).write_text("x")
+    if any(k.get("fail_batch") for k in keys):
+        raise RuntimeError("this batch fails")
+    return [seeded_sum(k["seed"], k.get("n", 1000)) for k in keys]
+
+
+def seeded_sum_or_fail(seed: int, n: int = 1000, fail_batch: bool = False, log_dir: str | None = None) -> dict:
+    """:func:`seeded_sum`, alone (``fail_batch`` only fails batches)."""
+    return seeded_sum(seed, n, log_dir)

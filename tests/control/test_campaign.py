@@ -119,6 +119,64 @@ def test_episode_campaign_equals_serial(executor, tmp_path):
     assert len({r["worker"] for r in parallel}) >= 1
 
 
+def _batch_tasks(seeds, log_dir, group="g", **key):
+    return [Task("campaign_tasks:seeded_sum_or_fail", {"seed": s, **key}, extra={"log_dir": str(log_dir)},
+                 label=f"s{s}", batch="campaign_tasks:seeded_sum_batch", group=group) for s in seeds]
+
+
+@pytest.mark.parametrize("executor_name", ["serial", "process"])
+def test_batched_tasks_run_together_with_the_results_they_get_alone(executor_name, tmp_path):
+    """Tasks of one batch group run in one call per worker; each gets its own record, equal to
+    the task run alone; other groups and plain tasks run apart."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    tasks = _batch_tasks([1, 2, 3, 4], logs) + _batch_tasks([5, 6], logs, group="h") + _sum_tasks([7])
+    workers = 1 if executor_name == "serial" else 2
+    recs = run_tasks(tasks, tmp_path / "store", executor=executor_name, workers=workers)
+    alone = run_tasks(_sum_tasks([1, 2, 3, 4, 5, 6, 7]), tmp_path / "alone")
+    assert [r["result"] for r in recs] == [r["result"] for r in alone]
+    batches = sorted(p.name for p in logs.glob("batch-*"))
+    if executor_name == "serial":
+        assert batches == ["batch-1-2-3-4", "batch-5-6"]
+        assert [r["batch"] for r in recs[:6]] == [4, 4, 4, 4, 2, 2]
+    else:  # one unit per worker: a unit of one task runs alone
+        assert batches == ["batch-1-3", "batch-2-4"]
+        assert [r.get("batch") for r in recs[:6]] == [2, 2, 2, 2, None, None]
+    assert "batch" not in recs[6]
+
+
+def test_a_failed_batch_is_retried_task_by_task(tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    tasks = _batch_tasks([1, 2], logs, fail_batch=True)
+    recs = run_tasks(tasks, tmp_path / "store", retries=1)
+    assert [r["status"] for r in recs] == ["ok", "ok"] and [r["attempts"] for r in recs] == [2, 2]
+    assert [r["result"] for r in recs] == [r["result"] for r in run_tasks(_sum_tasks([1, 2]), tmp_path / "alone")]
+    failing = run_tasks(tasks, tmp_path / "store2", retries=0)
+    assert [r["status"] for r in failing] == ["failed", "failed"] and "this batch fails" in failing[0]["error"]
+
+
+def test_eval_batches_give_each_episode_its_metrics_alone_bit_for_bit(tmp_path):
+    """azimut eval's episodes of one controller stepped as one vector env (episode_batch) give
+    each the per-episode metrics of its episode run alone (episode_task): kicks, domain
+    randomisation, a random track, scenarios, another robot."""
+    from jobs.eval.campaign import episode_batch, episode_task
+
+    cases = [episode_tasks(["icr", "twist"], ["crab", "random", "square"], [0, 3], max_time=3.0, kicks=True,
+                           domain_randomization=0.2),
+             episode_tasks(["twist"], ["hold", "reverse"], [1], max_time=3.0, robot="swerve")]
+    for tasks in cases:
+        for controller in {t.key["controller"] for t in tasks}:
+            group = [t for t in tasks if t.key["controller"] == controller]
+            batch = episode_batch([dict(t.key) for t in group], [dict(t.extra) for t in group])
+            alone = [episode_task(**t.key, **t.extra) for t in group]
+            assert [json.dumps(r["metrics"], sort_keys=True) for r in batch] == \
+                   [json.dumps(r["metrics"], sort_keys=True) for r in alone]
+    with pytest.raises(ValueError, match="differ only in track and seed"):
+        mixed = episode_tasks(["icr", "twist"], ["crab"], [0])
+        episode_batch([dict(t.key) for t in mixed], [{} for _ in mixed])
+
+
 def test_a_killed_worker_is_retried_and_a_dead_task_does_not_sink_the_others(executor, tmp_path):
     tasks = ([Task("campaign_tasks:crash_once", {"seed": 1}, extra={"marker_dir": str(tmp_path)}),
               Task("campaign_tasks:crash_once", {"seed": 2, "always": True}, extra={"marker_dir": str(tmp_path)})]
