@@ -77,7 +77,15 @@ from numba import njit
 from azimut_env.physics.actuators import dc_torque_limits_kernel, steer_actuator_kernel, wheel_spin_step_kernel
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, JS, MS, RS, WP, WS
-from azimut_env.physics.modules import FRICTION_PASSES, coupled_apply, coupled_factor, coupling_row, friction_impulse
+from azimut_env.physics.modules import (
+    FRICTION_PASSES,
+    coupled_apply,
+    coupled_factor,
+    coupled_joint_responses,
+    coupling_row,
+    friction_impulse_within,
+    stribeck_torque,
+)
 from azimut_env.physics.tire import TS, tire_step_kernel
 
 __all__ = ["step_kernel", "summary_kernel"]
@@ -119,6 +127,12 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
     resp = np.zeros(n)
     unit = np.zeros(n)
     j_fric = np.zeros(n)
+    # per joint, fixed over a substep's friction passes: bound τ_f dt, inverse effective inertia,
+    # and (coupled modules) the response of the body (3) and of every module (n) to its impulse pair
+    fric_lim = np.zeros(n)
+    fric_g = np.ones(n)
+    fric_body = np.zeros((n, 3))
+    fric_joint = np.zeros((n, n))
     for i in range(n_robots):
         mass = body[i, BODY.MASS]
         inertia = body[i, BODY.MOMENT]
@@ -224,7 +238,7 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 cy += mc * wm * wm * sg
                 cth += mc * wm * wm * cross
                 q_gam[k] = tau_m - mc * w * w * cross
-                coupling_row(gam, axw, ayw, p[WP.M_MOD], p[WP.COM], B, k)
+                coupling_row(cg, sg, axw, ayw, mc, B, k)
                 omega_new[k] = wm
             # chassis velocities (symplectic Euler: positions move with the new velocities)
             if coupled:
@@ -243,32 +257,40 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
             ay_r = (-s * fx_sum + c * fy_sum) / mass
             # steering joint friction: velocity-level impulses, projected Gauss–Seidel (modules.py)
             if friction:
+                if coupled:
+                    coupled_joint_responses(B, D, S_inv, fric_body, fric_joint)
                 for k in range(n):
                     j_fric[k] = 0.0
+                    if wp[i, k, WP.FRIC_S] <= 0.0:
+                        continue
+                    fric_lim[k] = stribeck_torque(abs(js[i, k, JS.OMEGA] - w0), wp[i, k, WP.FRIC_C],
+                                                  wp[i, k, WP.FRIC_S], wp[i, k, WP.STRIBECK]) * dt
+                    if coupled:
+                        fric_g[k] = fric_joint[k, k] - fric_body[k, 2]
+                    else:
+                        fric_g[k] = 1.0 / wp[i, k, WP.I_MOD] + 1.0 / inertia
                 for _ in range(FRICTION_PASSES):
+                    moved = False
                     for k in range(n):
                         if wp[i, k, WP.FRIC_S] <= 0.0:
                             continue
                         rel = omega_new[k] - w
-                        rel0 = js[i, k, JS.OMEGA] - w0
+                        j = friction_impulse_within(rel, fric_g[k], j_fric[k], fric_lim[k]) - j_fric[k]
+                        if j == 0.0:
+                            continue
+                        moved = True
                         if coupled:
-                            unit[k] = 1.0
-                            r0, r1, r2 = coupled_apply(B, D, S_inv, 0.0, 0.0, -1.0, unit, resp)
-                            unit[k] = 0.0
-                            j = friction_impulse(rel, rel0, resp[k] - r2, j_fric[k], wp[i, k, WP.FRIC_C],
-                                                 wp[i, k, WP.FRIC_S], wp[i, k, WP.STRIBECK], dt) - j_fric[k]
-                            vx += j * r0
-                            vy += j * r1
-                            w += j * r2
+                            vx += j * fric_body[k, 0]
+                            vy += j * fric_body[k, 1]
+                            w += j * fric_body[k, 2]
                             for kk in range(n):
-                                omega_new[kk] += j * resp[kk]
+                                omega_new[kk] += j * fric_joint[k, kk]
                         else:
-                            i_m = wp[i, k, WP.I_MOD]
-                            j = friction_impulse(rel, rel0, 1.0 / i_m + 1.0 / inertia, j_fric[k], wp[i, k, WP.FRIC_C],
-                                                 wp[i, k, WP.FRIC_S], wp[i, k, WP.STRIBECK], dt) - j_fric[k]
-                            omega_new[k] += j / i_m
+                            omega_new[k] += j / wp[i, k, WP.I_MOD]
                             w -= j / inertia
                         j_fric[k] += j
+                    if not moved:  # a pass that moved nothing: the next ones would not either
+                        break
             # steering angles, exact hard stops by projection and a stop impulse
             for k in range(n):
                 i_m = wp[i, k, WP.I_MOD]

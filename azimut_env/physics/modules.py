@@ -29,7 +29,9 @@ The impulse opposes β̇' and never reverses it, so it cannot chatter, and it ne
 energy: ΔT = j β̇' + g j²/2 ≤ 0 for j β̇' ≤ 0, |j| ≤ |β̇'|/g. It has no stiffness: no bound on dt.
 The n joints share the chassis, so each joint's impulse moves the others' relative rates: the
 impulses are resolved by projected Gauss–Seidel (:data:`FRICTION_PASSES` passes over the joints,
-each updating its joint's total impulse within its bound; Erleben, "Velocity-based shock
+each updating its joint's total impulse within its bound, fewer when a pass changed no impulse;
+the bounds and, for coupled modules, each joint's impulse response are computed once per substep,
+:func:`coupled_joint_responses`; Erleben, "Velocity-based shock
 propagation for multibody dynamics animation", ACM Trans. Graphics 26(2), 2007, §3). Each update
 is a coordinate-descent step on the kinetic energy over the bounds, so none adds energy, and
 stuck joints stay stuck to round-off (one pass left a creep of j/I per substep).
@@ -72,8 +74,9 @@ from numba import njit
 from azimut_env.physics.layout import BODY, CS, JS, MS, WP
 from azimut_env.physics.tire import TS
 
-__all__ = ["FRICTION_PASSES", "stribeck_torque", "friction_impulse", "coupled_factor", "coupled_apply", "coupling_row",
-           "mass_matrix", "module_impulse_response", "mechanical_energy"]
+__all__ = ["FRICTION_PASSES", "stribeck_torque", "friction_impulse", "friction_impulse_within", "coupled_factor",
+           "coupled_apply", "coupled_joint_responses", "coupling_row", "mass_matrix", "module_impulse_response",
+           "mechanical_energy"]
 
 #: projected Gauss–Seidel passes over the steering joints' friction impulses per substep
 FRICTION_PASSES = 4
@@ -83,7 +86,12 @@ FRICTION_PASSES = 4
 def stribeck_torque(speed: float, coulomb: float, static: float, stribeck_speed: float) -> float:
     """τ_f = τ_c + (τ_s − τ_c) exp(−(ω/ω_s)²) [N·m] at the sliding speed ω = ``speed`` >= 0 [rad/s]."""
     x = speed / stribeck_speed
-    return coulomb + (static - coulomb) * math.exp(-x * x)
+    x2 = x * x
+    if x2 == 0.0:  # exp(−0) = 1 and exp(−x²) = 0 below the smallest subnormal: the same numbers, no call
+        return coulomb + (static - coulomb)
+    if x2 > 746.0:
+        return coulomb + (static - coulomb) * 0.0
+    return coulomb + (static - coulomb) * math.exp(-x2)
 
 
 @njit(cache=True, inline="always")
@@ -94,8 +102,15 @@ def friction_impulse(rel: float, rel_start: float, inv_inertia: float, applied: 
     the joint's relative rate ``rel`` [rad/s] (inverse effective inertia ``inv_inertia``
     [1/(kg·m²)]), ``applied − rel/g``, clipped to ±τ_f(|rel_start|) dt (``rel_start``: the rate at
     the start of the substep). Apply the difference to ``applied``. See the module docstring."""
+    return friction_impulse_within(rel, inv_inertia, applied,
+                                   stribeck_torque(abs(rel_start), coulomb, static, stribeck_speed) * dt)
+
+
+@njit(cache=True, inline="always")
+def friction_impulse_within(rel: float, inv_inertia: float, applied: float, lim: float) -> float:
+    """:func:`friction_impulse` with its bound ``lim`` = τ_f(|rel_start|) dt [N·m·s] given: the
+    substep computes the bound once per joint, not once per Gauss–Seidel pass (the same numbers)."""
     need = applied - rel / inv_inertia
-    lim = stribeck_torque(abs(rel_start), coulomb, static, stribeck_speed) * dt
     if need > lim:
         return lim
     if need < -lim:
@@ -104,11 +119,9 @@ def friction_impulse(rel: float, rel_start: float, inv_inertia: float, applied: 
 
 
 @njit(cache=True, inline="always")
-def coupling_row(gam: float, arm_x: float, arm_y: float, mass: float, com: float, out, k: int) -> None:
-    """B_k = m c (−sin γ, cos γ, w·u) into ``out[k]`` (the module's column of M_vγ, M_θγ)."""
-    mc = mass * com
-    cg = math.cos(gam)
-    sg = math.sin(gam)
+def coupling_row(cg: float, sg: float, arm_x: float, arm_y: float, mc: float, out, k: int) -> None:
+    """B_k = m c (−sin γ, cos γ, w·u) into ``out[k]`` (the module's column of M_vγ, M_θγ), from
+    cos γ, sin γ (the substep has them) and m c = ``mc``."""
     out[k, 0] = -mc * sg
     out[k, 1] = mc * cg
     out[k, 2] = mc * (arm_x * cg + arm_y * sg)
@@ -166,6 +179,28 @@ def coupled_apply(B, D, S_inv, z0: float, z1: float, z2: float, zg, out_g):
     for k in range(B.shape[0]):
         out_g[k] = (zg[k] - B[k, 0] * a0 - B[k, 1] * a1 - B[k, 2] * a2) / D[k]
     return a0, a1, a2
+
+
+@njit(cache=True, inline="always")
+def coupled_joint_responses(B, D, S_inv, body_out, joint_out) -> None:
+    """For each joint k, the response M⁻¹ z_k to its unit impulse pair z_k = (0, 0, −1, e_k) (+1
+    on module k, −1 on the chassis's rotation): the body part into ``body_out[k]`` (3,), the
+    modules' into ``joint_out[k]`` (n,). The same numbers as :func:`coupled_apply` on z_k, without
+    its zero terms (the friction's Gauss–Seidel passes reuse them over a substep)."""
+    n = B.shape[0]
+    for k in range(n):
+        f = 1.0 / D[k]
+        r0 = 0.0 - B[k, 0] * f
+        r1 = 0.0 - B[k, 1] * f
+        r2 = -1.0 - B[k, 2] * f
+        a0 = S_inv[0, 0] * r0 + S_inv[0, 1] * r1 + S_inv[0, 2] * r2
+        a1 = S_inv[1, 0] * r0 + S_inv[1, 1] * r1 + S_inv[1, 2] * r2
+        a2 = S_inv[2, 0] * r0 + S_inv[2, 1] * r1 + S_inv[2, 2] * r2
+        body_out[k, 0] = a0
+        body_out[k, 1] = a1
+        body_out[k, 2] = a2
+        for kk in range(n):
+            joint_out[k, kk] = ((1.0 if kk == k else 0.0) - B[kk, 0] * a0 - B[kk, 1] * a1 - B[kk, 2] * a2) / D[kk]
 
 
 def mass_matrix(mass: float, inertia: float, arm: np.ndarray, gam: np.ndarray, module_mass: np.ndarray,
