@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from azimut_env.imperfections import IMPERFECTION_PRESETS
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, robot_label
 from jobs.bench_speed import JOBS, check_baseline, load_average, reference_steps_per_s, run_baseline_bench
@@ -327,6 +328,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
     parser.add_argument("--episode-steps", type=arg_int(1, 100_000_000), default=6000,
                         help="vector env time limit; short values put (timed) autoresets in the loop")
+    parser.add_argument("--imperfections", default=None, metavar="NAME[,NAME...]",
+                        type=arg_choice_list(IMPERFECTION_PRESETS),
+                        help="the robot's imperfections (paper, ideal; default: the envs' rule); several: the vector "
+                             "env is timed with each in turn at every N, with the ratio to the first")
     parser.add_argument("--solver-iterations", type=arg_int(1, 10_000), default=20,
                         help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
     parser.add_argument("--reference", default="Pendulum-v1",
@@ -353,9 +358,10 @@ def check_args(args: argparse.Namespace) -> None:
         check_baseline(args.baseline)
     if not args.convergence:
         from azimut_env.physics.stability import check_substeps
-        from jobs.args import robot_params
+        from azimut_env.task.config import resolve_params
 
-        check_substeps(args.substeps, robot_params(args))
+        for kw in (_robot_kwargs(args, name) for name in args.imperfections or [None]):
+            check_substeps(args.substeps, resolve_params(None, None, 1.0, kw.get("robot"), kw.get("imperfections")))
     if args.reference:
         import gymnasium as gym
 
@@ -363,11 +369,14 @@ def check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"argument --reference: unknown Gymnasium env {args.reference!r} ('' to skip)")
 
 
-def _robot_kwargs(args: argparse.Namespace) -> dict:
-    """The env keyword arguments of ``--robot``/``--robot-file``."""
+def _robot_kwargs(args: argparse.Namespace, imperfections: str | None = None) -> dict:
+    """The env keyword arguments of ``--robot``/``--robot-file`` and ``imperfections`` (default: the
+    first of ``--imperfections``; none given: the envs' rule)."""
     from jobs.args import robot_env_kwargs
 
-    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
+    imperfections = imperfections or (getattr(args, "imperfections", None) or [None])[0]
+    kwargs = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
+    return {**kwargs, "imperfections": imperfections} if imperfections else kwargs
 
 
 def run_action_bench(args: argparse.Namespace) -> int:
@@ -437,16 +446,21 @@ def run(args: argparse.Namespace) -> int:
               f"{args.solver_iterations} solver iterations, IT estimation included; "
               f"~{args.vector_steps} robot-steps per N, "
               f"episodes of at most {args.episode_steps} steps (autoresets timed)")
-        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}")
+        presets = args.imperfections or [None]
+        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}" + ("  imperfections" if args.imperfections
+                                                                                 else ""))
         rows = []
         for N in args.num_envs:
-            v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
-                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
-                                 robot_kwargs=_robot_kwargs(args))
-            rows.append(v)
-            print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
-                  f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}",
-                  flush=True)
+            first = None
+            for name in presets:
+                v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
+                                     solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
+                                     robot_kwargs=_robot_kwargs(args, name))
+                first = first or v
+                rows.append(v)
+                tail = f"  {name} ({v['steps_per_s'] / first['steps_per_s']:.2f}x {presets[0]})" if name else ""
+                print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
+                      f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}{tail}", flush=True)
         print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
               "env above, same run; bar 40000, goal 80000 at N = 64)")
         mb = memory_per_robot(512, args.track, args.substeps)

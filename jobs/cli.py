@@ -24,8 +24,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench-estimators": ("jobs.bench_estimators",
                          "benchmark the ICR estimators on D1/D2/D3 (paper Table 1, Fig. 11-12)"),
     "bench-env": ("jobs.bench_env", "measure simulator throughput (steps/s) with a time breakdown"),
-    "sim-paper": ("jobs.sim_paper", "the paper's phenomenon: qua while moving under the ICR controller at three "
-                  "speeds, split into motor lag and compliance, with a stiff-steering counterfactual"),
+    "sim-paper": ("jobs.sim_paper", "the paper's phenomenon: the steering's departure from the constraining surface "
+                  "while moving under the ICR controller, with one counterfactual per cause (compliance, friction, "
+                  "quantisation, imperfections, motor lag)"),
     "record-d2": ("jobs.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
     "estimate": ("jobs.estimate.command", "estimate the ICR, the H state and odometry from a recorded robot log "
                  "(CSV, ROS 2 bag, WPILib .wpilog)"),

@@ -58,6 +58,9 @@ BAD = [
     # the new-user trial: substeps outside the stability budget, an empty list entry
     "sim-paper --substeps 1", "sim-paper --substeps 4", "bench-env --substeps 1 --num-envs 1 --steps 10",
     "bench-env --num-envs 1,,2", "bench-env --num-envs ,1",
+    # issue 19: the imperfections presets of bench-env, sim-paper's D2 sweep
+    "bench-env --imperfections real", "bench-env --imperfections paper,paper", "bench-env --imperfections ''",
+    "sim-paper --d2",
 ]
 
 

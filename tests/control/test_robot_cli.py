@@ -46,3 +46,28 @@ def test_eval_on_a_robot_file_and_a_scenario(tmp_path):
     assert row["track"] == "hold" and "peak_steer_rate" in row and "hold_steps" in row
     assert m["campaign"]["robot"] == f"file {robot}"
     assert "hold: steer" in (out / "report.md").read_text()
+
+
+def test_bench_env_times_each_imperfections_preset():
+    """``bench-env --imperfections ideal,paper``: the vector env is built with each preset in turn
+    (the first also for the single env), on top of --robot."""
+    import argparse
+
+    from azimut_env.imperfections import with_imperfections
+    from azimut_env.params import RobotParams
+    from azimut_env.vector_env import AzimutVectorEnv
+    from jobs.bench_env import _robot_kwargs, add_arguments, check_args
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--imperfections", "ideal,paper", "--reference", ""])
+    assert args.imperfections == ["ideal", "paper"]
+    check_args(args)
+    assert _robot_kwargs(args) == {"imperfections": "ideal"}
+    for name, expected in (("ideal", RobotParams()), ("paper", with_imperfections(RobotParams(), "paper"))):
+        venv = AzimutVectorEnv(num_envs=1, **_robot_kwargs(args, name))
+        assert venv.params == expected
+        venv.close()
+    swerve = argparse.Namespace(robot="swerve", robot_file=None, imperfections=None)
+    assert _robot_kwargs(swerve) == {"robot": "swerve"}  # no preset given: the envs' rule
+    assert _robot_kwargs(swerve, "paper") == {"robot": "swerve", "imperfections": "paper"}
