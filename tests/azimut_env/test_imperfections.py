@@ -232,3 +232,21 @@ def test_encoder_quantisation_step_sizes():
         w_q = 2 * math.pi / (cpr * 0.02)
         np.testing.assert_allclose(sensors.phidot / w_q, np.round(sensors.phidot / w_q), atol=1e-6)
         assert np.all(np.abs(sensors.phidot - (phi1 - phi0) / 0.02) <= w_q + 1e-9)
+
+
+def test_the_paper_robot_reads_its_encoders_on_their_grids():
+    """In the env (noise off, so that the quantisation shows alone): the steering and motor
+    angles in multiples of 2π/4096, the wheel speeds in multiples of 2π/(36,000 · T) (the "paper"
+    wheel encoders, counts per control period T)."""
+    quantised = SensorParams(steer_noise=0.0, motor_noise=0.0, wheel_speed_noise=0.0, wheel_cpr=36_000)
+    env = AzimutEnv(track="circle", imperfections="paper", sensors=quantised, control_period=0.02)
+    env.reset(seed=1)
+    q, w_q = 2 * math.pi / 4096, 2 * math.pi / (36_000 * 0.02)
+    seen = set()
+    for t in range(60):
+        env.step(_actions(t, 4))
+        task = env.unwrapped.task
+        for x, step in ((task.beta_m, q), (task.motor_m, q), (task.phidot_m, w_q)):
+            np.testing.assert_allclose(x / step, np.round(x / step), atol=1e-6)
+        seen.update(np.round(task.phidot_m[0] / w_q).astype(int).tolist())
+    assert len(seen) > 20  # the wheels turned at many speeds, each on the grid

@@ -306,3 +306,71 @@ def test_drive_params_are_validated():
         WheelParams(drive_model="ac")
     with pytest.raises(ValueError, match="drive_no_load_speed"):
         WheelParams(drive_no_load_speed=0.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(omega=st.floats(-100, 100), stall=st.floats(0.1, 200), w0=st.floats(0.5, 100), tmax=st.floats(0.1, 200))
+def test_dc_torque_range_is_the_torque_speed_line_clipped_at_the_current_limit(omega, stall, w0, tmax):
+    """τ_hi(ω) = min(τ_max, τ_stall (1 − ω/ω₀)) and τ_lo(ω) = max(−τ_max, −τ_stall (1 + ω/ω₀)) while
+    they bracket a torque (|ω| below the no-load speed); the range is odd in ω (τ_lo(ω) =
+    −τ_hi(−ω)). Its two ends: the stall point (ω = 0: τ_stall, or the current limit below it) and
+    the free-running point (ω = ω₀: no motoring torque left)."""
+    from azimut_env.physics.actuators import dc_torque_limits_kernel
+    lo, hi = dc_torque_limits_kernel(omega, stall, w0, tmax)
+    lo_m, hi_m = dc_torque_limits_kernel(-omega, stall, w0, tmax)
+    assert lo == pytest.approx(-hi_m, abs=1e-12) and hi == pytest.approx(-lo_m, abs=1e-12)
+    assert -tmax <= lo <= hi <= tmax
+    if abs(omega) < w0:
+        assert hi == pytest.approx(min(tmax, stall * (1 - omega / w0)), rel=1e-12)
+        assert lo == pytest.approx(max(-tmax, -stall * (1 + omega / w0)), rel=1e-12)
+    assert dc_torque_limits_kernel(0.0, stall, w0, tmax) == (-min(stall, tmax), min(stall, tmax))
+    assert dc_torque_limits_kernel(w0, stall, w0, tmax)[1] == 0.0
+
+
+def test_energy_never_gained_while_coasting_with_every_paper_imperfection():
+    """The whole "paper" preset at once (steering friction, offset modules, the DC drive line,
+    steering-axis offsets, radius errors, the softer spring): motors off, the robot rolling and
+    two modules kicked, the mechanical energy never rises from one control step to the next."""
+    from azimut_env.imperfections import with_imperfections
+    params = with_imperfections(RobotParams(), "paper")
+    assert params.steering.has_friction and params.wheel.drive_model == "dc"
+    phys = AzimutPhysics(params)
+    phys.reset_robot(0, twist=(0.8, 0.2, 0.5))
+    phys.set_motors_enabled(False)
+    phys.kick(0, [0, 2], 0.05)
+    e = [float(phys.energy()[0])]
+    for _ in range(300):
+        phys.step()
+        assert phys.check()[0].all()
+        e.append(float(phys.energy()[0]))
+    rise = np.diff(e)
+    assert np.all(rise <= 1e-9 * e[0]), f"energy rose by {rise.max():.3g} J"
+    assert e[-1] < 0.5 * e[0]
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 6))
+def test_joint_responses_are_coupled_apply_on_each_unit_impulse_pair(seed, n):
+    """The friction passes' precomputed responses (modules.coupled_joint_responses) are
+    :func:`coupled_apply` on z_k = (0, 0, −1, e_k), to the bit; and they are M⁻¹ z_k."""
+    from azimut_env.physics.modules import coupled_apply, coupled_factor, coupled_joint_responses, mass_matrix
+    rng = np.random.default_rng(seed)
+    mass, inertia = 27.0 + 4 * 1.876, 2.0
+    arm = rng.uniform(-0.4, 0.4, (n, 2))
+    gam = rng.uniform(-np.pi, np.pi, n)
+    m_mod, com = np.full(n, 1.876), rng.uniform(0.0, 0.08, n)
+    D = np.full(n, 0.0151) + m_mod * com ** 2
+    mc = m_mod * com
+    B = np.stack([-mc * np.sin(gam), mc * np.cos(gam), mc * (arm[:, 0] * np.cos(gam) + arm[:, 1] * np.sin(gam))], -1)
+    S_inv = np.zeros((3, 3))
+    coupled_factor(B, D, mass, inertia, S_inv)
+    body, joint = np.zeros((n, 3)), np.zeros((n, n))
+    coupled_joint_responses(B, D, S_inv, body, joint)
+    M = mass_matrix(mass, inertia, arm, gam, m_mod, com, D)
+    for k in range(n):
+        unit, resp = np.zeros(n), np.zeros(n)
+        unit[k] = 1.0
+        assert tuple(body[k]) == coupled_apply(B, D, S_inv, 0.0, 0.0, -1.0, unit, resp)
+        assert np.array_equal(joint[k], resp)
+        z = np.concatenate([[0.0, 0.0, -1.0], unit])
+        np.testing.assert_allclose(np.concatenate([body[k], joint[k]]), np.linalg.solve(M, z), rtol=1e-9, atol=1e-12)
