@@ -26,11 +26,34 @@ from estimation.it import ITParams
 from estimation.kinematics import steering_from_lambda
 from estimation.quality import quality
 
-__all__ = ["run_benchmark", "robustness_inputs", "add_arguments", "run"]
+__all__ = ["run_benchmark", "robustness_inputs", "order_stats", "FIG11_PAIRS", "add_arguments", "run"]
 
 METHOD_ORDER = ("IT", "IT+", "NE", "LS", "NS", "ORACLE")
 #: The paper's Table 1 (D3): (min %, mean %).
 PAPER_TABLE1 = {"IT": (32.47, 67.18), "NE": (15.56, 49.94), "LS": (12.04, 47.24), "NS": (12.21, 48.02)}
+
+
+#: The paper's Fig. 11 order on D2 (§4.1.1): IT gives "always the same or a better quality" than NS;
+#: NS ahead of LS, which "performs well only when the propulsion axes are not closely parallel".
+FIG11_PAIRS = (("IT", "NS"), ("NS", "LS"))
+#: qua [points of 100] below which two estimates count as equal (rounding of the same optimum)
+ORDER_TOL = 1e-9
+
+
+def order_stats(qua_a: np.ndarray, qua_b: np.ndarray, margin: float = 0.1, tol: float = ORDER_TOL) -> dict:
+    """How method a ranks against method b on the same points, from their qua (N,) [points of 100]:
+    ``differ`` (points where |a − b| > ``tol``), ``a_at_least_b`` (share of those where a ≥ b),
+    ``worst`` (min of a − b; negative where b was better), ``a_over_b_margin`` (share of all
+    points where a > b + ``margin``: the paper's "visible" separation, 0.1 point by default)."""
+    a = np.asarray(qua_a, dtype=np.float64)
+    b = np.asarray(qua_b, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 1 or a.size == 0:
+        raise ValueError(f"qua_a and qua_b must be non-empty (N,) arrays of one shape, got {a.shape} and {b.shape}")
+    diff = a - b
+    differ = np.abs(diff) > tol
+    return {"points": int(a.size), "differ": int(differ.sum()),
+            "a_at_least_b": float(np.mean(diff[differ] > 0)) if differ.any() else 1.0,
+            "worst": float(diff.min()), "a_over_b_margin": float(np.mean(diff > margin))}
 
 
 def _quality_of(lam: np.ndarray, q: np.ndarray, geom: RobotGeometry) -> np.ndarray:
@@ -161,9 +184,12 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
         for m in methods if "IT" in table else ():
             if m not in ("IT", "ORACLE"):
                 dom[m] = float(np.mean(table["IT"]["_qua"] >= table[m]["_qua"] - 1e-9))
+        order = {f"{a}>={b}": order_stats(table[a]["_qua"], table[b]["_qua"]) for a, b in FIG11_PAIRS
+                 if a in table and b in table}
         for row in table.values():
             row.pop("_qua")
-        results["datasets"][name] = {"n_points": len(q), "methods": table, "IT_at_least_as_good_fraction": dom}
+        results["datasets"][name] = {"n_points": len(q), "methods": table, "IT_at_least_as_good_fraction": dom,
+                                     "fig11_order": order}
 
     log(f"[robustness] {n_random} random inputs plus singular, parallel and at-the-stops inputs ...")
     rob = {}
@@ -207,6 +233,11 @@ def format_report(res: dict) -> str:
         if ds["IT_at_least_as_good_fraction"]:
             extra.append("IT ≥ other method at every point: " + ", ".join(
                 f"{m} {100 * v:.2f}%" for m, v in ds["IT_at_least_as_good_fraction"].items()))
+        for pair, o in ds.get("fig11_order", {}).items():
+            a, b = pair.split(">=")
+            extra.append(f"{a} ≥ {b} at {100 * o['a_at_least_b']:.2f}% of the {o['differ']} points where they differ "
+                         f"(worst {a} − {b} = {o['worst']:+.4f} point); {a} > {b} + 0.1 point on "
+                         f"{100 * o['a_over_b_margin']:.2f}% of all points")
         lines.append("")
         lines.extend(extra)
         if name == "D3":

@@ -1,14 +1,16 @@
 """``azimut record-d2``: record dataset D2 from the simulated robot on the ``paper`` track.
 
 The paper's D2 (§4) is the set of steering configurations measured while AZIMUT-3 drove a spiral,
-a circle and a rounded square under ICR-based control. This command drives the simulated robot on
+a circle and a rounded square under ICR-based control. This command drives the simulated robot (the envs'
+default: AZIMUT-3 with the ``"paper"`` imperfections, :mod:`azimut_env.imperfections`) on
 the ``paper`` track with the ICR controller (:class:`~control.path_controllers.ICRPathController`,
 its path follower not slowing down before the reference's stops; one episode of
 :func:`control.rollout.run_episode`, ended at the end of the track, off the track or after
 ``max_time``) and keeps the measured
 steering angles (wheel side of the compliant steering, with the env's sensor noise and encoder
 quantisation) of every step where the controller is RUNNING and the robot moves (true speed above
-``--min-speed``): the configurations of motion, off the constraining surface by the compliance.
+``--min-speed``): the configurations of motion, off the constraining surface by the compliance
+and the friction of the steering (``azimut sim-paper`` attributes the departure).
 Exact duplicates (quantised encoders) are removed, and ``--points`` of them are kept, evenly
 spaced in time.
 
@@ -16,7 +18,8 @@ File format (``estimation/data/d2.npz``, read by ``estimation.datasets.load_d2_r
 
 * ``q``: (N, n) float64, measured steering angles [rad], in time order;
 * ``alpha``, ``l``, ``b``, ``r``: the geometry it was recorded with;
-* ``meta``: a JSON string (track, seed, speed scale, control period, command line, counts).
+* ``meta``: a JSON string (track, seed, speed scale, control period, imperfections preset, command
+  line, counts).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from azimut_env.imperfections import DEFAULT_IMPERFECTIONS
 from azimut_env.params import RobotParams
 from control.icr.config import Mode
 from control.path_controllers import ICRPathController
@@ -46,13 +50,19 @@ D2_SPEED_SCALE = 0.5
 
 
 def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_SCALE, min_speed: float = 0.05,
-              max_time: float = 400.0) -> tuple[np.ndarray, dict]:
-    """Drive ``paper`` under the ICR controller; return (q (N, n), metadata). See the module doc."""
+              max_time: float = 400.0, params: RobotParams | None = None,
+              substeps: int | None = None) -> tuple[np.ndarray, dict]:
+    """Drive ``paper`` under the ICR controller; return (q (N, n), metadata). See the module doc.
+    ``params``: the robot (default: the envs' default, AZIMUT-3 with the ``"paper"``
+    imperfections; ``azimut sim-paper --sweep ... --d2`` records one per swept value);
+    ``substeps``: the physics' substeps (default: the env's)."""
     if points < 1:
         raise ValueError(f"points must be >= 1, got {points}")
     if not (math.isfinite(speed_scale) and speed_scale > 0):
         raise ValueError(f"speed_scale must be > 0, got {speed_scale}")
-    log = run_episode(ICRPathController(speed_scale, follower_stops=False), "paper", seed=seed, max_time=max_time)
+    env_kwargs = {k: v for k, v in (("params", params), ("substeps", substeps)) if v is not None} or None
+    log = run_episode(ICRPathController(speed_scale, follower_stops=False), "paper", seed=seed, max_time=max_time,
+                      env_kwargs=env_kwargs)
     if log.error is not None and log.error != "off track":
         raise RuntimeError(f"simulation failed while recording D2: {log.error}")
     steps = int(log.qua.size)
@@ -68,7 +78,8 @@ def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_S
     meta = dict(track="paper", seed=seed, speed_scale=speed_scale, min_speed=min_speed,
                 control_period=log.dt, steps=steps, moving_steps=len(q_all),
                 unique=len(q_unique), points=len(q), completed=bool(log.completed),
-                controller="icr", command="azimut record-d2 " + " ".join(sys.argv[2:]))
+                controller="icr", imperfections=DEFAULT_IMPERFECTIONS if params is None else "given parameters",
+                command="azimut record-d2 " + " ".join(sys.argv[2:]))
     return np.ascontiguousarray(q), meta
 
 
