@@ -54,10 +54,12 @@ from control.controller import make_controller
 from control.episode import MOVING_MU, EpisodeLog, moving_mask
 from control.rollout import run_episode
 from estimation import estimate_icr, quality, steering_from_lambda
+from jobs.bench_estimators import order_stats
+from jobs.record_d2 import record_d2
 
 __all__ = ["DRIVERS", "COUNTERFACTUALS", "SWEEPS", "default_robot", "stiff_params", "stable_substeps",
-           "counterfactual", "departures_deg", "qua_of_angles", "it_over_ns", "attribute", "run_phenomenon",
-           "sweep"]
+           "counterfactual", "departures_deg", "qua_of_angles", "it_over_ns", "d2_separation", "attribute",
+           "run_phenomenon", "sweep"]
 
 DRIVERS = ("icr", "feedforward")
 #: the counterfactuals of :func:`run_phenomenon`, by the cause each removes
@@ -151,7 +153,22 @@ def it_over_ns(q: np.ndarray, geom, margin: float = 0.1) -> float:
     q = q[np.sort(first)]
     qua = {m: 100 * np.asarray(quality(steering_from_lambda(estimate_icr(q, geom, m), geom, singular_fill=q), q))
            for m in ("IT", "NS")}
-    return float(np.mean(qua["IT"] > qua["NS"] + margin))
+    return order_stats(qua["IT"], qua["NS"], margin)["a_over_b_margin"]
+
+
+def d2_separation(q: np.ndarray, geom) -> dict:
+    """The paper's Fig. 11 order on a D2 recording q (N, n) [rad] (:data:`~jobs.bench_estimators.FIG11_PAIRS`):
+    ``d2_it_over_ns`` (share of points where IT's qua exceeds NS's by more than 0.1 point),
+    ``d2_it_ge_ns`` and ``d2_ns_ge_ls`` (share of the points where the two differ at which the
+    first is at least as good), ``d2_ns_ls_worst`` (min of NS − LS [points]) and the mean
+    departure of the recorded configurations from the surface [°]."""
+    q = geom.wrap_steering(np.asarray(q, dtype=np.float64))
+    qua = {m: 100 * np.asarray(quality(steering_from_lambda(estimate_icr(q, geom, m), geom, singular_fill=q), q))
+           for m in ("IT", "NS", "LS")}
+    it_ns, ns_ls = order_stats(qua["IT"], qua["NS"]), order_stats(qua["NS"], qua["LS"])
+    return {"d2_points": int(len(q)), "d2_it_over_ns": it_ns["a_over_b_margin"], "d2_it_ge_ns": it_ns["a_at_least_b"],
+            "d2_ns_ge_ls": ns_ls["a_at_least_b"], "d2_ns_ls_worst": ns_ls["worst"],
+            "d2_departure_mean_deg": float(departures_deg(q, geom).mean())}
 
 
 def _stats(x: np.ndarray) -> tuple[float, float]:
@@ -240,11 +257,13 @@ def run_phenomenon(driver: str = "icr", track: str = "paper", speeds=(0.5, 1.0, 
 
 
 def sweep(parameter: str, values, speeds=(0.5, 1.0), track: str = "paper", seed: int = 0,
-          params: RobotParams | None = None, substeps: int = 8) -> list[dict]:
+          params: RobotParams | None = None, substeps: int = 8, d2: bool = False) -> list[dict]:
     """The ICR controller on ``track`` with one steering parameter of ``params`` (default
     :func:`default_robot`) set to each of ``values``: ``"stiffness"`` k_s [N·m/rad] (the damper
     keeps its damping ratio, c_s ∝ √k_s) or ``"friction"`` τ_c [N·m] (τ_s = 1.5 τ_c); one row of
-    :func:`attribute` figures per value and speed."""
+    :func:`attribute` figures per value and speed. ``d2``: also record D2 with each value
+    (:func:`~jobs.record_d2.record_d2`, seed ``seed``) and add :func:`d2_separation`'s figures to
+    its rows."""
     _check_run("icr", track)
     if parameter not in SWEEPS:
         raise ValueError(f"unknown sweep {parameter!r}; choose from {', '.join(SWEEPS)}")
@@ -259,8 +278,9 @@ def sweep(parameter: str, values, speeds=(0.5, 1.0), track: str = "paper", seed:
         else:
             run_params = replace(base, steering=replace(st, friction_coulomb=value, friction_static=1.5 * value))
         sub = stable_substeps(run_params, start=substeps)
+        sep = d2_separation(record_d2(seed=seed, params=run_params, substeps=sub)[0], base.geometry) if d2 else {}
         for speed in speeds:
             log = _drive("icr", track, seed, float(speed), run_params, sub, None)
             rows.append({"parameter": parameter, "value": value, "speed_scale": float(speed), "substeps": sub,
-                         **attribute(log, base.geometry, steer_offset=run_params.imperfections.offsets(base.n))})
+                         **attribute(log, base.geometry, steer_offset=run_params.imperfections.offsets(base.n)), **sep})
     return rows

@@ -7,7 +7,8 @@ imperfections, motor lag), and prints, while moving, the departure of the measur
 motor steering angles from the constraining surface (mean, p95 per wheel), the drop of the mean
 departure without each cause, the share of configurations where IT beats NS by more than 0.1 point
 of qua, qua, the spring deflection and the motor lag. ``--sweep stiffness|friction --values ...``
-varies one steering parameter instead. The measures and the counterfactuals are defined in
+varies one steering parameter instead (``--d2``: and records D2 with each value, to show how the
+estimators separate on it). The measures and the counterfactuals are defined in
 :mod:`jobs.phenomenon`.
 """
 
@@ -57,6 +58,10 @@ _TABLE = (("speed_scale", "speed ×", "{:.2f}"), ("case", "case", "{}"), ("compl
           ("deflection_rms_deg", "defl. RMS [°]", "{:.2f}"), ("motor_lag_rms_deg", "lag RMS [°]", "{:.2f}"),
           ("rms_lateral_m", "RMS lat [cm]", "{:.2f}"), ("mean_internal_force_N", "int. force [N]", "{:.1f}"))
 _SWEEP_TABLE = (("value", "value", "{:g}"),) + tuple(c for c in _TABLE if c[0] not in ("case", "departure_drop_deg"))
+#: the columns ``--d2`` adds to the sweep: D2 recorded with each value (jobs.phenomenon.d2_separation)
+_D2_TABLE = (("d2_departure_mean_deg", "D2 dep. mean [°]", "{:.3f}"), ("d2_it_over_ns", "D2 IT > NS+0.1", "{:.1%}"),
+             ("d2_it_ge_ns", "D2 IT ≥ NS", "{:.2%}"), ("d2_ns_ge_ls", "D2 NS ≥ LS", "{:.1%}"),
+             ("d2_ns_ls_worst", "worst NS − LS", "{:+.4f}"))
 
 
 def table_markdown(rows: list[dict], columns=_TABLE) -> str:
@@ -127,6 +132,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(τ_s = 1.5 τ_c), over --values")
     parser.add_argument("--values", type=arg_float(0.0, 1e4), nargs="+", default=None,
                         help="the values of --sweep (stiffness > 0)")
+    parser.add_argument("--d2", action="store_true",
+                        help="with --sweep: also record D2 (azimut record-d2's run) with each value and report how it "
+                             "separates the estimators (IT > NS + 0.1 point, IT ≥ NS, NS ≥ LS where they differ)")
     parser.add_argument("--stiffness-factor", type=arg_float(1.0, 1e4), default=100.0,
                         help="spring stiffness factor of the compliance counterfactual (default 100; damper ×sqrt)")
     parser.add_argument("--substeps", type=arg_int(1, 256), default=8, help="physics substeps of the robot's runs")
@@ -151,6 +159,8 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError("--sweep and --values go together")
     if args.sweep == "stiffness" and min(args.values) <= 0:
         raise ValueError("--values of --sweep stiffness must be > 0 [N·m/rad]")
+    if args.d2 and not args.sweep:
+        raise ValueError("--d2 goes with --sweep")
     if args.sweep and args.driver != "icr":
         raise ValueError("--sweep drives the ICR controller (--driver icr)")
     if "none" in args.causes and len(args.causes) > 1:
@@ -174,9 +184,9 @@ def run(args: argparse.Namespace) -> int:
            f"true |μ| > {MOVING_MU} m/s)"
     if args.sweep:
         rows = sweep(args.sweep, args.values, args.speeds, args.track, seed=args.seed, params=params,
-                     substeps=args.substeps)
-        print(f"icr {head}; sweep of {args.sweep}")
-        print(table_markdown(rows, _SWEEP_TABLE), end="")
+                     substeps=args.substeps, d2=args.d2)
+        print(f"icr {head}; sweep of {args.sweep}" + ("; D2 recorded with each value" if args.d2 else ""))
+        print(table_markdown(rows, _SWEEP_TABLE + (_D2_TABLE if args.d2 else ())), end="")
         if args.json:
             _write_json(args.json, {"track": args.track, "seed": args.seed, "sweep": args.sweep, "rows": rows})
     else:

@@ -20,6 +20,7 @@ from jobs.phenomenon import (
     COUNTERFACTUALS,
     attribute,
     counterfactual,
+    d2_separation,
     default_robot,
     departures_deg,
     it_over_ns,
@@ -87,6 +88,11 @@ def test_departures_and_qua_are_zero_and_one_on_the_surface():
     assert np.all(qua_of_angles(off, GEOM) < 1.0)
     assert np.all(departures_deg(off, GEOM).max(axis=1) > 1.0)
     assert it_over_ns(q, GEOM) == 0.0 and math.isnan(it_over_ns(q[:0], GEOM))
+    on = d2_separation(q, GEOM)
+    assert on["d2_it_over_ns"] == 0.0 and on["d2_it_ge_ns"] == 1.0 and on["d2_points"] == 50
+    assert on["d2_departure_mean_deg"] < 1e-6 and abs(on["d2_ns_ls_worst"]) < 1e-6
+    sep = d2_separation(off, GEOM)
+    assert sep["d2_it_ge_ns"] == 1.0 and sep["d2_departure_mean_deg"] > 1.0  # IT ≥ NS off the surface too
 
 
 def test_stiff_params_keep_the_damping_ratio():
@@ -109,7 +115,7 @@ def test_sweep_rejects_unknown_parameters():
                                   ["--stiffness-factor", "0.5"], ["--json", "/nonexistent/dir/x.json"],
                                   ["--causes", "gravity"], ["--sweep", "stiffness"], ["--values", "1"],
                                   ["--sweep", "stiffness", "--values", "0"], ["--causes", "none", "friction"],
-                                  ["--imperfections", "real"]])
+                                  ["--imperfections", "real"], ["--d2"]])
 def test_cli_rejects_bad_arguments(argv, capsys):
     try:
         code = main(["sim-paper", *argv])
@@ -126,3 +132,16 @@ def test_cli_json(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert [r["case"] for r in data["rows"]] == ["robot", "no friction"]
     assert "dep. β_meas mean" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_sweep_d2_at_the_default_values_is_the_shipped_d2():
+    """``sweep(..., d2=True)`` records D2 with each value: at the default robot's own friction it is
+    ``azimut record-d2``'s file, so its figures are those of the shipped D2."""
+    from estimation.datasets import dataset_d2
+
+    rows = sweep("friction", [default_robot().steering.friction_coulomb], speeds=(1.0,), d2=True)
+    q, source = dataset_d2(RobotParams().geometry)
+    assert source == "recorded"
+    expected = d2_separation(q, RobotParams().geometry)
+    assert {k: rows[0][k] for k in expected} == expected
