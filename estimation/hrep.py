@@ -144,7 +144,7 @@ def lambda_distance(lam1: np.ndarray, lam2: np.ndarray) -> np.ndarray:
     lam1, lam2 = normalize(lam1), normalize(lam2)
     c = np.abs(np.sum(lam1 * lam2, axis=-1))
     s = np.linalg.norm(np.cross(lam1, lam2), axis=-1)
-    return np.arctan2(s, c)
+    return atan2(s, c)
 
 
 def select_chart(lam: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
+from estimation.libm import log1p
 from estimation.validation import check_range
 
 __all__ = ["QUALITY_F", "quality", "joint_distance_metric"]
@@ -107,4 +108,4 @@ def quality(beta_est, q, f: float = QUALITY_F, *, periodic: bool = False) -> np.
     """
     f = check_range("f", f, 1.0)
     m, batch = _metric(beta_est, q, periodic)
-    return np.clip(1.0 - np.log1p(f * m) / math.log1p(f), 0.0, 1.0).reshape(batch)
+    return np.clip(1.0 - log1p(f * m) / math.log1p(f), 0.0, 1.0).reshape(batch)

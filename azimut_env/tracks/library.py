@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from azimut_env.tracks.track import Track
+from estimation.libm import atan2
 
 __all__ = ["TRACK_NAMES", "make_track", "paper_track", "circle_track", "figure8_track", "square_track",
            "crab_track", "random_track"]
@@ -70,7 +71,7 @@ def paper_track(speed: float = 1.0, spacing: float = 0.02) -> Track:
         pieces.append(_line(start, e, spacing))
     square = np.vstack(pieces + [np.array([[R, 0.0]])])
     d = np.diff(square, axis=0)
-    tang = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    tang = np.unwrap(atan2(d[:, 1], d[:, 0]))
     tang = np.append(tang, tang[-1])
     h_sq = tang - np.pi / 2
     h_sq += h_end - h_sq[0]  # continuous with the end of the circle
@@ -96,7 +97,7 @@ def figure8_track(size: float = 2.0, speed: float = 0.5, spacing: float = 0.02) 
     tt = np.interp(ss, np.append(s, s[-1] + d[-1]), np.append(t, 2 * np.pi))
     xy = np.stack([size * np.sin(tt), size * np.sin(tt) * np.cos(tt)], axis=1)
     dx = np.stack([np.cos(tt), np.cos(2 * tt)], axis=1)  # derivative direction
-    th = np.unwrap(np.arctan2(dx[:, 1], dx[:, 0]))
+    th = np.unwrap(atan2(dx[:, 1], dx[:, 0]))
     return Track("figure8", xy, th, speed, closed=True)
 
 
@@ -151,7 +152,7 @@ def random_track(seed: int | None = None, rng: np.random.Generator | None = None
     xy = np.stack([np.interp(ss, s, np.append(x, x[0])), np.interp(ss, s, np.append(y, y[0]))], axis=1)
     if rng.random() < 0.5:
         dxy = np.diff(np.vstack([xy, xy[:1]]), axis=0)
-        th = np.unwrap(np.arctan2(dxy[:, 1], dxy[:, 0])) + rng.uniform(-np.pi, np.pi)
+        th = np.unwrap(atan2(dxy[:, 1], dxy[:, 0])) + rng.uniform(-np.pi, np.pi)
     else:
         th = rng.uniform(-np.pi, np.pi) + rng.uniform(0, 0.8) * np.sin(2 * np.pi * ss / ss[-1] * rng.integers(1, 4)
                                                                        + rng.uniform(0, 2 * np.pi))

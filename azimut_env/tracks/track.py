@@ -21,6 +21,7 @@ import numpy as np
 
 from azimut_env.tracks.query import query_batch_kernel, query_one_kernel, wrap_angle
 from azimut_env.validation import check_bool, check_nonnegative, check_positive, check_real_array
+from estimation.libm import atan2
 
 __all__ = ["Track"]
 
@@ -101,7 +102,7 @@ class Track:
         s = np.concatenate([[0.0], np.cumsum(ds)])
         path = np.concatenate([[0.0], np.cumsum(dl)])
         # path direction per sample, carried through zero-length segments
-        seg_dir = np.arctan2(np.diff(xy[:, 1]), np.diff(xy[:, 0]))
+        seg_dir = atan2(np.diff(xy[:, 1]), np.diff(xy[:, 0]))
         valid = dl > 1e-9
         tangent = np.empty(xy.shape[0])
         if np.any(valid):
@@ -225,7 +226,7 @@ class Track:
         v = np.concatenate(vs)
         if hd is None:
             d = np.diff(np.vstack([xy, xy[:1]]) if closed else xy, axis=0)
-            th = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+            th = np.unwrap(atan2(d[:, 1], d[:, 0]))
             if not closed:
                 th = np.append(th, th[-1])
         else:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.geometry import RobotGeometry
+from estimation.libm import atan2
 from estimation.logs.ros_cdr import POSE_STRINGS, JointStateBatcher, decode_poses, pose_offset
 from estimation.logs.source import (
                                     BAD_MISSING_JOINT,
@@ -58,7 +59,7 @@ def _rosbags():
 def yaw_from_quaternion(x, y, z, w):
     """The rotation about z [rad] of unit quaternions (x, y, z, w) (arrays or floats):
     atan2(2(wz + xy), 1 − 2(y² + z²))."""
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 class RosLog(LogSource):
