@@ -262,7 +262,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       controller's nominal lap, ``time_limit_factor``) instead of 6000 steps; ``info["stalled"]``.
       The same release changes the simulated vehicle dynamics (physics v2: steering modules as
       joint coordinates, a brush tire; ``docs/physics.md``). ``gymnasium.make("Azimut-v0")``
-      raises ``gymnasium.error.DeprecatedEnv`` naming ``Azimut-v1``.
+      raises ``gymnasium.error.DeprecatedEnv`` naming the current version.
     * v0: initial version.
     """
 

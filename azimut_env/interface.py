@@ -76,7 +76,7 @@ class _Common(Protocol):
 
 @runtime_checkable
 class ControllerInterface(_Common, Protocol):
-    """The single env's controller interface (``Azimut-v1``, ``env.unwrapped``)."""
+    """The single env's controller interface (``Azimut-v2``, ``env.unwrapped``)."""
 
     @property
     def track(self) -> Any:

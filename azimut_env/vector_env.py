@@ -1,4 +1,4 @@
-"""``AzimutVectorEnv``: N ``Azimut-v1`` robots in one pymunk Space, stepped as one batch.
+"""``AzimutVectorEnv``: N ``Azimut-v2`` robots in one pymunk Space, stepped as one batch.
 
 A :class:`gymnasium.vector.VectorEnv` over :class:`~azimut_env.task.core.AzimutTask`, the same task and
 physics code as the single env (which is its N = 1 case); the constructor, the controller
@@ -11,8 +11,8 @@ compiled termination, reward and observation fill. This module adds seeding per 
 autoreset modes, the batched info and the per-sub-env blow-up bookkeeping. Robots never collide
 with each other.
 
-``gymnasium.make_vec("Azimut-v1", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
-(keyword arguments as for ``gymnasium.make("Azimut-v1", ...)``).
+``gymnasium.make_vec("Azimut-v2", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
+(keyword arguments as for ``gymnasium.make("Azimut-v2", ...)``).
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ __all__ = ["AzimutVectorEnv"]
 class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     """
     ## Description
-    ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) that share
+    ``num_envs`` independent copies of :class:`~azimut_env.env.AzimutEnv` (``Azimut-v2``) that share
     one pymunk Space (no robot-robot collisions) and run every stage batched. Sub-env i behaves
-    exactly as a single ``Azimut-v1`` seeded with ``seed + i`` and given the same actions: the
+    exactly as a single ``Azimut-v2`` seeded with ``seed + i`` and given the same actions: the
     same observations, rewards and terminations to the bit (its robot gets fresh joints at each
     reset, so the shared Space's solver state does not leak between episodes; with obstacle
     contacts this holds to floating-point tolerance only).

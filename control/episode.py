@@ -77,7 +77,7 @@ class EpisodeLog:
     events: int = 0
     completed: bool = False
     error: str | None = None
-    ret: float = float("nan")  #: the episode's return (sum of the ``Azimut-v1`` rewards)
+    ret: float = float("nan")  #: the episode's return (sum of the ``Azimut-v2`` rewards)
 
 
 def progress_bar(label: str, frac: float, start: float, stream=sys.stderr) -> None:

@@ -428,7 +428,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     r = bench_env(args.steps, args.track, args.seed, args.substeps, _robot_kwargs(args))
     per = r["us_per_step"]
-    print(f"Azimut-v1 single env, robot {robot_label(args)}, track {args.track}, {int(r['substeps'])} substeps, "
+    print(f"Azimut-v2 single env, robot {robot_label(args)}, track {args.track}, {int(r['substeps'])} substeps, "
           f"{int(r['steps'])} steps")
     print(f"{'stage':<16}{'us/step':>10}{'share':>8}")
     for key, label in (("physics_us", "physics"), ("estimation_us", "estimation"), ("observation_us", "observation"),

@@ -75,7 +75,7 @@ GLOSSARY: dict[str, Column] = {
     "reconfigure_events": Column("stop+reconfig", "the number of times the ICR controller stopped the robot to turn "
                                                   "its wheels in place (a steering stop or axis on the way, or a "
                                                   "knocked wheel); 0 for controllers that never stop"),
-    "return": Column("return", "the sum of the env's per-step rewards over the episode (Azimut-v1's reward: "
+    "return": Column("return", "the sum of the env's per-step rewards over the episode (Azimut-v2's reward: "
                                "progress minus the tracking, overspeed, slip, internal-force, action-rate and "
                                "off-track costs), what the RL agents maximise"),
 }

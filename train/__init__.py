@@ -1,4 +1,4 @@
-"""train: RL baselines on ``Azimut-v1`` (Stable-Baselines3 + PyTorch CPU, the ``rl`` extra).
+"""train: RL baselines on ``Azimut-v2`` (Stable-Baselines3 + PyTorch CPU, the ``rl`` extra).
 
 * ``azimut train --algo ppo|sac --action raw|residual|icr-rate ...`` (:mod:`jobs.training.command`): N robots in
   one vector env behind the chosen action space (:mod:`train.envs`), VecNormalize saved with the

@@ -1,4 +1,4 @@
-"""Training and evaluation environments for ``train``: N robots of ``Azimut-v1`` in one
+"""Training and evaluation environments for ``train``: N robots of ``Azimut-v2`` in one
 :class:`~azimut_env.vector_env.AzimutVectorEnv`, behind the chosen action space, as an SB3 ``VecEnv``.
 
 Action spaces (``ACTIONS``):

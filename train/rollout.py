@@ -3,7 +3,7 @@
 :func:`run_policy_episode` is one episode of the one episode loop
 (:func:`control.rollout.run_episode`) with the policy as its controller
 (:class:`train.policy.PolicyController`), so :func:`control.episode.episode_metrics` gives the
-same metrics as for the controllers, the episode's return (sum of ``Azimut-v1`` rewards) with
+same metrics as for the controllers, the episode's return (sum of ``Azimut-v2`` rewards) with
 them.
 """
 

@@ -1,4 +1,4 @@
-"""Train a PPO or SAC agent on ``Azimut-v1`` and save its run folder (``azimut train``'s library).
+"""Train a PPO or SAC agent on ``Azimut-v2`` and save its run folder (``azimut train``'s library).
 
 :func:`train` is what ``azimut train`` (:mod:`jobs.training.command`) and its several-seeds
 campaign (:mod:`jobs.training.seeds`) run; both import it from here. The run folder ``out``

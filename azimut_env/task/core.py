@@ -1,9 +1,9 @@
-"""The task of ``Azimut-v1`` over N robots at once: the stages of a step, and resets.
+"""The task of ``Azimut-v2`` over N robots at once: the stages of a step, and resets.
 
 :class:`AzimutTask` holds N robots in one :class:`~azimut_env.physics.engine.AzimutPhysics` (one pymunk
 Space) and every per-robot task quantity as an array with a leading robot axis. Both envs are thin
 front ends over it (:mod:`azimut_env.frontend`), so there is one copy of the task and of the
-physics: :class:`~azimut_env.env.AzimutEnv` (``Azimut-v1``) is the N = 1 case,
+physics: :class:`~azimut_env.env.AzimutEnv` (``Azimut-v2``) is the N = 1 case,
 :class:`~azimut_env.vector_env.AzimutVectorEnv` steps N robots with one call per stage.
 
 Data flow of one control step (each stage batched over the robots, compiled where it pays):

@@ -1,4 +1,4 @@
-"""The ``info`` of ``Azimut-v1``: one table of keys that both envs build their info from.
+"""The ``info`` of ``Azimut-v2``: one table of keys that both envs build their info from.
 
 :data:`INFO_FIELDS` is the single description of the info dict: each key's name, its value for
 one robot (shape, with n the number of wheels), its unit and meaning, whether a step whose

@@ -1,4 +1,4 @@
-"""The observation of ``Azimut-v1``: one layout table, and the compiled fill.
+"""The observation of ``Azimut-v2``: one layout table, and the compiled fill.
 
 :data:`OBSERVATION_FIELDS` is the single description of the observation vector: each field's
 name, size, bound, unit and meaning, in the order of the vector. It drives

@@ -1,4 +1,4 @@
-"""The reward of ``Azimut-v1``: one table of terms, one compiled function per term.
+"""The reward of ``Azimut-v2``: one table of terms, one compiled function per term.
 
 :data:`REWARD_TERMS` is the single description of the reward, like
 :data:`~azimut_env.task.observation.OBSERVATION_FIELDS` is of the observation: each row

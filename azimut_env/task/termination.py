@@ -1,4 +1,4 @@
-"""When an episode of ``Azimut-v1`` ends: termination (off the track, finished, stalled) and the
+"""When an episode of ``Azimut-v2`` ends: termination (off the track, finished, stalled) and the
 time limit (truncation).
 
 Per step, after the track query (:meth:`~azimut_env.task.core.AzimutTask.observe`):

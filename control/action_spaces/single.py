@@ -1,4 +1,4 @@
-"""Higher-level action spaces for ``Azimut-v1`` (for RL): ICR targets and chassis twists.
+"""Higher-level action spaces for ``Azimut-v2`` (for RL): ICR targets and chassis twists.
 
 Both wrappers keep the env's observation and reward; they replace the per-wheel set-point action
 with a motion target that a controller turns into coordinated wheel set-points every step:
@@ -97,7 +97,8 @@ class _ControllerWrapper(gym.Wrapper):
         base = env.unwrapped
         missing = missing_members(base, ControllerInterface)
         if missing:
-            raise ValueError(f"the wrapped env must be Azimut-v1 (missing {', '.join(map(repr, missing))})")
+            raise ValueError("the wrapped env must be Azimut-v2 or Azimut-v1 "
+                             f"(missing {', '.join(map(repr, missing))})")
         self._kind = controller
         self._view = _OneRobot(base)
         self._ctl = ActionController(self._view, action, controller, icr_config=icr_config,
@@ -128,7 +129,7 @@ class ICRTargetAction(_ControllerWrapper):
     """Action = ICR target (λ_d direction, μ_d); see the module docstring.
 
     Args:
-        env: an ``Azimut-v1`` env. mu_max: μ_d at action[3] = 1 [m/s]. min_norm: below this norm
+        env: an ``Azimut-v2`` env. mu_max: μ_d at action[3] = 1 [m/s]. min_norm: below this norm
         of action[:3] the target is "hold" (μ_d = 0). signed_mu: μ_d ∈ [−mu_max, mu_max] and
         λ_d ∈ Λ (False, default: μ_d ∈ [0, mu_max], λ_d the direction of motion; module
         docstring). icr_config: the controller's tuning.
@@ -154,7 +155,7 @@ class TwistAction(_ControllerWrapper):
     """Action = chassis-frame twist; see the module docstring.
 
     Args:
-        env: an ``Azimut-v1`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
+        env: an ``Azimut-v2`` env. v_max [m/s], w_max [rad/s]: twist at action ±1.
         controller: ``"icr"`` (default) or ``"swerve"``. icr_config, swerve_config: tuning.
         shape_targets, target_rate [rad/s], cross_push [rad]: target shaping (ICR controller only).
     """

@@ -38,7 +38,7 @@ one batched ``step`` of the vector env with all set-points):
 
 Residual agents can be kept near the reference controller with ``correction_cost`` (w ≥ 0, default 0):
 the wrapper subtracts w · mean_k(a_k²) from each robot's reward (a ∈ [−1, 1]³ the clipped action; so
-at most w per step), an L2 cost on the correction's size. Without it nothing in ``Azimut-v1``'s reward
+at most w per step), an L2 cost on the correction's size. Without it nothing in ``Azimut-v2``'s reward
 ties the correction to zero where the reference is already near the reward's optimum (on a lap at the
 track's speed the reward is nearly flat in small corrections), and the policy's mean drifts with the
 noise of the advantage estimates. Residual RL: Johannink et al., *Residual Reinforcement Learning for

@@ -1,4 +1,4 @@
-"""``azimut train``: train a PPO or SAC agent on ``Azimut-v1`` (Stable-Baselines3, the ``rl`` extra).
+"""``azimut train``: train a PPO or SAC agent on ``Azimut-v2`` (Stable-Baselines3, the ``rl`` extra).
 
 The training is :func:`train.trainer.train` (library code); this job adds the command line, the
 provenance in ``run.json`` (package version and git commit, :func:`jobs.records.provenance`) and
