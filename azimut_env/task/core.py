@@ -53,6 +53,7 @@ from azimut_env.physics.engine import AzimutPhysics, BlowUpLimits
 from azimut_env.physics.layout import MS, RS, RS_POSE, RS_VEL_WORLD, WS
 from azimut_env.physics.wheel_params import default_wheel_params, randomized_wheel_params
 from azimut_env.task.actions import CommandPath
+from azimut_env.task.compiled_step import observe_kernel, task_arrays
 from azimut_env.task.config import TaskConfig, resolve_params
 from azimut_env.task.lap_time import nominal_duration, reference_lap_time  # noqa: F401 (re-exported)
 from azimut_env.task.localisation import OdometryPoses
@@ -88,8 +89,7 @@ from azimut_env.validation import check_int
 from estimation import estimate_eta
 from estimation.estimate import estimate_eta_rows
 
-# Plain-int columns of the IntEnum layouts for the per-step paths (numpy indexes with an int
-# several µs faster than with an IntEnum member; the enums stay the names).
+# plain-int columns for the per-step paths (numpy indexes with an IntEnum member µs slower)
 _RS_CODE, _RS_SLIP, _RS_INTERNAL = int(RS.CODE), int(RS.SLIP), int(RS.INTERNAL)
 _MS_THETA, _MS_PHI, _MS_PHIDOT = int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)
 _WS_BETA = int(WS.BETA)
@@ -130,7 +130,6 @@ class AzimutTask:
             raise TypeError(f"config must be TaskConfig, got {type(config).__name__}")
         self.n_robots = check_int("n_robots", n_robots, min_value=1)
         self.n = params.n
-        self.params = params
         track = check_track(track)
         obstacles = coerce_obstacles(obstacles)
         self._builtin: dict[str, Track] = {}
@@ -166,11 +165,7 @@ class AzimutTask:
         self.mu_hat = np.zeros(N)
         self.qua = np.ones(N)
         self.beta_est = np.zeros((N, n))
-        self.s = np.zeros(N)
-        self.lat = np.zeros(N)
-        self.head = np.zeros(N)
-        self.v_ref = np.zeros(N)
-        self.v_along = np.zeros(N)
+        self.s, self.lat, self.head, self.v_ref, self.v_along = (np.zeros(N) for _ in range(5))
         self.look = np.zeros((N, K, 3))
         self.track_out = np.zeros((N, len(TQ)))
         self.prev_action = np.zeros((N, 2 * n), dtype=np.float32)
@@ -178,9 +173,7 @@ class AzimutTask:
         self.reward = np.zeros(N)
         self.reward_terms = np.zeros((N, len(self.reward_table)))
         self.reward_inputs = np.zeros((N, len(RewardInput)))
-        self.off_track = np.zeros(N, dtype=np.bool_)
-        self.finished = np.zeros(N, dtype=np.bool_)
-        self.stalled = np.zeros(N, dtype=np.bool_)
+        self.off_track, self.finished, self.stalled = (np.zeros(N, dtype=np.bool_) for _ in range(3))
         self.s_best = np.zeros(N)
         self.best_step = np.zeros(N, dtype=np.int64)
         #: per-robot step limit of the current episode (``time_limit_factor``; huge when off)
@@ -202,6 +195,9 @@ class AzimutTask:
         self.pose_source = config.pose_source
         self.odometry = (OdometryPoses(config.localisation, config.control_period, params.geometry, N, n, K)
                          if config.pose_source == "odometry" else None)
+        #: the stages after the physics in one compiled call (:meth:`observe`); False: one by one
+        self.compiled_step = True
+        self._compiled = None  # (TaskArrays, kernel) of azimut_env.task.compiled_step, built at the first step
 
     # ------------------------------------------------------------------ reset
 
@@ -381,12 +377,18 @@ class AzimutTask:
         generator (``rngs``: a sequence of N generators, or a ``numba.typed.List`` of them, which
         draws for all robots in one compiled call with the same streams). Rows left out keep
         their previous values except the raw measurements; ``action`` (N, 2n) is what
-        :meth:`apply_actions` returned."""
+        :meth:`apply_actions` returned. A step of every robot with the true pose as the pose
+        source runs the stages in one compiled call (:mod:`.compiled_step`, the same bits) unless
+        ``compiled_step`` is False."""
         all_rows = rows is None
         rows = self._all if all_rows else rows
         self.sensors.draw_noise(rngs, rows, all_rows)
-        s_prev = self.s.copy()
         keep = None if all_rows or rows is self._all or rows.all() else ~rows
+        if keep is None and self.compiled_step and self.odometry is None:  # every stage in one compiled call
+            if self._compiled is None:
+                self._compiled = (task_arrays(self), observe_kernel(self._reward_kernel))
+            return self._compiled[1](self._compiled[0], action)
+        s_prev = self.s.copy()
         if keep is not None:
             saved = [a[keep].copy() for a in (self.lam_hat, self.mu_hat, self.beta_est, self.qua, self.s, self.lat,
                                              self.head, self.v_ref, self.track_out, self.look)]
@@ -488,10 +490,8 @@ class AzimutTask:
 
     # ------------------------------------------------------------------ pickling
 
-    def __getstate__(self) -> dict:
-        d = self.__dict__.copy()
-        d.pop("_packs", None)  # a numba typed list: rebuilt from the tracks
-        return d
+    def __getstate__(self) -> dict:  # a numba typed list and a struct of references: rebuilt
+        return {**self.__dict__, "_packs": None, "_compiled": None}
 
     def __setstate__(self, d: dict) -> None:
         self.__dict__.update(d)
