@@ -198,9 +198,9 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
                      substeps: int = 8, split: bool = True, solver_iterations: int = 20,
                      max_episode_steps: int | None = 6000, robot_kwargs: dict | None = None) -> dict[str, float]:
     """``AzimutVectorEnv`` with N = ``num_envs``: robot-steps/s over about ``robot_steps`` robot-steps
-    (uninstrumented), the per-robot-step time split (a second, instrumented loop) and the memory
-    per robot. ``max_episode_steps`` short enough puts autoresets (timed) in the loop. Returns a
-    dict of figures (times in µs per robot-step)."""
+    (uninstrumented; in wall and in CPU time), the per-robot-step time split (a second, instrumented
+    loop) and the memory per robot. ``max_episode_steps`` short enough puts autoresets (timed) in
+    the loop. Returns a dict of figures (times in µs per robot-step)."""
     from azimut_env.vector_env import AzimutVectorEnv
 
     gc.collect()
@@ -219,6 +219,7 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
     rates = []
     t_total = 0.0
     done = 0
+    cpu0 = time.process_time()
     while done < calls:
         t0 = clock()
         m = min(chunk, calls - done)
@@ -228,10 +229,12 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
         t_total += dt
         rates.append(m * N / dt)
         done += m
+    cpu = time.process_time() - cpu0
     rss1 = _rss_mb()
     out: dict[str, float] = {
         "num_envs": float(N),
         "steps_per_s": calls * N / t_total,
+        "cpu_steps_per_s": calls * N / cpu,
         "best_chunk_steps_per_s": max(rates),
         "us_per_robot_step": t_total / (calls * N) * 1e6,
         "rss_growth_mb_per_robot": (rss1 - rss0) / N,
@@ -451,14 +454,14 @@ def run(args: argparse.Namespace) -> int:
                                                                                  else ""))
         rows = []
         for N in args.num_envs:
-            first = None
             for name in presets:
                 v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
                                      solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
                                      robot_kwargs=_robot_kwargs(args, name))
-                first = first or v
                 rows.append(v)
-                tail = f"  {name} ({v['steps_per_s'] / first['steps_per_s']:.2f}x {presets[0]})" if name else ""
+                first = rows[len(rows) - 1 - presets.index(name)]  # this N's row of the first preset
+                tail = (f"  {name} ({v['steps_per_s'] / first['steps_per_s']:.2f}x {presets[0]}, "
+                        f"{v['cpu_steps_per_s'] / first['cpu_steps_per_s']:.2f}x in CPU time)") if name else ""
                 print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
                       f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}{tail}", flush=True)
         print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
