@@ -339,7 +339,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
         task = self.task
         try:
-            a = task.apply_actions(a[None])
+            a = task.apply_actions(a[None], owned=True)
         except ValueError:
             raise ValueError(f"action contains NaN or inf: {np.asarray(action)}") from None
         errored, messages = task.end_blown_up(task.step_physics())

@@ -78,16 +78,19 @@ class CommandPath:
         """Robot i's queue holds ``setpoints`` (n, len(CMD)) (its motors' set-points at reset)."""
         self.fifo[i] = setpoints
 
-    def apply(self, actions: np.ndarray, physics, rows: np.ndarray | None = None) -> np.ndarray:
+    def apply(self, actions: np.ndarray, physics, rows: np.ndarray | None = None, owned: bool = False) -> np.ndarray:
         """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all)
         to ``physics``. With latency k > 0 the set-points enter the rows' FIFOs and the ones given
-        k calls earlier go to the motors. Returns the clipped float32 copy. Raises ``ValueError``
-        (changing nothing) on NaN or inf."""
-        a = np.asarray(actions)
-        if a.dtype.kind not in "biuf":
-            raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
-        a = float32_copy(a)
-        if a.shape != (self.n_robots, 2 * self.n):
+        k calls earlier go to the motors. Returns the clipped float32 copy (``owned``: ``actions``
+        is already a float32 (N, 2n) copy of the caller's, clipped in place). Raises
+        ``ValueError`` (changing nothing) on NaN or inf."""
+        a = actions
+        if not owned:
+            a = np.asarray(actions)
+            if a.dtype.kind not in "biuf":
+                raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
+            a = float32_copy(a)
+        if a.shape != (self.n_robots, 2 * self.n) or a.dtype != np.float32:
             raise ValueError(f"actions must have shape {(self.n_robots, 2 * self.n)}, got {np.shape(actions)}")
         rows = self._all if rows is None else rows
         bad = _apply_actions_kernel(a, self._new, rows, *self._lim)

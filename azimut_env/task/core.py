@@ -328,6 +328,8 @@ class AzimutTask:
         the reward −``off_track_penalty``, no reward terms and false ``off_track``, ``finished``,
         ``stalled`` flags. Call before :meth:`observe`, which leaves these robots out. Returns the
         mask of those robots and the blow-up message of every robot (``""`` where fine)."""
+        if self.n_robots == 1 and codes[0] == _FINE:  # the single env's step: no array operations
+            return np.zeros(1, dtype=np.bool_), [""]
         errored = codes != _FINE
         if rows is not None:
             errored &= rows
@@ -353,11 +355,11 @@ class AzimutTask:
 
     # ------------------------------------------------------------------ step
 
-    def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+    def apply_actions(self, actions: np.ndarray, rows: np.ndarray | None = None, owned: bool = False) -> np.ndarray:
         """Check, clip and write the set-points of ``actions`` (N, 2n) for ``rows`` (default all),
-        through the latency FIFO (:class:`~azimut_env.task.actions.CommandPath`). Returns the clipped
-        float32 copy; ``ValueError`` (changing nothing) on NaN or inf."""
-        return self.commands.apply(actions, self.physics, None if rows is None or rows is self._all else rows)
+        through the latency FIFO (:class:`~azimut_env.task.actions.CommandPath`; ``owned``: see
+        there). Returns the clipped float32 copy; ``ValueError`` (changing nothing) on NaN or inf."""
+        return self.commands.apply(actions, self.physics, None if rows is None or rows is self._all else rows, owned)
 
     def step_physics(self) -> np.ndarray:
         """Kicks due now, then one control period of physics for all robots. Returns the blow-up

@@ -64,26 +64,21 @@ def _canonical_lambda(twist, mu, lam):
                 mu[i] = -m
 
 
-def _row_dots(x: np.ndarray) -> np.ndarray:
-    """(N,) each row's ``row @ row``, computed by NumPy's dot loop as the 1-D product is (so bit for
-    bit the same numbers): ``np.vecdot`` (NumPy 2), else a stacked matmul."""
-    vecdot = getattr(np, "vecdot", None)
-    return vecdot(x, x) if vecdot is not None else (x[:, None, :] @ x[:, :, None])[:, 0, 0]
-
-
 def true_eta(twist: np.ndarray) -> tuple[np.ndarray, Any]:
     """The true H state (λ, μ) of chassis twists ξ̇ = (ẋ, ẏ, θ̇) (3,) or (N, 3) in the chassis frame:
     ξ̇ = μ (v, −u, w), so λ ∝ (−ẏ, ẋ, θ̇) and μ = ‖ξ̇‖ ≥ 0, with the canonical sign at μ ≤ 1e-3 (as
     the estimate). Returns ((3,), float) or ((N, 3), (N,))."""
     tw = np.asarray(twist, dtype=np.float64)
+    # ‖ξ̇‖² as the sum written out, one robot or a batch (a BLAS dot product may round differently on
+    # some CPUs), so a robot's value is its row of the batch, bit for bit, on every CPU
     if tw.ndim == 1:  # one robot (the single env, every step): the operations of a row of the batch
         x, y, w = tw.tolist()
-        mu = math.sqrt(float(tw @ tw))
+        mu = math.sqrt(x * x + y * y + w * w)
         u, v, w = (-y / mu, x / mu, w / mu) if mu > 0 else (0.0, 0.0, 1.0)
         if mu <= 1e-3 and (w if w != 0 else (u if u != 0 else v)) < 0:
             u, v, w, mu = -u, -v, -w, -mu
         return np.array([u, v, w]), mu
-    mu = np.sqrt(_row_dots(tw))
+    mu = np.sqrt(tw[:, 0] * tw[:, 0] + tw[:, 1] * tw[:, 1] + tw[:, 2] * tw[:, 2])
     lam = np.empty_like(tw)
     _canonical_lambda(tw, mu, lam)
     return lam, mu
@@ -139,7 +134,7 @@ KINDS: dict[str, tuple[Callable, Callable]] = {
 
 
 def _twist(t: AzimutTask, r) -> np.ndarray:
-    return t.physics.summary[r, _RS_TWIST]  # an index array: a copy
+    return t.physics.summary[r].take(_RS_TWIST, axis=-1)  # a copy (take: faster than fancy indexing)
 
 
 def _pose_estimate(t: AzimutTask, r) -> np.ndarray:
