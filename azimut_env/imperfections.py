@@ -93,7 +93,7 @@ import numpy as np
 from azimut_env.params import ImperfectionParams, RobotParams
 
 __all__ = ["IMPERFECTION_PRESETS", "DEFAULT_IMPERFECTIONS", "with_imperfections", "check_imperfections",
-           "resolve_imperfections",
+           "resolve_imperfections", "imperfections_of",
            "PAPER_SPRING", "IDEAL_SPRING", "PAPER_FRICTION", "PAPER_MODULE", "STEER_OFFSET_STD", "RADIUS_ERROR_STD",
            "PAPER_WHEEL_CPR", "IDEAL_WHEEL_CPR"]
 
@@ -168,6 +168,15 @@ def with_imperfections(params: RobotParams, name: str) -> RobotParams:
                    imperfections=ImperfectionParams(steer_offset=offsets, radius_error=errors,
                                                     steer_offset_std=STEER_OFFSET_STD,
                                                     radius_error_std=RADIUS_ERROR_STD))
+
+
+def imperfections_of(params: RobotParams) -> str | None:
+    """The preset ``params`` carries: ``"paper"`` or ``"ideal"`` when applying it changes nothing,
+    else None (a robot with imperfections of its own)."""
+    for name in IMPERFECTION_PRESETS:
+        if with_imperfections(params, name) == params:
+            return name
+    return None
 
 
 def resolve_imperfections(params: RobotParams | None, imperfections: str | None,

@@ -309,6 +309,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     its retries; the report lists it)."""
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
+    from azimut_env.imperfections import imperfections_of
     from jobs.args import robot_env_kwargs, robot_label
 
     names = getattr(args, "controller_names", None) or check_controllers(list(controllers), args.speed_scale)
@@ -376,6 +377,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         return 130
     wall = time.perf_counter() - start
     rows = [_row_of(r, names) for r in records]
+    specs = {names.get(c, c): c for c in controllers if names.get(c, c) != c}  # a short name's spec (its path)
     controllers = [names.get(c, c) for c in controllers]  # the report speaks of names
     ok_rows = [r for r in rows if r["status"] == "ok"]
     metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
@@ -421,7 +423,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                 "limits": limits_text(limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
                 "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args),
-                "exports": exports, "provenance": provenance()}
+                "imperfections": imperfections_of(env0.params) or "the robot's own", "controller_specs": specs,
+                "exports": exports,
+                "provenance": provenance()}
     write_campaign_report(out, rows, full, campaign, plots, compare)
     from jobs.eval.agents import write_agents
 

@@ -144,12 +144,16 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     from azimut_env.tracks import SCENARIO_NAMES
 
     table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
+    specs = campaign.get("controller_specs") or {}
+    named = "".join(f"; {name} = {spec}" for name, spec in specs.items())
     lines = ["# azimut eval", "",
-             f"Controllers {', '.join(campaign['controllers'])}; tracks {', '.join(campaign['tracks'])}; "
+             f"Controllers {', '.join(campaign['controllers'])}{named}; tracks {', '.join(campaign['tracks'])}; "
              f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
              f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
              + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
-             f"Robot {campaign.get('robot', 'azimut3')}; control period {campaign['control_period']} s; "
+             f"Robot {campaign.get('robot', 'azimut3')}"
+             + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else "")
+             + f"; control period {campaign['control_period']} s; "
              f"{campaign['limits']}.",
              f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
              f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",

@@ -99,7 +99,7 @@ def learning_curve_figure(out: Path, record: dict, plt):
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     pts = training_returns(out)
     if pts:
-        ax.plot(*zip(*pts), color="C0",
+        ax.plot(*zip(*pts), color="C0", marker="o" if len(pts) == 1 else None,  # one point: a line shows nothing
                 label=f"training: mean return of the last 100 episodes, on {training_label(record['track'])}")
     ev = evaluation_history(out)
     periodic = [e for e in ev if not e.get("final")]

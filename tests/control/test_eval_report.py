@@ -4,6 +4,7 @@ shading."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 
@@ -92,6 +93,21 @@ def test_provenance_and_strict_json(two_seeds):
     # the episode was cut before the end of the track: its completion time is undefined -> null
     assert all(e["completion_time_s"] is None for e in data["episodes"])
     assert "NaN" not in (two_seeds / "metrics.json").read_text()
+
+
+def test_the_robot_and_its_imperfections_are_named(one_seed):
+    """Azimut-v2's default robot has the paper imperfections: the report says so, and metrics.json."""
+    assert _strict_load(one_seed / "metrics.json")["campaign"]["imperfections"] == "paper"
+    assert "Robot azimut3 (imperfections: paper);" in (one_seed / "report.md").read_text()
+    from azimut_env.imperfections import imperfections_of, with_imperfections
+    from azimut_env.params import RobotParams
+
+    assert imperfections_of(RobotParams()) == "ideal"
+    assert imperfections_of(with_imperfections(RobotParams(), "paper")) == "paper"
+    own = RobotParams.preset("swerve")
+    own = dataclasses.replace(own, steering=dataclasses.replace(own.steering, friction_coulomb=0.1,
+                                                                friction_static=0.2))
+    assert imperfections_of(own) is None
 
 
 def test_strict_json_and_unknown_provenance(monkeypatch, tmp_path):

@@ -150,6 +150,10 @@ def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
                  "--out", str(named)]) in (0, 1)
     rows = json.loads((named / "metrics.json").read_text())["episodes"]
     assert [r["controller"] for r in rows] == ["tiny"] and rows[0]["return"] == by["run"]["return"]
+    # the short name's spec (the policy's path) is in the report and metrics.json
+    campaign = json.loads((named / "metrics.json").read_text())["campaign"]
+    assert campaign["controller_specs"] == {"tiny": f"ppo:tiny={out}"}
+    assert f"tiny = ppo:tiny={out};" in (named / "report.md").read_text()
     assert main(["eval", "--controllers", f"ppo:{tmp_path / 'missing.zip'}", "--out", str(report)]) == 2
     assert main(["eval", "--controllers", f"ppo:{out}", "--speed-scale", "0.5", "--out", str(report)]) == 2
     assert main(["eval", "--controllers", f"ppo:{out},ppo:run={out}", "--out", str(report)]) == 2
