@@ -1,8 +1,9 @@
 """``azimut bench-env``: simulator throughput (env steps/s), single env and vector env, with time splits.
 
-* The single env (``AzimutEnv``, the "naive" one robot per Space and per Python call) is timed in a
-  plain ``env.step`` loop with small uniformly random actions (resets excluded), with its stages
-  timed inside the same loop (thin timing wrappers on the task's stage methods).
+* The single env (``AzimutEnv``, one robot per Space and per Python call) is timed in a plain
+  ``env.step`` loop with small uniformly random actions (resets excluded), split inside the same
+  loop (thin timing wrappers) into the physics, what follows it (the noise draw and the one
+  compiled call of :mod:`azimut_env.task.compiled_step`), the info dict and the rest.
 * ``--num-envs 1,16,64,256`` also times ``AzimutVectorEnv`` at each N, in the same run: an
   uninstrumented loop of ``vec.step`` gives the steps/s (robot-steps per second: N per call) and
   the ratio against the single env; a second, instrumented loop splits the time per robot-step
@@ -133,19 +134,18 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     actions = rng.uniform(-1, 1, size=(steps, env.action_space.shape[0])).astype(np.float32) * 0.2
     for i in range(50):  # warm-up (numba kernels load from cache or compile)
         env.step(actions[i])
-    acc = {"physics": 0.0, "estimation": 0.0, "sensors": 0.0, "track": 0.0, "observe": 0.0}
+    acc = {"physics": 0.0, "observe": 0.0, "info": 0.0}
     clock = time.perf_counter
 
     task = env.task
     task.physics.step = _timed(acc, task.physics.step, "physics")
-    task._measure = _timed(acc, task._measure, "sensors")
-    task._estimate = _timed(acc, task._estimate, "estimation")
-    task._query_tracks = _timed(acc, task._query_tracks, "track")
-    task.observe = _timed(acc, task.observe, "observe")  # includes sensors, estimation, track
+    # the noise draw and the one compiled call of azimut_env.task.compiled_step (sensors, estimation,
+    # track, termination, reward, observation)
+    task.observe = _timed(acc, task.observe, "observe")
     import azimut_env.env as env_module  # the info dict, built per step by the env (azimut_env.task.info)
 
     robot_info = env_module.robot_info
-    env_module.robot_info = _timed(acc, robot_info, "observe")
+    env_module.robot_info = _timed(acc, robot_info, "info")
     env.reset(seed=seed)
     for key in acc:
         acc[key] = 0.0
@@ -174,19 +174,14 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     env_module.robot_info = robot_info
     total = elapsed / done
     per = {key: value / done for key, value in acc.items()}
-    obs_rest = max(0.0, per["observe"] - per["sensors"] - per["estimation"] - per["track"])
-    staged = per["physics"] + per["observe"]
     return {
         "steps_per_s": 1.0 / total,
         "cpu_steps_per_s": done / cpu,
         "us_per_step": total * 1e6,
         "physics_us": per["physics"] * 1e6,
-        "estimation_us": per["estimation"] * 1e6,
-        "observation_us": (per["sensors"] + per["track"] + obs_rest) * 1e6,
-        "sensors_us": per["sensors"] * 1e6,
-        "track_us": per["track"] * 1e6,
-        "obs_reward_info_us": obs_rest * 1e6,
-        "other_us": max(0.0, total - staged) * 1e6,
+        "observe_us": per["observe"] * 1e6,
+        "info_us": per["info"] * 1e6,
+        "other_us": max(0.0, total - sum(per.values())) * 1e6,
         "substeps": float(substeps),
         "steps": float(done),
         "resets": float(resets),
@@ -247,10 +242,13 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
 
 
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
-    """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``)."""
+    """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``), with the
+    stages after the physics run one by one (``AzimutTask.compiled_step = False``: the
+    uninstrumented loop runs them as one compiled call)."""
     acc = {k: 0.0 for k in VECTOR_STAGES}
     clock = time.perf_counter
     task, phys = venv.task, venv.physics
+    task.compiled_step = False
     original = (task._outputs, task.sensors.draw_noise)
     task.apply_actions = _timed(acc, task.apply_actions, "actions")
     phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
@@ -270,6 +268,7 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
             task.__dict__.pop(name, None)
         phys.stage_times = None
         task.sensors.__dict__.pop("draw_noise", None)
+        task.compiled_step = True
     acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
     scale = 1e6 / (calls * N)
     out = {f"{k}_us": v * scale for k, v in acc.items()}
@@ -434,10 +433,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"Azimut-v2 single env, robot {robot_label(args)}, track {args.track}, {int(r['substeps'])} substeps, "
           f"{int(r['steps'])} steps")
     print(f"{'stage':<16}{'us/step':>10}{'share':>8}")
-    for key, label in (("physics_us", "physics"), ("estimation_us", "estimation"), ("observation_us", "observation"),
-                       ("sensors_us", "  sensors"), ("track_us", "  track"), ("obs_reward_info_us", "  obs+rew+info"),
+    for key, label in (("physics_us", "physics"), ("observe_us", "after physics"), ("info_us", "info dict"),
                        ("other_us", "other")):
         print(f"{label:<16}{r[key]:>10.1f}{r[key] / per:>8.0%}")
+    print("(after physics: the sensor noise draw and the one compiled call for sensors, estimation, track, "
+          "termination, reward and observation; other: step()'s checks, the actions, the blow-up check)")
     print(f"{'total':<16}{per:>10.1f}")
     print(f"steps/s: {r['steps_per_s']:.0f} overall ({r['cpu_steps_per_s']:.0f} in CPU time), "
           f"{r['best_chunk_steps_per_s']:.0f} in the best chunk "
@@ -472,7 +472,8 @@ def run(args: argparse.Namespace) -> int:
         print()
         print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
               "control step, all substeps; without obstacles pymunk is read and written once per step and not "
-              "stepped)")
+              "stepped; the stages after the physics one by one here, not as the one compiled call of the loop "
+              "above)")
         labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
         head = "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES)
         print(f"{'N':>5}{head}{'total':>9}")
