@@ -19,9 +19,10 @@ from gymnasium.envs.registration import register, registry
 __all__ = ["ENV_ID", "ENV_ID_V1"]
 
 #: The current version: the physics v3 with the imperfections the paper names (``imperfections``
-#: default ``"paper"``, :mod:`azimut_env.imperfections`). ``Azimut-v1`` (physics v2, no steering
-#: friction, module mass on the axis, no drive torque–speed line, no geometric imperfections) stays
-#: registered as the same env with ``imperfections="ideal"``, bit for bit what it was: Gymnasium
+#: default ``"paper"``, :mod:`azimut_env.imperfections`) and the antagonism priced by the reward.
+#: ``Azimut-v1`` (physics v2, no steering friction, module mass on the axis, no drive torque–speed
+#: line, no geometric imperfections; the null-space force priced) stays registered as the same env
+#: with ``imperfections="ideal"`` and v1's reward weights, bit for bit what it was: Gymnasium
 #: warns that it is out of date when it is made. ``Azimut-v0`` (the first reward and physics) is
 #: retired: ``gymnasium.make`` of it raises ``gymnasium.error.DeprecatedEnv``. See ``AzimutEnv``'s
 #: "Version History".
@@ -36,8 +37,11 @@ ENV_ID_V1 = "Azimut-v1"
 # before any state changes) left the checker without data and the next good step raised a
 # TypeError inside the checker. The env passes gymnasium's and SB3's full ``check_env`` in the
 # tests (tests/azimut_env/test_env_api.py), which is the stronger check.
-for _id, _kwargs in ((ENV_ID, {}), (ENV_ID_V1, {"imperfections": "ideal"})):
+# Azimut-v1 is the same env with v1's robot and reward: entry points that merge the given keyword
+# arguments onto them (azimut_env.task.config.v1_kwargs), so that a reward_weights given to make does
+# not drop v1's weights as registration kwargs would.
+for _id, _entry, _vector in ((ENV_ID, "azimut_env.env:AzimutEnv", "azimut_env.vector_env:AzimutVectorEnv"),
+                             (ENV_ID_V1, "azimut_env.env:make_v1", "azimut_env.vector_env:make_v1_vector")):
     if _id not in registry:
-        register(id=_id, entry_point="azimut_env.env:AzimutEnv",
-                 vector_entry_point="azimut_env.vector_env:AzimutVectorEnv",
-                 max_episode_steps=None, disable_env_checker=True, kwargs=_kwargs)
+        register(id=_id, entry_point=_entry, vector_entry_point=_vector, max_episode_steps=None,
+                 disable_env_checker=True)

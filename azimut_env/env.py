@@ -38,14 +38,14 @@ import numpy as np
 from azimut_env.frontend import AzimutFrontEnd
 from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.actions import float32_copy
-from azimut_env.task.config import front_signature
+from azimut_env.task.config import front_signature, v1_kwargs
 from azimut_env.task.core import observation_layout
 from azimut_env.task.info import robot_info
 from azimut_env.tracks import Track
 from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_seed
 from estimation import estimate_eta
 
-__all__ = ["AzimutEnv", "observation_layout", "h_state_from_measurements", "h_state_batch"]
+__all__ = ["AzimutEnv", "make_v1", "observation_layout", "h_state_from_measurements", "h_state_batch"]
 
 
 def h_state_batch(q, phidot, geom, mu_tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -122,16 +122,17 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     (``reward_weights={name: w}`` sets it), v_max the track's top reference speed, dt the control
     period; every term but progress is ≤ 0:
 
-    | name           | weight | unit | term (per step)                                            |
-    |----------------|--------|------|------------------------------------------------------------|
-    | progress       | 3      | -    | w·clip(Δs, −v_max·dt, v_ref·dt)/(v_max·dt)                 |
-    | lateral        | 0.5    | -    | −w·(1 − exp(−abs(e_lat)/lateral_scale))                    |
-    | heading        | 0.3    | -    | −w·(1 − exp(−abs(e_θ)/heading_scale))                      |
-    | overspeed      | 2      | -    | −w·max(0, v_along − v_ref)/v_max                           |
-    | slip           | 0.02   | 1/W  | −min(w·P_slip, antagonism_cap), P_slip the tire slip power |
-    | internal_force | 0.01   | 1/N  | −min(w·F_int, antagonism_cap), F_int the internal force    |
-    | action_rate    | 0.05   | -    | −w·‖a − a_prev‖² (normalised actions)                      |
-    | off_track      | 10     | -    | −w on the step that leaves the track or stalls             |
+    | name            | weight | unit | term (per step)                                             |
+    |-----------------|--------|------|-------------------------------------------------------------|
+    | progress        | 3      | -    | w·clip(Δs, −v_max·dt, v_ref·dt)/(v_max·dt)                  |
+    | lateral         | 0.5    | -    | −w·(1 − exp(−abs(e_lat)/lateral_scale))                     |
+    | heading         | 0.3    | -    | −w·(1 − exp(−abs(e_θ)/heading_scale))                       |
+    | overspeed       | 2      | -    | −w·max(0, v_along − v_ref)/v_max                            |
+    | slip            | 0.02   | 1/W  | −min(w·P_slip, antagonism_cap), P_slip the tire slip power  |
+    | antagonism      | 0.01   | 1/N  | −min(w·F_ant, antagonism_cap), F_ant the wheels' antagonism |
+    | nullspace_force | 0      | 1/N  | −min(w·F_null, antagonism_cap), F_null the null-space force |
+    | action_rate     | 0.05   | -    | −w·‖a − a_prev‖² (normalised actions)                       |
+    | off_track       | 10     | -    | −w on the step that leaves the track or stalls              |
 
     * progress: w · v_ref / v_max per step at the reference speed (w at the track's top speed),
       nothing more for going faster, and a backward jump of the track projection costs at most
@@ -140,8 +141,13 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       centimetres matter (lateral, default weight: 1 cm −0.09, 5 cm −0.32);
     * overspeed: going faster than the reference is penalised (finishing early would otherwise
       save the per-step costs);
-    * slip (P_slip = Σ abs(F·v_slip) [W]) and internal_force (F_int [N]): the actuator antagonism
-      the paper is about (tire slip power and the internal force of wheels that fight each other);
+    * slip (P_slip = Σ abs(F·v_slip) [W]) and antagonism (F_ant [N]): the actuator antagonism the
+      paper is about (tire slip power, and the forces of wheels that fight each other: the tire
+      forces minus the distribution of their net wrench that a common rigid slip would give,
+      ``info["antagonism"]``, :mod:`azimut_env.physics.antagonism`; 0 for perfectly coordinated
+      wheels, whatever the loads and rolling speeds); nullspace_force (F_null [N], weight 0): the
+      minimum-norm null-space force, ``Azimut-v1``'s internal force, which also grows with the
+      chassis acceleration;
     * off_track: also charged on the step that stalls (below); a physics blow-up gets −w as its
       reward.
 
@@ -172,27 +178,28 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     step whose physics blew up has only ``reward_terms``, ``off_track``, ``finished``, ``stalled``
     and ``error``.
 
-    | key            | value      | unit       | content                                             |
-    |----------------|------------|------------|-----------------------------------------------------|
-    | pose           | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame            |
-    | pose_estimate  | (3,)       | m, m, rad  | the pose the observation used (pose_source)         |
-    | twist          | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame         |
-    | eta_true       | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign    |
-    | eta_hat        | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's               |
-    | beta_true      | (n,)       | rad        | true steering angles (wheel side of the spring)     |
-    | beta_est       | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR          |
-    | tire_forces    | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame     |
-    | slip_power     | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)           |
-    | internal_force | ()         | N          | step-mean internal force of the wheels              |
-    | qua            | ()         | -          | qua of the measured steering angles (eq. 28–29)     |
-    | progress       | ()         | m          | true progress along the track (unwrapped over laps) |
-    | lateral_error  | ()         | m          | true distance to the path, positive to its left     |
-    | heading_error  | ()         | rad        | true θ − θ_ref, wrapped                             |
-    | reward_terms   | {term: ()} | -          | the reward terms of the step by name (0 at a reset) |
-    | off_track      | ()         | bool       | the step left the track (terminated)                |
-    | finished       | ()         | bool       | the step finished the track (terminated)            |
-    | stalled        | ()         | bool       | the step ended a stall (terminated)                 |
-    | error          | ()         | str        | the physics failure, only on the step that blew up  |
+    | key             | value      | unit       | content                                                 |
+    |-----------------|------------|------------|---------------------------------------------------------|
+    | pose            | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame                |
+    | pose_estimate   | (3,)       | m, m, rad  | the pose the observation used (pose_source)             |
+    | twist           | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame             |
+    | eta_true        | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign        |
+    | eta_hat         | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's                   |
+    | beta_true       | (n,)       | rad        | true steering angles (wheel side of the spring)         |
+    | beta_est        | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR              |
+    | tire_forces     | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame         |
+    | slip_power      | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)               |
+    | antagonism      | ()         | N          | step-mean antagonism: stiffness-weighted internal force |
+    | nullspace_force | ()         | N          | step-mean min-norm null-space force of the tires        |
+    | qua             | ()         | -          | qua of the measured steering angles (eq. 28–29)         |
+    | progress        | ()         | m          | true progress along the track (unwrapped over laps)     |
+    | lateral_error   | ()         | m          | true distance to the path, positive to its left         |
+    | heading_error   | ()         | rad        | true θ − θ_ref, wrapped                                 |
+    | reward_terms    | {term: ()} | -          | the reward terms of the step by name (0 at a reset)     |
+    | off_track       | ()         | bool       | the step left the track (terminated)                    |
+    | finished        | ()         | bool       | the step finished the track (terminated)                |
+    | stalled         | ()         | bool       | the step ended a stall (terminated)                     |
+    | error           | ()         | str        | the physics failure, only on the step that blew up      |
 
     ## Arguments
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
@@ -252,10 +259,15 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       steering joint friction (Coulomb, stiction, Stribeck), the module's centre of mass off the
       steering axis, the drive's torque–speed line, per-wheel steering-axis zero offsets and
       rolling-radius errors (drawn anew under domain randomisation), 36,000-count wheel encoders,
-      and a 20 N·m/rad steering spring (was 60); observation, action, reward and termination are
-      unchanged. ``gymnasium.make("Azimut-v1")`` still makes v1 (this env with
-      ``imperfections="ideal"``, bit for bit the v1 trajectories), with Gymnasium's warning that
-      it is out of date.
+      and a 20 N·m/rad steering spring (was 60). The reward prices the antagonism of the wheels
+      (term ``antagonism``, weight 0.01 /N, the stiffness-weighted internal force) instead of v1's
+      internal force, the minimum-norm null-space force, which also reads the chassis acceleration
+      (term ``nullspace_force``, weight 0; ``reward_weights={"internal_force": ...}`` is refused,
+      naming the new term); ``info`` has ``antagonism`` and ``nullspace_force`` in place of
+      ``internal_force``. Observation, action and termination are unchanged.
+      ``gymnasium.make("Azimut-v1")`` still makes v1 (this env with ``imperfections="ideal"`` and
+      v1's reward weights, bit for bit the v1 trajectories and rewards), with Gymnasium's warning
+      that it is out of date.
     * v1: a reward that prices what the paper measures: bounded exponential tracking terms (were
       quadratic), overspeed penalised, slip power and internal force priced, backward projection
       jumps clipped, optional stall termination, a per-track time limit (1.5 × the reference
@@ -363,3 +375,13 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
 
 
 AzimutEnv.__init__.__signature__ = front_signature(AzimutEnv.__init__)
+
+
+def make_v1(**kwargs: Any) -> AzimutEnv:
+    """``gymnasium.make("Azimut-v1", ...)``: this env with v1's robot and reward
+    (:func:`~azimut_env.task.config.v1_kwargs`: ``imperfections="ideal"``, the null-space force priced
+    in place of the antagonism), the keyword arguments otherwise as given."""
+    return AzimutEnv(**v1_kwargs(kwargs))
+
+
+make_v1.metadata = AzimutEnv.metadata

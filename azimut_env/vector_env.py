@@ -12,7 +12,7 @@ autoreset modes, the batched info and the per-sub-env blow-up bookkeeping. Robot
 with each other.
 
 ``gymnasium.make_vec("Azimut-v2", num_envs=N, vectorization_mode="vector_entry_point")`` returns it
-(keyword arguments as for ``gymnasium.make("Azimut-v2", ...)``).
+(keyword arguments as for ``gymnasium.make("Azimut-v2", ...)``; ``"Azimut-v1"``: :func:`make_v1_vector`).
 """
 
 from __future__ import annotations
@@ -30,12 +30,12 @@ from numba.typed import List as NumbaList
 
 from azimut_env.frontend import AzimutFrontEnd
 from azimut_env.params import RobotParams, SensorParams
-from azimut_env.task.config import front_signature
+from azimut_env.task.config import front_signature, v1_kwargs
 from azimut_env.task.info import batch_info, robot_info
 from azimut_env.tracks import Track
 from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
-__all__ = ["AzimutVectorEnv"]
+__all__ = ["AzimutVectorEnv", "make_v1_vector"]
 
 
 class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
@@ -78,27 +78,28 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     ``stalled`` and ``error`` (an object array). ``info.sub_info(info, i)`` gives sub-env i's info,
     equal to the single env's key by key; :meth:`sub_env_info` gives it from the current state.
 
-    | key            | value      | unit       | content                                             |
-    |----------------|------------|------------|-----------------------------------------------------|
-    | pose           | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame            |
-    | pose_estimate  | (3,)       | m, m, rad  | the pose the observation used (pose_source)         |
-    | twist          | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame         |
-    | eta_true       | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign    |
-    | eta_hat        | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's               |
-    | beta_true      | (n,)       | rad        | true steering angles (wheel side of the spring)     |
-    | beta_est       | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR          |
-    | tire_forces    | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame     |
-    | slip_power     | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)           |
-    | internal_force | ()         | N          | step-mean internal force of the wheels              |
-    | qua            | ()         | -          | qua of the measured steering angles (eq. 28–29)     |
-    | progress       | ()         | m          | true progress along the track (unwrapped over laps) |
-    | lateral_error  | ()         | m          | true distance to the path, positive to its left     |
-    | heading_error  | ()         | rad        | true θ − θ_ref, wrapped                             |
-    | reward_terms   | {term: ()} | -          | the reward terms of the step by name (0 at a reset) |
-    | off_track      | ()         | bool       | the step left the track (terminated)                |
-    | finished       | ()         | bool       | the step finished the track (terminated)            |
-    | stalled        | ()         | bool       | the step ended a stall (terminated)                 |
-    | error          | ()         | str        | the physics failure, only on the step that blew up  |
+    | key             | value      | unit       | content                                                 |
+    |-----------------|------------|------------|---------------------------------------------------------|
+    | pose            | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame                |
+    | pose_estimate   | (3,)       | m, m, rad  | the pose the observation used (pose_source)             |
+    | twist           | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame             |
+    | eta_true        | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign        |
+    | eta_hat         | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's                   |
+    | beta_true       | (n,)       | rad        | true steering angles (wheel side of the spring)         |
+    | beta_est        | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR              |
+    | tire_forces     | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame         |
+    | slip_power      | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)               |
+    | antagonism      | ()         | N          | step-mean antagonism: stiffness-weighted internal force |
+    | nullspace_force | ()         | N          | step-mean min-norm null-space force of the tires        |
+    | qua             | ()         | -          | qua of the measured steering angles (eq. 28–29)         |
+    | progress        | ()         | m          | true progress along the track (unwrapped over laps)     |
+    | lateral_error   | ()         | m          | true distance to the path, positive to its left         |
+    | heading_error   | ()         | rad        | true θ − θ_ref, wrapped                                 |
+    | reward_terms    | {term: ()} | -          | the reward terms of the step by name (0 at a reset)     |
+    | off_track       | ()         | bool       | the step left the track (terminated)                    |
+    | finished        | ()         | bool       | the step finished the track (terminated)                |
+    | stalled         | ()         | bool       | the step ended a stall (terminated)                     |
+    | error           | ()         | str        | the physics failure, only on the step that blew up      |
 
     ## Arguments
     ``num_envs``; ``max_episode_steps`` (default None: the per-track limit only); ``autoreset_mode``; ``render_index``
@@ -379,3 +380,9 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
 
 
 AzimutVectorEnv.__init__.__signature__ = front_signature(AzimutVectorEnv.__init__)
+
+
+def make_v1_vector(**kwargs: Any) -> AzimutVectorEnv:
+    """``gymnasium.make_vec("Azimut-v1", ...)``: this env with v1's robot and reward
+    (:func:`~azimut_env.task.config.v1_kwargs`), the keyword arguments otherwise as given."""
+    return AzimutVectorEnv(**v1_kwargs(kwargs))

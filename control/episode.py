@@ -34,8 +34,8 @@ class EpisodeLog:
     Attributes:
         controller: the controller's name; track: the episode's track; dt: control period [s].
         t: [s] the time at the end of each step; pose: (T, 3) true pose (x, y, θ) [m, m, rad];
-        lateral, heading: the track errors [m], [rad]; slip_power [W], internal_force [N], qua:
-        as the env's info; beta_meas, beta_true, motor_true: (T, n) measured and true steering
+        lateral, heading: the track errors [m], [rad]; slip_power [W], nullspace_force [N],
+        antagonism [N], qua: as the env's info; beta_meas, beta_true, motor_true: (T, n) measured and true steering
         angles and the true motor angles [rad]; phidot_meas: (T, n) the measured wheel spin
         rates [rad/s]; beta_cmd, phidot_cmd: (T, n) the commands
         [rad], [rad/s]; beta_rate, phiddot: (T, n) their rates where the controller gave them
@@ -56,7 +56,8 @@ class EpisodeLog:
     lateral: np.ndarray = field(default_factory=lambda: np.zeros(0))
     heading: np.ndarray = field(default_factory=lambda: np.zeros(0))
     slip_power: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    internal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    nullspace_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    antagonism: np.ndarray = field(default_factory=lambda: np.zeros(0))
     qua: np.ndarray = field(default_factory=lambda: np.zeros(0))
     beta_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     phidot_meas: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
@@ -114,7 +115,8 @@ def episode_metrics(log: EpisodeLog) -> dict:
         "rms_heading_rad": float(np.sqrt(np.mean(head**2))),
         "completion_time_s": t_end if log.completed else float("nan"),
         "slip_energy_J": float(np.sum(log.slip_power) * log.dt),
-        "mean_internal_force_N": float(np.mean(log.internal_force)) if log.internal_force.size else float("nan"),
+        "mean_nullspace_force_N": float(np.mean(log.nullspace_force)) if log.nullspace_force.size else float("nan"),
+        "mean_antagonism_N": float(np.mean(log.antagonism)) if log.antagonism.size else float("nan"),
         "mean_qua": float(np.mean(log.qua)) if log.qua.size else float("nan"),
         "min_qua": float(np.min(log.qua)) if log.qua.size else float("nan"),
         "mean_qua_moving": float(np.mean(log.qua[moving])) if moving.any() else float("nan"),

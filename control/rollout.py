@@ -101,8 +101,9 @@ def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, be
     """Append robot i's row (the keys of :class:`EpisodeLog`) after a step, from the env's info
     (the vector env's batched info, whose row i is the single env's info of that robot)."""
     row = [("pose", info["pose"][i]), ("lateral", info["lateral_error"][i]), ("heading", info["heading_error"][i]),
-           ("slip_power", info["slip_power"][i]), ("internal_force", info["internal_force"][i]),
-           ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]), ("phidot_meas", phidot_meas[i]),
+           ("slip_power", info["slip_power"][i]), ("nullspace_force", info["nullspace_force"][i]),
+           ("antagonism", info["antagonism"][i]), ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]),
+           ("phidot_meas", phidot_meas[i]),
            ("beta_true", info["beta_true"][i]), ("motor_true", motor[i]),
            ("beta_cmd", np.array(cmd.beta[i], dtype=np.float64)),
            ("phidot_cmd", np.array(cmd.phidot[i], dtype=np.float64)),

@@ -55,11 +55,19 @@ GLOSSARY: dict[str, Column] = {
     "completion_time_s": Column("time [s]", "the simulated time to finish the track; - when it was not finished"),
     "slip_energy_J": Column("slip energy [J]", "the energy the tires dissipated by slipping, ∫ Σ_k |F_k · v_slip,k| "
                                                "dt over the episode (tire force times slip velocity, all wheels)"),
-    "mean_internal_force_N": Column(
-        "mean int. force [N]", "the mean over steps of the internal force: the norm of the part of the tire forces "
-                               "that cancels out on the chassis (the forces minus the least-norm forces giving the "
-                               "same net force and moment): wheels pushing against each other, 0 when their "
-                               "propulsion axes meet in one instantaneous centre of rotation"),
+    "mean_antagonism_N": Column(
+        "mean antagonism [N]", "the mean over steps of the antagonism of the wheels: the norm of the tire forces minus "
+                               "the distribution of their net force and moment that one common rigid slip of the "
+                               "chassis would give, each wheel weighted by its tire's slip stiffness (load over "
+                               "rolling speed): forces of wheels that push against each other; 0 when every wheel "
+                               "is on the constraining surface and at its speed, whatever the loads, the rolling "
+                               "speeds and the acceleration (docs/physics.md, Antagonism)"),
+    "mean_nullspace_force_N": Column(
+        "mean null-space force [N]", "the mean over steps of the minimum-norm null-space force (the internal force of "
+                                     "earlier reports): the norm of the tire forces minus the least-norm forces giving "
+                                     "the same net force and moment; it contains an acceleration floor, since wheels "
+                                     "rolling at different speeds or loads share a force unequally even when they "
+                                     "agree on one instantaneous centre of rotation"),
     "mean_qua": Column("mean qua (all)", f"the mean over all steps of {_QUA}"),
     "min_qua": Column("min qua (all)", "the smallest qua of the episode"),
     "mean_qua_moving": Column("mean qua moving", f"the mean of qua over {_MOVING}; stops and in-place "
@@ -76,7 +84,7 @@ GLOSSARY: dict[str, Column] = {
                                                   "its wheels in place (a steering stop or axis on the way, or a "
                                                   "knocked wheel); 0 for controllers that never stop"),
     "return": Column("return", "the sum of the env's per-step rewards over the episode (Azimut-v2's reward: "
-                               "progress minus the tracking, overspeed, slip, internal-force, action-rate and "
+                               "progress minus the tracking, overspeed, slip, antagonism, action-rate and "
                                "off-track costs), what the RL agents maximise"),
 }
 

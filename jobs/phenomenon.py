@@ -203,7 +203,8 @@ def attribute(log: EpisodeLog, geom, min_mu: float = MOVING_MU, steer_offset=Non
     out["motor_lag_rms_deg"], out["motor_lag_max_deg"] = _rms_max_deg(lag)
     out["rms_lateral_m"] = float(np.sqrt(np.mean(log.lateral ** 2))) if log.lateral.size else float("nan")
     out["slip_energy_J"] = float(np.sum(log.slip_power) * log.dt)
-    out["mean_internal_force_N"] = float(np.mean(log.internal_force)) if log.internal_force.size else float("nan")
+    out["mean_nullspace_force_N"] = float(np.mean(log.nullspace_force)) if log.nullspace_force.size else float("nan")
+    out["mean_antagonism_N"] = float(np.mean(log.antagonism)) if log.antagonism.size else float("nan")
     return out
 
 

@@ -56,7 +56,8 @@ _TABLE = (("speed_scale", "speed ×", "{:.2f}"), ("case", "case", "{}"), ("compl
           ("departure_drop_deg", "drop [°]", "{:+.3f}"), ("it_over_ns", "IT > NS+0.1", "{:.1%}"),
           ("qua_meas_mean", "qua β_meas mean", "{:.4f}"), ("qua_meas_min", "min", "{:.4f}"),
           ("deflection_rms_deg", "defl. RMS [°]", "{:.2f}"), ("motor_lag_rms_deg", "lag RMS [°]", "{:.2f}"),
-          ("rms_lateral_m", "RMS lat [cm]", "{:.2f}"), ("mean_internal_force_N", "int. force [N]", "{:.1f}"))
+          ("rms_lateral_m", "RMS lat [cm]", "{:.2f}"), ("mean_antagonism_N", "antagonism [N]", "{:.1f}"),
+          ("mean_nullspace_force_N", "null-space force [N]", "{:.1f}"))
 _SWEEP_TABLE = (("value", "value", "{:g}"),) + tuple(c for c in _TABLE if c[0] not in ("case", "departure_drop_deg"))
 #: the columns ``--d2`` adds to the sweep: D2 recorded with each value (jobs.phenomenon.d2_separation)
 _D2_TABLE = (("d2_departure_mean_deg", "D2 dep. mean [°]", "{:.3f}"), ("d2_it_over_ns", "D2 IT > NS+0.1", "{:.1%}"),

@@ -15,12 +15,12 @@ from train.rollout import policy_metrics
 
 __all__ = ["InfoStatsCallback", "HeldOutEvalCallback", "WallClockLimit"]
 
-_INFO_KEYS = ("slip_power", "internal_force", "heading_error", "lateral_error")
+_INFO_KEYS = ("slip_power", "antagonism", "nullspace_force", "heading_error", "lateral_error")
 
 
 class InfoStatsCallback(BaseCallback):
-    """Mean |value| over the last ``every`` env steps of the infos' slip power [W], internal force
-    [N], heading and lateral errors, logged as ``env/<key>`` (TensorBoard and progress.csv)."""
+    """Mean |value| over the last ``every`` env steps of the infos' slip power [W], antagonism and
+    null-space force [N], heading and lateral errors, logged as ``env/<key>`` (TensorBoard and progress.csv)."""
 
     def __init__(self, every: int = 256) -> None:
         super().__init__()
@@ -82,7 +82,8 @@ class HeldOutEvalCallback(BaseCallback):
             t = r["track"]
             self.logger.record(f"eval/{t}/return", r["return"])
             self.logger.record(f"eval/{t}/rms_lateral_cm", 100 * r["rms_lateral_m"])
-            self.logger.record(f"eval/{t}/internal_force_N", r["mean_internal_force_N"])
+            self.logger.record(f"eval/{t}/antagonism_N", r["mean_antagonism_N"])
+            self.logger.record(f"eval/{t}/nullspace_force_N", r["mean_nullspace_force_N"])
             self.logger.record(f"eval/{t}/slip_energy_J", r["slip_energy_J"])
             self.logger.record(f"eval/{t}/completed", float(r["completed"]))
         self.logger.record("eval/mean_return", entry["mean_return"])
@@ -102,7 +103,7 @@ class HeldOutEvalCallback(BaseCallback):
             if vn is not None:
                 vn.save(str(self.out / "best_vecnormalize.pkl"))
         summary = ", ".join(f"{r['track']} ret {r['return']:.0f} lat {100 * r['rms_lateral_m']:.2f} cm "
-                            f"F {r['mean_internal_force_N']:.1f} N"
+                            f"antagonism {r['mean_antagonism_N']:.1f} N"
                             f"{'' if r['completed'] else ' (' + (r['error'] or 'not finished') + ')'}"
                             for r in entry["rows"])
         print(f"[eval @ {self.num_timesteps}] {summary}", flush=True)

@@ -42,9 +42,9 @@ class AzimutSB3VecEnv(VecEnv):
     ``get_attr``/``set_attr``/``env_method`` act on the vector env, which all sub-envs share: a
     get returns the same value for every index.
 
-    Per-sub-env ``infos`` carry ``progress``, ``lateral_error``, ``heading_error``,
-    ``slip_power`` [W], ``internal_force`` [N], ``off_track``, ``finished``, ``stalled`` and, through a
-    controller wrapper, ``controller_mode`` (SB3 callbacks log them; see ``train``).
+    Per-sub-env ``infos`` carry ``progress``, ``lateral_error``, ``heading_error``, ``slip_power``
+    [W], ``antagonism`` and ``nullspace_force`` [N], ``off_track``, ``finished``, ``stalled`` and,
+    through a controller wrapper, ``controller_mode`` (SB3 callbacks log them; see ``train``).
     """
 
     def __init__(self, num_envs: int = 1, venv: AzimutVectorEnv | None = None, **kwargs: Any) -> None:
@@ -91,8 +91,8 @@ class AzimutSB3VecEnv(VecEnv):
     def _split_info(self, info: dict[str, Any]) -> list[dict[str, Any]]:
         """Per-sub-env dicts of the few scalar infos SB3 users log (progress, errors...)."""
         out: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for key in ("progress", "lateral_error", "heading_error", "slip_power", "internal_force", "off_track",
-                    "finished", "stalled", "controller_mode"):
+        for key in ("progress", "lateral_error", "heading_error", "slip_power", "antagonism", "nullspace_force",
+                    "off_track", "finished", "stalled", "controller_mode"):
             values = info.get(key)
             if values is not None:
                 for i in range(self.num_envs):

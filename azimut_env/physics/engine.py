@@ -32,7 +32,7 @@ Per-robot parameters live in arrays (``wheel_params``, columns :class:`WP`) so t
 randomisation can vary them robot by robot (:meth:`AzimutPhysics.set_wheel_params`,
 :meth:`AzimutPhysics.set_chassis_mass`). After each step, ``summary`` (N, len(RS)) and
 ``wheel_summary`` (N, n, len(WS)) hold the derived per-robot quantities (pose, twists, slip power,
-internal force, blow-up code; β, β̇, tire forces and contact points in the chassis frame),
+null-space force, antagonism, blow-up code; β, β̇, tire forces and contact points in the chassis frame),
 computed by one compiled call for all robots. Other modules read them by the column names of
 :mod:`azimut_env.physics.layout` and change the physics only through its methods.
 """
@@ -47,6 +47,7 @@ import numpy as np
 import pymunk
 
 from azimut_env.params import RobotParams
+from azimut_env.physics.antagonism import SLIP_MEMORY_TIME, slip_damping
 from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.physics.body_io import BodyIO
 from azimut_env.physics.contacts import lap, step_with_contacts
@@ -155,10 +156,12 @@ class AzimutPhysics:
         self._before = np.zeros((self.n_robots, len(CS)))
         self._read_state()
 
-    def _summarize(self) -> None:
-        summary_kernel(self._state, self.joint_state, self.motor_state, self.acc, self.wheel_params, self._axis_xy,
-                        self.n, 1.0 / self.substeps, self.blowup.speed, self.blowup.yaw_rate,
-                        self.blowup.spin, self.blowup.position, self.summary, self.wheel_summary)
+    def _summarize(self, sl: slice = slice(None)) -> None:
+        """The summary rows ``sl`` (all robots by default) from the state (:func:`summary_kernel`)."""
+        lim = self.blowup
+        summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl], self.wheel_params[sl],
+                       self.enabled[sl], self._axis_xy, self.n, 1.0 / self.substeps, SLIP_MEMORY_TIME, lim.speed,
+                       lim.yaw_rate, lim.spin, lim.position, self.summary[sl], self.wheel_summary[sl])
 
     def _read_state(self) -> np.ndarray:
         self._io.read()
@@ -171,11 +174,7 @@ class AzimutPhysics:
         b = self.chassis[robot]
         p, v = b.position, b.velocity
         self._state[robot] = (p.x, p.y, b.angle, v.x, v.y, b.angular_velocity)
-        sl = slice(robot, robot + 1)
-        summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl],
-                        self.wheel_params[sl], self._axis_xy, self.n, 1.0 / self.substeps, self.blowup.speed,
-                        self.blowup.yaw_rate, self.blowup.spin, self.blowup.position, self.summary[sl],
-                        self.wheel_summary[sl])
+        self._summarize(slice(robot, robot + 1))
 
     def _build_space_keep_state(self) -> None:
         """Rebuild the Space and copy every robot body's state over."""
@@ -462,14 +461,26 @@ class AzimutPhysics:
         """(N,) power dissipated by tire slip Σ_k |F_k · v_slip,k|, averaged over the last step [W]."""
         return self.summary[:, RS.SLIP].copy()
 
-    def internal_force(self) -> np.ndarray:
-        """(N,) norm of the internal (antagonistic) part of the tire forces, step mean [N].
+    def nullspace_force(self) -> np.ndarray:
+        """(N,) ‖F − Gᵀ(G Gᵀ)⁻¹ G F‖, step mean [N]: the minimum-norm null-space part of the tire forces F
+        (2n, chassis frame; G F the net wrench). It has an acceleration floor: wheels rolling at different
+        speeds or loads share a wrench unequally even on one ICR (:meth:`antagonism` takes it out)."""
+        return self.summary[:, RS.NULLSPACE].copy()
 
-        The tire forces F (2n values, chassis frame) map to the net wrench W = G F on the chassis
-        (force and moment about the centre). The least-norm forces that give the same W are
-        F* = Gᵀ(G Gᵀ)⁻¹ W; F − F* lies in the null space of G: forces that cancel out.
-        """
-        return self.summary[:, RS.INTERNAL].copy()
+    def antagonism(self) -> np.ndarray:
+        """(N,) ‖F − D J (Jᵀ D J)⁻¹ Jᵀ F‖, step mean [N]: the tire forces minus the distribution of their
+        net wrench that a common rigid slip would give, D the slip dampings of :meth:`slip_dampings`
+        (:mod:`azimut_env.physics.antagonism`; 0 for any rigid slip field)."""
+        return self.summary[:, RS.ANTAGONISM].copy()
+
+    def slip_dampings(self) -> np.ndarray:
+        """(N, n, 2) (d_long, d_lat) [N·s/m] of the last step: c N/(|v_x| + σ/τ) of each wheel's step-mean load
+        and speed, in series with the drive loop along d (:func:`~azimut_env.physics.antagonism.slip_damping`)."""
+        inv, wp = 1.0 / self.substeps, self.wheel_params
+        gain = np.where(self.enabled[:, None], wp[..., WP.KV], wp[..., WP.BEARING])
+        return slip_damping(self.acc[..., ACC.LOAD] * inv, self.acc[..., ACC.ROLL] * inv, wp[..., WP.C_KAPPA],
+                            wp[..., WP.C_ALPHA], wp[..., WP.SIGMA_LONG], wp[..., WP.SIGMA_LAT], wp[..., WP.R], gain,
+                            SLIP_MEMORY_TIME)
 
     def energy(self) -> np.ndarray:
         """(N,) kinetic energy (chassis with the module masses, module rotations and their coupling

@@ -75,6 +75,7 @@ import numpy as np
 from numba import njit
 
 from azimut_env.physics.actuators import dc_torque_limits_kernel, steer_actuator_kernel, wheel_spin_step_kernel
+from azimut_env.physics.antagonism import antagonism_kernel, slip_damping_kernel
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, JS, MS, RS, WP, WS
 from azimut_env.physics.modules import (
@@ -228,6 +229,8 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 acc[i, k, ACC.FX] += fx
                 acc[i, k, ACC.FY] += fy
                 acc[i, k, ACC.SLIP] += abs(f_long * s_long + f_lat * v_lat)
+                acc[i, k, ACC.LOAD] += load
+                acc[i, k, ACC.ROLL] += abs(v_roll)
                 if not coupled:
                     omega_new[k] = wm + dt * tau_m / p[WP.I_MOD]
                     continue
@@ -344,17 +347,25 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
 
 
 @njit(cache=True)
-def summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, speed_max, yaw_rate_max, spin_max, position_max,
-                   out_r, out_w):
+def summary_kernel(state, js, ms, acc, wp, en, axis_xy, n, inv_sub, memory, speed_max, yaw_rate_max, spin_max,
+                   position_max, out_r, out_w):
     """Per-step derived quantities for all robots, one call: out_r (N, RS) and out_w (N, n, WS).
 
-    Internal force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
-    least-norm forces with the same wrench are F* = Gᵀ (G Gᵀ)⁻¹ W, and ‖F − F*‖ is the internal part.
-    The blow-up code (:class:`~azimut_env.physics.blowup.BlowUp`) compares with the ``*_max`` limits.
+    Null-space force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
+    least-norm forces with the same wrench are F* = Gᵀ (G Gᵀ)⁻¹ W, and ‖F − F*‖ is their null-space
+    part. Antagonism: ‖F − F_nat‖ with F_nat the distribution of W that a common rigid slip gives,
+    weighted by the wheels' slip dampings of their step-mean loads and rolling speeds, in series with
+    the drive's velocity loop (its gain, or the bearing's damping where ``en`` (N,) has the motors
+    off; ``memory`` the τ of :func:`~azimut_env.physics.antagonism.slip_damping_kernel`;
+    :mod:`azimut_env.physics.antagonism`). The blow-up code (:class:`~azimut_env.physics.blowup.BlowUp`)
+    compares with the ``*_max`` limits.
     """
     n_robots = ms.shape[0]
     P = np.zeros((n, 2))
     F = np.zeros((n, 2))
+    gams = np.zeros(n)
+    d_long = np.zeros(n)
+    d_lat = np.zeros(n)
     for i in range(n_robots):
         x, y, th = state[i, CS.X], state[i, CS.Y], state[i, CS.TH]
         vx, vy, w = state[i, CS.VX], state[i, CS.VY], state[i, CS.W]
@@ -399,8 +410,14 @@ def summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, speed_max, yaw_r
             P[k, 1] = py
             F[k, 0] = fx
             F[k, 1] = fy
+            gams[k] = gam
+            d_long[k], d_lat[k] = slip_damping_kernel(
+                acc[i, k, ACC.LOAD] * inv_sub, acc[i, k, ACC.ROLL] * inv_sub, wp[i, k, WP.C_KAPPA],
+                wp[i, k, WP.C_ALPHA], wp[i, k, WP.SIGMA_LONG], wp[i, k, WP.SIGMA_LAT], memory, wp[i, k, WP.R],
+                wp[i, k, WP.KV] if en[i] else wp[i, k, WP.BEARING])
         out_r[i, RS.SLIP] = slip
         internal = 0.0
+        antagonism = 0.0
         if finite:
             # G Gᵀ = [[n, 0, −Σp_y], [0, n, Σp_x], [−Σp_y, Σp_x, Σ|p|²]], solved in closed form
             sx = 0.0
@@ -432,7 +449,9 @@ def summary_kernel(state, js, ms, acc, wp, axis_xy, n, inv_sub, speed_max, yaw_r
                 dy = F[k, 1] - (x1 + px * x2)
                 internal += dx * dx + dy * dy
             internal = math.sqrt(internal)
-        out_r[i, RS.INTERNAL] = internal
+            antagonism = antagonism_kernel(P, F, gams, d_long, d_lat, n)
+        out_r[i, RS.NULLSPACE] = internal
+        out_r[i, RS.ANTAGONISM] = antagonism
         if not finite:
             code = BlowUp.NON_FINITE.value
         elif vmax > speed_max:

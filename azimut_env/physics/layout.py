@@ -98,19 +98,24 @@ class MS(IntEnum):
 
 class ACC(IntEnum):
     """Columns of the per-wheel accumulator over one step's substeps (N, n, len(ACC)): the tire
-    force on the robot in the world (FX, FY) [N] and the slip power |F · v_slip| [W]."""
+    force on the robot in the world (FX, FY) [N], the slip power |F · v_slip| [W], the normal
+    load LOAD [N] and the rolling speed over the ground ROLL = |v(P)·d| [m/s] (the last two for
+    the slip dampings of the antagonism, :mod:`azimut_env.physics.antagonism`)."""
 
-    FX, FY, SLIP = range(3)
+    FX, FY, SLIP, LOAD, ROLL = range(5)
 
 
 class RS(IntEnum):
     """Columns of the robot summary ``summary`` (N, len(RS)), computed after each step: the pose
     (X, Y [m], TH [rad]) and velocity (VX, VY [m/s], W [rad/s]) in the world (the columns of
     :class:`CS`, in the same order), the velocity in the
-    chassis frame (BX, BY [m/s]), the step-mean slip power SLIP [W] and internal force INTERNAL [N],
-    and the blow-up code CODE (a :class:`azimut_env.physics.blowup.BlowUp`, 0 when fine)."""
+    chassis frame (BX, BY [m/s]), the step-mean slip power SLIP [W], the null-space force
+    NULLSPACE [N] (the minimum-norm internal force of the step-mean tire forces) and the
+    antagonism ANTAGONISM [N] (their stiffness-weighted internal force,
+    :mod:`azimut_env.physics.antagonism`), and the blow-up code CODE (a
+    :class:`azimut_env.physics.blowup.BlowUp`, 0 when fine)."""
 
-    X, Y, TH, VX, VY, W, BX, BY, SLIP, INTERNAL, CODE = range(11)
+    X, Y, TH, VX, VY, W, BX, BY, SLIP, NULLSPACE, ANTAGONISM, CODE = range(12)
 
 
 class WS(IntEnum):

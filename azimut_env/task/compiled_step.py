@@ -166,7 +166,7 @@ _NEW = _constructor()
 # plain-int columns (numba folds them; the IntEnums stay the names)
 _WS_BETA, _MS_THETA, _MS_PHI, _MS_PHIDOT = int(WS.BETA), int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)
 _RS_X, _RS_TH, _RS_VX, _RS_VY = int(RS.X), int(RS.TH), int(RS.VX), int(RS.VY)
-_RS_SLIP, _RS_INTERNAL = int(RS.SLIP), int(RS.INTERNAL)
+_RS_SLIP, _RS_ANTAGONISM, _RS_NULLSPACE = int(RS.SLIP), int(RS.ANTAGONISM), int(RS.NULLSPACE)
 _TQ_S, _TQ_LATERAL, _TQ_HEADING, _TQ_V_REF = int(TQ.S), int(TQ.LATERAL), int(TQ.HEADING), int(TQ.V_REF)
 
 
@@ -291,8 +291,9 @@ def observe_kernel(reward_kernel):
     check_track_limits(ta.rows, ta.track_out, ta.track_length, ta.max_lateral_error, ta.off_track, ta.finished)
     # the reward: {reward_kernel.__name__}
     _reward(ta.rows, ta.track_out, ta.s_prev, ta.summary[:, {_RS_VX}:{_RS_VY + 1}], ta.track_max_speed,
-            ta.summary[:, {_RS_SLIP}], ta.summary[:, {_RS_INTERNAL}], action, ta.prev_action, ta.off_track,
-            ta.v_along, ta.reward_inputs, ta.reward_constants, ta.weights, ta.reward_terms, ta.reward)
+            ta.summary[:, {_RS_SLIP}], ta.summary[:, {_RS_ANTAGONISM}], ta.summary[:, {_RS_NULLSPACE}], action,
+            ta.prev_action, ta.off_track, ta.v_along, ta.reward_inputs, ta.reward_constants, ta.weights,
+            ta.reward_terms, ta.reward)
     remember_action(ta, action)
     observe(ta)
     stalls(ta)

@@ -20,11 +20,11 @@ from typing import Any
 
 from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.localisation import LocalisationParams, check_pose_source
-from azimut_env.task.reward import OFF_TRACK, check_reward_weights, default_reward_weights
+from azimut_env.task.reward import OFF_TRACK, RENAMED_TERMS, check_reward_weights, default_reward_weights
 from azimut_env.validation import check_fields, check_int, check_nonnegative, check_positive, check_range
 
 __all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS",
-           "LEGACY_WEIGHT_KEYWORDS"]
+           "LEGACY_WEIGHT_KEYWORDS", "V1_REWARD_WEIGHTS", "v1_kwargs"]
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ class TaskConfig:
             (the terms and their units are in :class:`~azimut_env.env.AzimutEnv`, "Rewards").
         lateral_scale [m], heading_scale [rad]: scales of the bounded tracking terms
             w·(1 − exp(−|e|/scale)).
-        antagonism_cap: largest per-step cost of each of the slip and internal-force terms.
+        antagonism_cap: largest per-step cost of each of the slip, antagonism and null-space terms.
         stall_time: end the episode (terminated, with the off-track penalty) after this long [s]
             without ``stall_distance`` [m] of new progress; 0: never.
         time_limit_factor: per-robot step limit = ceil(factor · T / dt), T the nominal lap of the
@@ -181,6 +181,24 @@ LEGACY_WEIGHT_KEYWORDS = {"progress_weight": "progress", "lateral_weight": "late
                           "internal_force_weight": "internal_force", "action_rate_weight": "action_rate",
                           "off_track_penalty": "off_track"}
 
+#: ``Azimut-v1``'s reward on top of the current defaults: it priced the minimum-norm null-space force
+#: (then called internal_force), not the antagonism, with the same weight (:func:`v1_kwargs`)
+V1_REWARD_WEIGHTS = {"antagonism": 0.0, "nullspace_force": 0.01}
+
+
+def v1_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The keyword arguments of an ``Azimut-v1`` env from those given to ``gymnasium.make``: the
+    ideal robot (``imperfections="ideal"``) unless another is named, and :data:`V1_REWARD_WEIGHTS`
+    under the ``reward_weights`` given (a term named there keeps the value given; what is not a
+    mapping is left for :class:`TaskConfig` to refuse). Its rewards are then v1's, bit for bit
+    (the antagonism term adds −0.0)."""
+    out = dict(kwargs)
+    out.setdefault("imperfections", "ideal")
+    weights = out.get("reward_weights")
+    if weights is None or isinstance(weights, Mapping):
+        out["reward_weights"] = {**V1_REWARD_WEIGHTS, **(weights or {})}
+    return out
+
 
 def _legacy_weights(config: dict[str, Any]) -> dict[str, Any]:
     """``config`` with the deprecated per-term weight keywords (:data:`LEGACY_WEIGHT_KEYWORDS`) moved
@@ -196,6 +214,8 @@ def _legacy_weights(config: dict[str, Any]) -> dict[str, Any]:
     weights = dict(weights or {})
     for key in legacy:
         term = LEGACY_WEIGHT_KEYWORDS[key]
+        if term in RENAMED_TERMS:
+            raise ValueError(f"{key}: the term {term!r} is now {RENAMED_TERMS[term]}")
         if term in weights:
             raise TypeError(f"{key} and reward_weights[{term!r}] both set the weight of {term!r}: "
                             f"pass reward_weights only")

@@ -90,7 +90,7 @@ from estimation import estimate_eta
 from estimation.estimate import estimate_eta_rows
 
 # plain-int columns for the per-step paths (numpy indexes with an IntEnum member µs slower)
-_RS_CODE, _RS_SLIP, _RS_INTERNAL = int(RS.CODE), int(RS.SLIP), int(RS.INTERNAL)
+_RS_CODE, _RS_SLIP, _RS_ANTAGONISM, _RS_NULLSPACE = int(RS.CODE), int(RS.SLIP), int(RS.ANTAGONISM), int(RS.NULLSPACE)
 _MS_THETA, _MS_PHI, _MS_PHIDOT = int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)
 _WS_BETA = int(WS.BETA)
 _TQ_S, _TQ_LATERAL, _TQ_HEADING, _TQ_V_REF = int(TQ.S), int(TQ.LATERAL), int(TQ.HEADING), int(TQ.V_REF)
@@ -411,9 +411,9 @@ class AzimutTask:
         check_track_limits(rows, self.track_out, self.track_length, cfg.max_lateral_error, self.off_track,
                            self.finished)
         self._reward_kernel(rows, self.track_out, s_prev, summary[:, RS_VEL_WORLD], self.track_max_speed,
-                            summary[:, _RS_SLIP], summary[:, _RS_INTERNAL], action, self.prev_action, self.off_track,
-                            self.v_along, self.reward_inputs, self._reward_constants, self._weights, self.reward_terms,
-                            self.reward)
+                            summary[:, _RS_SLIP], summary[:, _RS_ANTAGONISM], summary[:, _RS_NULLSPACE], action,
+                            self.prev_action, self.off_track, self.v_along, self.reward_inputs, self._reward_constants,
+                            self._weights, self.reward_terms, self.reward)
         if rows is self._all:
             np.copyto(self.prev_action, action)
         else:

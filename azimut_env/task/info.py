@@ -38,7 +38,8 @@ __all__ = ["InfoField", "INFO_FIELDS", "INFO_KEYS", "KINDS", "robot_info", "batc
            "true_eta"]
 
 # plain-int columns (numpy indexes with IntEnum members several µs slower, and this runs every step)
-_RS_SLIP, _RS_INTERNAL, _WS_BETA = int(RS.SLIP), int(RS.INTERNAL), int(WS.BETA)
+_RS_SLIP, _WS_BETA = int(RS.SLIP), int(WS.BETA)
+_RS_ANTAGONISM, _RS_NULLSPACE = int(RS.ANTAGONISM), int(RS.NULLSPACE)
 _RS_POSE = slice(int(RS_POSE.start), int(RS_POSE.stop))
 _RS_TWIST = np.array([int(c) for c in RS_TWIST_BODY], dtype=np.intp)
 _WS_FORCE = slice(int(WS_FORCE.start), int(WS_FORCE.stop))
@@ -161,8 +162,10 @@ INFO_FIELDS: tuple[InfoField, ...] = (
        lambda t, r: t.physics.wheel_summary[r, :, _WS_FORCE], "array"),
     _F("slip_power", "()", "W", "step-mean tire slip power Σ abs(F·v_slip)", False,
        lambda t, r: t.physics.summary[r, _RS_SLIP], "float"),
-    _F("internal_force", "()", "N", "step-mean internal force of the wheels", False,
-       lambda t, r: t.physics.summary[r, _RS_INTERNAL], "float"),
+    _F("antagonism", "()", "N", "step-mean antagonism: stiffness-weighted internal force", False,
+       lambda t, r: t.physics.summary[r, _RS_ANTAGONISM], "float"),
+    _F("nullspace_force", "()", "N", "step-mean min-norm null-space force of the tires", False,
+       lambda t, r: t.physics.summary[r, _RS_NULLSPACE], "float"),
     _F("qua", "()", "-", "qua of the measured steering angles (eq. 28–29)", False, lambda t, r: t.qua[r], "float"),
     _F("progress", "()", "m", "true progress along the track (unwrapped over laps)", False, lambda t, r: t.s[r],
        "float"),

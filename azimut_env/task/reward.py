@@ -16,9 +16,12 @@ term's weight ``w``. With v_max the track's top reference speed and dt the contr
   one step at full speed);
 * lateral and heading −w·(1 − exp(−|e|/scale)) (bounded, steepest at zero error);
 * overspeed −w·max(0, v_along − v_ref)/v_max;
-* slip −min(w·P_slip, cap) and internal force −min(w·F_int, cap): the actuator antagonism that
-  Clavien, Lauria, Michaud (RAS 2018) is about, the tire slip power and the internal force of
-  the physics summary (``AzimutPhysics.slip_power``, ``internal_force``);
+* slip −min(w·P_slip, cap) and antagonism −min(w·F_ant, cap): the actuator antagonism that
+  Clavien, Lauria, Michaud (RAS 2018) is about, the tire slip power and the stiffness-weighted
+  internal force of the physics summary (``AzimutPhysics.slip_power``, ``antagonism``;
+  :mod:`azimut_env.physics.antagonism`); nullspace_force −min(w·F_null, cap), the minimum-norm
+  null-space force (``AzimutPhysics.nullspace_force``), weight 0 by default: ``Azimut-v1``'s
+  internal-force term, priced by that id (:data:`~azimut_env.task.config.V1_REWARD_WEIGHTS`);
 * action rate −w‖a − a_prev‖² (the normalised set-point actions);
 * off track −w on the step that leaves the track; a stall pays it too (:func:`charge_penalty`,
   called by the termination stage), and a physics blow-up gets it as its reward.
@@ -49,7 +52,8 @@ from azimut_env.tracks import TQ
 from azimut_env.validation import real_scalar, show
 
 __all__ = ["RewardTerm", "REWARD_TERMS", "current_reward_terms", "RewardInput", "RewardConstant", "RewardWeights",
-           "OFF_TRACK", "reward_term_names", "default_reward_weights", "check_reward_weights", "reward_weight_array",
+           "OFF_TRACK", "RENAMED_TERMS", "reward_term_names", "default_reward_weights", "check_reward_weights",
+           "reward_weight_array",
            "reward_constants", "reward_table", "fill_reward_inputs", "reward_kernel", "charge_penalty"]
 
 
@@ -64,9 +68,10 @@ class RewardInput(IntEnum):
     SPEED_ALONG = 5      # chassis velocity along the path [m/s]
     TOP_SPEED = 6        # v_max, the track's top reference speed (at least 1 mm/s) [m/s]
     SLIP_POWER = 7       # Σ|F·v_slip|, step mean [W]
-    INTERNAL_FORCE = 8   # F_int, step mean [N]
-    ACTION_CHANGE = 9    # ‖a − a_prev‖² (the normalised actions)
-    OFF_TRACK = 10       # 1.0 on the step that leaves the track, else 0.0
+    ANTAGONISM = 8       # F_ant, step mean [N]
+    NULLSPACE_FORCE = 9  # F_null, step mean [N]
+    ACTION_CHANGE = 10   # ‖a − a_prev‖² (the normalised actions)
+    OFF_TRACK = 11       # 1.0 on the step that leaves the track, else 0.0
 
 
 class RewardConstant(IntEnum):
@@ -75,7 +80,7 @@ class RewardConstant(IntEnum):
     CONTROL_PERIOD = 0  # dt [s]
     LATERAL_SCALE = 1   # [m]
     HEADING_SCALE = 2   # [rad]
-    ANTAGONISM_CAP = 3  # the largest per-step cost of each of the slip and internal-force terms
+    ANTAGONISM_CAP = 3  # the largest per-step cost of each of the slip, antagonism and null-space terms
 
 
 _X, _K = RewardInput, RewardConstant
@@ -109,8 +114,13 @@ def _reward_slip(x, k, w):
 
 
 @njit(cache=True)
-def _reward_internal_force(x, k, w):
-    return -min(w * x[_X.INTERNAL_FORCE], k[_K.ANTAGONISM_CAP])
+def _reward_antagonism(x, k, w):
+    return -min(w * x[_X.ANTAGONISM], k[_K.ANTAGONISM_CAP])
+
+
+@njit(cache=True)
+def _reward_nullspace_force(x, k, w):
+    return -min(w * x[_X.NULLSPACE_FORCE], k[_K.ANTAGONISM_CAP])
 
 
 @njit(cache=True)
@@ -144,8 +154,10 @@ REWARD_TERMS: tuple[RewardTerm, ...] = (
     _T("heading", 0.3, "-", _reward_heading, "−w·(1 − exp(−abs(e_θ)/heading_scale))"),
     _T("overspeed", 2.0, "-", _reward_overspeed, "−w·max(0, v_along − v_ref)/v_max"),
     _T("slip", 0.02, "1/W", _reward_slip, "−min(w·P_slip, antagonism_cap), P_slip the tire slip power"),
-    _T("internal_force", 0.01, "1/N", _reward_internal_force,
-       "−min(w·F_int, antagonism_cap), F_int the internal force"),
+    _T("antagonism", 0.01, "1/N", _reward_antagonism,
+       "−min(w·F_ant, antagonism_cap), F_ant the wheels' antagonism"),
+    _T("nullspace_force", 0.0, "1/N", _reward_nullspace_force,
+       "−min(w·F_null, antagonism_cap), F_null the null-space force"),
     _T("action_rate", 0.05, "-", _reward_action_rate, "−w·‖a − a_prev‖² (normalised actions)"),
     _T("off_track", 10.0, "-", _reward_off_track, "−w on the step that leaves the track or stalls"),
 )
@@ -153,6 +165,9 @@ del _T
 
 #: the term whose weight is the penalty of leaving the track, stalling and a physics blow-up
 OFF_TRACK = "off_track"
+#: terms of earlier versions -> what replaced them (``reward_weights`` refuses the old name with this)
+RENAMED_TERMS = {"internal_force": "'antagonism' (the stiffness-weighted internal force, Azimut-v2); "
+                                   "'nullspace_force' is the old minimum-norm quantity"}
 
 
 def current_reward_terms() -> tuple[RewardTerm, ...]:
@@ -216,6 +231,9 @@ def check_reward_weights(overrides: Mapping[str, Any] | None = None) -> RewardWe
         overrides = {}
     if not isinstance(overrides, Mapping):
         raise TypeError(f"reward_weights must be a mapping term name -> weight, got {type(overrides).__name__}")
+    renamed = [k for k in overrides if k in RENAMED_TERMS]
+    if renamed:
+        raise ValueError(f"reward_weights: the term {renamed[0]!r} is now {RENAMED_TERMS[renamed[0]]}")
     unknown = [k for k in overrides if k not in names]
     if unknown:
         raise ValueError(f"reward_weights: unknown term(s) {unknown}; the terms are {list(names)}")
@@ -255,14 +273,14 @@ def reward_table(terms: tuple[RewardTerm, ...] | None = None) -> str:
 
 
 @njit(cache=True)
-def fill_reward_inputs(rows, track_state, s_prev, vel_world, max_speeds, slip, internal, action, prev_action,
-                       off_track, v_along, x):
+def fill_reward_inputs(rows, track_state, s_prev, vel_world, max_speeds, slip, antagonism, nullspace, action,
+                       prev_action, off_track, v_along, x):
     """For the robots where ``rows`` is True: the speed along the path ``v_along`` (N,) and the
     reward inputs ``x`` (N, len(RewardInput)).
 
     ``track_state`` (N, 5) (columns :class:`~azimut_env.tracks.TQ`) and ``vel_world`` (N, 2) are
     the true ones, ``s_prev`` the progress before the step, ``max_speeds`` each track's top
-    reference speed, ``slip`` [W] and ``internal`` [N] the physics' step means, ``action`` and
+    reference speed, ``slip`` [W], ``antagonism`` and ``nullspace`` [N] the physics' step means, ``action`` and
     ``prev_action`` (N, 2n) float32, ``off_track`` the termination flags of this step."""
     for i in range(rows.shape[0]):
         if not rows[i]:
@@ -283,7 +301,8 @@ def fill_reward_inputs(rows, track_state, s_prev, vel_world, max_speeds, slip, i
         xi[_X.SPEED_ALONG] = va
         xi[_X.TOP_SPEED] = max(max_speeds[i], 1e-3)
         xi[_X.SLIP_POWER] = slip[i]
-        xi[_X.INTERNAL_FORCE] = internal[i]
+        xi[_X.ANTAGONISM] = antagonism[i]
+        xi[_X.NULLSPACE_FORCE] = nullspace[i]
         xi[_X.ACTION_CHANGE] = da2
         xi[_X.OFF_TRACK] = 1.0 if off_track[i] else 0.0
 
@@ -325,8 +344,8 @@ def reward_kernel(terms: tuple[RewardTerm, ...] | None = None) -> Callable:
     return kernel
 
 
-_FILL_ARGS = ("rows, track_state, s_prev, vel_world, max_speeds, slip, internal, action, prev_action, off_track, "
-              "v_along, x")
+_FILL_ARGS = ("rows, track_state, s_prev, vel_world, max_speeds, slip, antagonism, nullspace, action, prev_action, "
+              "off_track, v_along, x")
 
 
 def _compile_kernel(terms: tuple[RewardTerm, ...]) -> Callable:

@@ -280,8 +280,8 @@ def _export(log, folder: Path, label: str, robot: str | None, storage: str) -> s
 
 
 def _save_trace(path: Path, log) -> None:
-    np.savez_compressed(path, t=log.t, pose=log.pose, slip_power=log.slip_power,
-                        internal_force=log.internal_force, lateral=log.lateral, track_xy=log.track.xy)
+    np.savez_compressed(path, t=log.t, pose=log.pose, slip_power=log.slip_power, antagonism=log.antagonism,
+                        nullspace_force=log.nullspace_force, lateral=log.lateral, track_xy=log.track.xy)
 
 
 # ------------------------------------------------------------------------------------- run
@@ -355,7 +355,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         if rec["status"] == "ok":
             m = rec["result"]["metrics"]
             msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
-                   f"int. force {m['mean_internal_force_N']:.2f} N, "
+                   f"antagonism {m['mean_antagonism_N']:.2f} N, null-space force {m['mean_nullspace_force_N']:.2f} N, "
                    f"qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
                    f"limit-exceeded steps {m['limit_violation_steps']}, stop+reconfig {m['reconfigure_events']}, "
                    f"{rec['elapsed_s']:.1f} s" + (f" (a batch of {rec['batch']})" if rec.get("batch") else ""))

@@ -17,7 +17,8 @@ All run with the same actuator limits and control period, through the one episod
 Per controller and track (and seed: ``azimut eval`` runs a campaign of (controller, track, seed)
 episodes, see :mod:`jobs.eval.campaign`, whose ``report.md`` and ``metrics.json`` give the
 mean and a bootstrap interval over seeds of each metric) the report has: RMS and max lateral
-error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean internal force, mean
+error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean antagonism and mean
+null-space force of the tire forces (:mod:`azimut_env.physics.antagonism`), mean
 and min qua of the measured steering configuration (eq. 28–29) over all steps and **while moving**
 (see :func:`moving_mask`: the controller in its RUNNING mode and the true |μ| above
 :data:`MOVING_MU`; stops and in-place reconfigurations, where the wheels turn with the chassis at
@@ -70,7 +71,8 @@ _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("comp
             ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100), ("max_lateral_m", "max lat [cm]", "{:.2f}", 100),
             ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180 / math.pi),
             ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
-            ("mean_internal_force_N", "mean int. force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
+            ("mean_antagonism_N", "mean antagonism [N]", "{:.2f}"),
+            ("mean_nullspace_force_N", "mean null-space force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
             ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
             ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"),
             ("limit_violation_steps", "limit-exceeded steps", "{}"),

@@ -143,8 +143,9 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
 
 
 def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]:
-    """Overlay the controllers on one track: trajectories; slip power and internal force over
-    time. ``traces``: controller -> npz (t, pose, slip_power, internal_force, track_xy).
+    """Overlay the controllers on one track: trajectories; slip power, antagonism and null-space
+    force over time. ``traces``: controller -> npz (t, pose, slip_power, antagonism,
+    nullspace_force, track_xy; a trace without a series, from an older campaign, leaves it out).
     Returns the file names (relative to ``out``)."""
     plt = _pyplot()
     files: list[str] = []
@@ -157,15 +158,18 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
     ax.set_title(f"trajectories on {track}")
     _save(fig, out, f"compare_{track}_trajectory.png", files, 100)
 
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    series = (("slip_power", "slip power Σ|F·v_slip| [W]"), ("antagonism", "antagonism [N]"),
+              ("nullspace_force", "null-space force [N]"))
+    fig, axes = plt.subplots(len(series), 1, figsize=(9, 7.5), sharex=True)
     for i, (controller, tr) in enumerate(traces.items()):
-        axes[0].plot(tr["t"], tr["slip_power"], color=f"C{i}", lw=0.7, label=controller)
-        axes[1].plot(tr["t"], tr["internal_force"], color=f"C{i}", lw=0.7, label=controller)
-    axes[0].set_ylabel("slip power Σ|F·v_slip| [W]")
-    axes[1].set_ylabel("internal force [N]")
-    axes[1].set_xlabel("t [s]")
+        for ax, (key, _) in zip(axes, series):
+            if key in tr:
+                ax.plot(tr["t"], tr[key], color=f"C{i}", lw=0.7, label=controller)
+    for ax, (_, label) in zip(axes, series):
+        ax.set_ylabel(label, fontsize=8)
+    axes[-1].set_xlabel("t [s]")
     axes[0].legend(fontsize=8, loc="upper right")
-    axes[0].set_title(f"slip and internal force over time on {track}")
+    axes[0].set_title(f"slip, antagonism and null-space force over time on {track}")
     fig.tight_layout()
     _save(fig, out, f"compare_{track}_slip_force.png", files, 100)
     return files

@@ -29,7 +29,8 @@ SUMMARY_COLUMNS = [
     ("rms_heading_rad", "{:.2f}", 180.0 / math.pi),
     ("completion_time_s", "{:.1f}", 1.0),
     ("slip_energy_J", "{:.2f}", 1.0),
-    ("mean_internal_force_N", "{:.2f}", 1.0),
+    ("mean_antagonism_N", "{:.2f}", 1.0),
+    ("mean_nullspace_force_N", "{:.2f}", 1.0),
     ("mean_qua", "{:.4f}", 1.0),
     ("mean_qua_moving", "{:.4f}", 1.0),
     ("min_qua_moving", "{:.4f}", 1.0),
@@ -127,12 +128,12 @@ def _statistics_sentence(cells: list[dict], campaign: dict) -> str:
     return f"Mean over the {n_seeds} seeds, which gave the same value in every cell (no interval){failed}."
 
 
-_PLOT_GUIDE = ("Per track, the controllers overlaid: their trajectories, and their slip power and internal force "
-               "over time. Per controller and track: the trajectory over the track (the paper's Fig. 9; red crosses: "
-               "stops to turn wheels in place), the measured steering angles in pairs against the surface S(λ) of "
-               "consistent configurations (Fig. 10), qua over time (Fig. 11; grey bands: the controller stopped or "
-               "turning wheels in place), the estimated ICR λ̂ on the unit sphere seen from above (colour: time), "
-               "and each wheel's commands against their limits.")
+_PLOT_GUIDE = ("Per track, the controllers overlaid: their trajectories, and their slip power, antagonism and "
+               "null-space force over time. Per controller and track: the trajectory over the track (the paper's "
+               "Fig. 9; red crosses: stops to turn wheels in place), the measured steering angles in pairs against "
+               "the surface S(λ) of consistent configurations (Fig. 10), qua over time (Fig. 11; grey bands: the "
+               "controller stopped or turning wheels in place), the estimated ICR λ̂ on the unit sphere seen from "
+               "above (colour: time), and each wheel's commands against their limits.")
 
 
 def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,

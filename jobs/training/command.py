@@ -206,7 +206,8 @@ def _print_final(record: dict) -> None:
         lap = ("lap " + format(r["completion_time_s"], ".1f") + " s" if r["completed"]
                else (r["error"] or "lap not finished in the evaluation time"))
         print(f"  {r['track']:<8} return {r['return']:.1f}, RMS lat {100 * r['rms_lateral_m']:.2f} cm, "
-              f"internal force {r['mean_internal_force_N']:.2f} N, slip {r['slip_energy_J']:.2f} J, "
+              f"antagonism {r['mean_antagonism_N']:.2f} N, null-space force {r['mean_nullspace_force_N']:.2f} N, "
+              f"slip {r['slip_energy_J']:.2f} J, "
               f"{lap}")
 
 

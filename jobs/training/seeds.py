@@ -28,7 +28,8 @@ __all__ = ["train_seed_task", "seed_tasks", "learning_curve_stats", "check_seed_
 
 #: metrics of the final evaluation summarised over seeds: (key, format, scale); headers from jobs.glossary
 FINAL_COLUMNS = [("return", "{:.1f}", 1.0), ("completed", "{:.2f}", 1.0), ("rms_lateral_m", "{:.2f}", 100.0),
-                 ("mean_internal_force_N", "{:.2f}", 1.0), ("slip_energy_J", "{:.2f}", 1.0)]
+                 ("mean_antagonism_N", "{:.2f}", 1.0), ("mean_nullspace_force_N", "{:.2f}", 1.0),
+                 ("slip_energy_J", "{:.2f}", 1.0)]
 
 
 def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, num_robots: int,

@@ -129,13 +129,14 @@ def test_observation_layout_and_bounds():
     lam_hat, mu_hat = env.estimated_eta
     assert np.allclose(dec["lambda_hat"], lam_hat, atol=1e-6)
     assert np.allclose(dec["beta"], env.measured_beta, atol=1e-6)
-    assert info["reward_terms"] == dict.fromkeys(info["reward_terms"], 0.0) and len(info["reward_terms"]) == 8
+    assert info["reward_terms"] == dict.fromkeys(info["reward_terms"], 0.0) and len(info["reward_terms"]) == 9
     assert observation_table() in textwrap.dedent(AzimutEnv.__doc__)  # the docs show the layout table
     _, rew, _, _, info = env.step(env.action_space.sample())
-    assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "overspeed", "slip", "internal_force",
-                                         "action_rate", "off_track"}
+    assert set(info["reward_terms"]) == {"progress", "lateral", "heading", "overspeed", "slip", "antagonism",
+                                         "nullspace_force", "action_rate", "off_track"}
     assert rew == pytest.approx(sum(info["reward_terms"].values()))
-    for key in ("pose", "twist", "eta_true", "eta_hat", "tire_forces", "slip_power", "internal_force", "qua"):
+    for key in ("pose", "twist", "eta_true", "eta_hat", "tire_forces", "slip_power", "antagonism", "nullspace_force",
+                "qua"):
         assert key in info
     assert 0.0 <= info["qua"] <= 1.0
 

@@ -26,7 +26,7 @@ from azimut_env.imperfections import (
     with_imperfections,
 )
 from azimut_env.params import ImperfectionParams, RobotParams, SensorParams
-from azimut_env.physics.engine import WP, AzimutPhysics
+from azimut_env.physics.engine import RS, WP, AzimutPhysics
 from azimut_env.task.sensors import SensorState
 from azimut_env.vector_env import AzimutVectorEnv
 from estimation import eta_from_twist, steering_from_lambda, wheel_speeds
@@ -96,6 +96,13 @@ def _hash(arrays):
     return h.hexdigest()[:16]
 
 
+def _v1_hash(arrays, summary):
+    """:func:`_hash` with the live ``summary`` array cut to v1's columns (the antagonism column came
+    later). The arrays are the physics' own, updated in place, so, as when the hashes were
+    recorded, each entry is hashed in its final state."""
+    return _hash([np.delete(a, RS.ANTAGONISM, axis=-1) if a is summary else a for a in arrays])
+
+
 def _physics_hash(params=None):
     phys = AzimutPhysics(params, n_robots=2)
     for i in range(2):
@@ -106,7 +113,7 @@ def _physics_hash(params=None):
                           12 * np.sin(0.011 * t + 0.3 * np.arange(8).reshape(2, 4)))
         phys.step()
         out += [phys.summary, phys.wheel_summary, phys.motor_state, phys.joint_state, phys.tire_state]
-    return _hash(out)
+    return _v1_hash(out, phys.summary)
 
 
 def _env_hash(env, steps=300, vector=False, task_arrays=True):
@@ -118,7 +125,7 @@ def _env_hash(env, steps=300, vector=False, task_arrays=True):
         out += [ph.summary, ph.wheel_summary, ph.motor_state]
         if task_arrays:
             out += [u.task.beta_m, u.task.phidot_m, u.task.motor_m]
-    return _hash(out)
+    return _v1_hash(out, (env if vector else env.unwrapped).physics.summary)
 
 
 def _all_hashes(ideal=None):
@@ -156,6 +163,31 @@ def test_v1_id_makes_the_ideal_env_and_v2_the_paper_one():
     assert v2.params == with_imperfections(RobotParams(), "paper")
     with pytest.raises(gym.error.DeprecatedEnv, match="Azimut-v2"), pytest.warns(DeprecationWarning):
         gym.make("Azimut-v0")
+
+
+def test_v1_id_keeps_the_v1_reward_bit_for_bit():
+    """Azimut-v1 priced the minimum-norm null-space force (then called internal_force, weight 0.01)
+    and no antagonism: its reward is the sum of the v1 terms in the v1 order, bit for bit, also
+    with other weights given to make (merged onto v1's, not replacing them), and in the vector env."""
+    v1_order = ("progress", "lateral", "heading", "overspeed", "slip", "nullspace_force", "action_rate", "off_track")
+    with pytest.warns(DeprecationWarning, match="out of date"):
+        env = gym.make("Azimut-v1", track="paper", reward_weights={"slip": 0.05}).unwrapped
+    w = env.config.reward_weights
+    assert (w["antagonism"], w["nullspace_force"], w["slip"]) == (0.0, 0.01, 0.05)
+    assert env.params == RobotParams()
+    env.reset(seed=3)
+    for t in range(60):
+        _, r, *_, info = env.step(_actions(t, 4))
+        terms = info["reward_terms"]
+        assert terms["antagonism"] == 0.0 and terms["nullspace_force"] == -min(0.01 * info["nullspace_force"], 2.0)
+        total = 0.0
+        for name in v1_order:
+            total += terms[name]
+        assert r == total
+    with pytest.warns(DeprecationWarning, match="out of date"):
+        venv = gym.make_vec("Azimut-v1", num_envs=2, vectorization_mode="vector_entry_point", track="circle")
+    assert venv.config.reward_weights["nullspace_force"] == 0.01 and venv.config.reward_weights["antagonism"] == 0.0
+    assert gym.make(azimut_env.ENV_ID).unwrapped.config.reward_weights["nullspace_force"] == 0.0
 
 
 def _reset(env, seed=3):
@@ -233,7 +265,7 @@ def test_a_common_steering_offset_turns_the_travel_direction_by_delta():
 
 
 def test_unequal_imperfections_make_the_wheels_fight():
-    """Commands on the surface, wheels off it: the internal force rises with the imperfections."""
+    """Commands on the surface, wheels off it: the antagonism rises with the imperfections."""
     def internal(params):
         phys = AzimutPhysics(params)
         geom = params.geometry
@@ -243,7 +275,7 @@ def test_unequal_imperfections_make_the_wheels_fight():
         for _ in range(100):
             phys.set_commands(beta[None], wheel_speeds(lam, mu, geom, beta=beta)[None])
             phys.step()
-        return float(phys.internal_force()[0])
+        return float(phys.antagonism()[0])
 
     p = with_imperfections(RobotParams(), "paper")
     geometric_only = dataclasses.replace(RobotParams(), imperfections=p.imperfections)

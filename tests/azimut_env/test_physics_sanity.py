@@ -80,7 +80,7 @@ def _internal_and_slip(beta, phidot, seconds=1.0):
     f, p = [], []
     for _ in range(10):
         phys.step()
-        f.append(phys.internal_force()[0])
+        f.append(phys.nullspace_force()[0])
         p.append(phys.slip_power()[0])
     return float(np.mean(f)), float(np.mean(p))
 
@@ -165,7 +165,7 @@ def test_blow_up_is_detected_not_returned_as_nan():
     assert not ok[0] and "non-finite" in why[0]
 
 
-def test_internal_force_is_the_null_space_part_of_the_tire_forces():
+def test_nullspace_force_is_the_minimum_norm_null_space_part_of_the_tire_forces():
     geom = RobotParams().geometry
     beta, phidot = _kinematic_setpoints(geom, (0.3, 0.1, 0.5))
     beta[1] += 0.3
@@ -180,7 +180,7 @@ def test_internal_force_is_the_null_space_part_of_the_tire_forces():
     G[2, 1::2] = p[:, 0]
     internal = np.linalg.norm(f - np.linalg.pinv(G) @ (G @ f))
     assert internal > 1.0
-    assert phys.internal_force()[0] == pytest.approx(internal, rel=1e-9)
+    assert phys.nullspace_force()[0] == pytest.approx(internal, rel=1e-9)
     # the contact points are A_k + b_k (cos γ_k, sin γ_k)
     gam = geom.alpha + phys.steering_angles()[0]
     assert np.allclose(p, geom.axis_xy + geom.b[:, None] * np.stack([np.cos(gam), np.sin(gam)], 1))

@@ -80,11 +80,21 @@ def test_weights_by_name_merge_onto_the_defaults_and_scale_their_term():
     ({"slip": "0.1"}, TypeError, r"reward_weights\['slip'\] must be a real number"),
     ({"slip": True}, TypeError, r"reward_weights\['slip'\] must be a real number"),
     ([("slip", 0.1)], TypeError, "reward_weights must be a mapping"),
+    ({"internal_force": 0.01}, ValueError, r"reward_weights: the term 'internal_force' is now 'antagonism'"),
 ])
 def test_bad_weights_are_refused_with_one_line(weights, error, match):
     for make in (lambda: TaskConfig(reward_weights=weights), lambda: AzimutEnv(reward_weights=weights),
                  lambda: AzimutVectorEnv(num_envs=2, reward_weights=weights)):
         with pytest.raises(error, match=match) as info:
+            make()
+        assert "\n" not in str(info.value)
+
+
+def test_the_internal_force_keyword_of_v1_is_refused_naming_the_new_term():
+    for make in (lambda: AzimutEnv(internal_force_weight=0.01),
+                 lambda: AzimutVectorEnv(num_envs=2, internal_force_weight=0.01)):
+        with pytest.raises(ValueError, match=r"internal_force_weight: the term 'internal_force' is now 'antagonism'") \
+                as info:
             make()
         assert "\n" not in str(info.value)
 
@@ -129,7 +139,8 @@ def test_terms_are_their_documented_formulas():
         assert t["lateral"] == -w["lateral"] * (1.0 - math.exp(-abs(info["lateral_error"]) / cfg.lateral_scale))
         assert t["heading"] == -w["heading"] * (1.0 - math.exp(-abs(info["heading_error"]) / cfg.heading_scale))
         assert t["slip"] == -min(w["slip"] * info["slip_power"], cfg.antagonism_cap)
-        assert t["internal_force"] == -min(w["internal_force"] * info["internal_force"], cfg.antagonism_cap)
+        assert t["antagonism"] == -min(w["antagonism"] * info["antagonism"], cfg.antagonism_cap)
+        assert t["nullspace_force"] == -min(w["nullspace_force"] * info["nullspace_force"], cfg.antagonism_cap)
         assert t["off_track"] == 0.0 and t["overspeed"] <= 0.0 and t["action_rate"] <= 0.0
         assert r == sum(t.values())
 

@@ -3,7 +3,7 @@
 * ICR controller on ``paper`` at its nominal speed, 1 m/s, and at 0.4 m/s (speed scale 0.4): RMS
   lateral error <= 2 cm, max <= 5 cm, zero commanded-limit violations.
 * Against the WPILib-style twist baseline with the same follower and limits, on every built-in
-  track: lower slip energy and internal force (at most half on ``square`` and ``crab``), and RMS
+  track: lower slip energy and antagonism (at most half on ``square`` and ``crab``), and RMS
   lateral error at most 1.2x the baseline's.
 * ``square``: a stop and reconfiguration at every corner.
 """
@@ -35,7 +35,7 @@ def test_icr_versus_twist_baseline(track):
     assert icr["limit_violation_steps"] == 0
     factor = 0.5 if track in ("square", "crab") else 1.0
     assert icr["slip_energy_J"] < factor * twist["slip_energy_J"]
-    assert icr["mean_internal_force_N"] < factor * twist["mean_internal_force_N"]
+    assert icr["mean_antagonism_N"] < factor * twist["mean_antagonism_N"]
     assert icr["rms_lateral_m"] <= 1.2 * twist["rms_lateral_m"]
     if track == "square":
         assert icr["reconfigure_events"] >= 4

@@ -77,7 +77,8 @@ def _rows():
         for t in ("circle", "crab"):
             for s in (0, 1):
                 rows.append({"controller": c, "track": t, "seed": s, "status": "ok", "completed": c != "a.s2" or s,
-                             "rms_lateral_m": 0.01, "slip_energy_J": 1.0, "mean_internal_force_N": f + s})
+                             "rms_lateral_m": 0.01, "slip_energy_J": 1.0, "mean_nullspace_force_N": f + s,
+                             "mean_antagonism_N": 0.5 * (f + s)})
     return rows
 
 
@@ -88,10 +89,11 @@ def test_agent_summary_per_track_aggregate_and_bar():
     names = ["icr", "twist", "a.s0", "a.s1", "a.s2"]
     summary = agent_summary(rows, names, ["circle", "crab"], n_resamples=2000)
     g = summary["groups"]["a"]
-    assert g["tracks"]["circle"]["mean_internal_force_N"]["scores"] == [20.5, 40.5, 25.5]
-    assert g["tracks"]["circle"]["mean_internal_force_N"]["iqm"] == pytest.approx(86.5 / 3)  # 3 seeds: none cut
+    assert g["tracks"]["circle"]["mean_nullspace_force_N"]["scores"] == [20.5, 40.5, 25.5]
+    assert g["tracks"]["circle"]["mean_nullspace_force_N"]["iqm"] == pytest.approx(86.5 / 3)  # 3 seeds: none cut
+    assert g["tracks"]["circle"]["mean_antagonism_N"]["scores"] == [10.25, 20.25, 12.75]
     # 6 scores (3 seeds x 2 tracks) against icr's 10.5: the smallest and largest cut
-    assert g["aggregate"]["mean_internal_force_N"]["iqm"] == pytest.approx((20.5 + 25.5 + 25.5 + 40.5) / 4 / 10.5)
+    assert g["aggregate"]["mean_nullspace_force_N"]["iqm"] == pytest.approx((20.5 + 25.5 + 25.5 + 40.5) / 4 / 10.5)
     assert g["bar"]["met"] == 1 and g["bar"]["by_seed"] == {"0": True, "1": False, "2": False}  # s2 missed a lap
     text = "\n".join(agent_section(summary, rows, ["circle", "crab"], ["icr", "twist"]))
     assert "| a | circle | 3 |" in text and "1 of 3 seeds" in text

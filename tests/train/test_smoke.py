@@ -41,7 +41,7 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
     assert policy.algo == algo and policy.action == action and policy.obs_rms is not None
     assert policy.env_kwargs == SHORT
     row, log = policy_metrics(policy, "crab", seed=1, max_time=1.0)
-    assert {"return", "rms_lateral_m", "mean_internal_force_N", "slip_energy_J"} <= set(row)
+    assert {"return", "rms_lateral_m", "mean_antagonism_N", "mean_nullspace_force_N", "slip_energy_J"} <= set(row)
     assert np.isfinite(row["return"]) and log.t.size > 0
     evals = json.loads((out / "evaluations.json").read_text())
     assert evals[-1]["final"] and evals[-1]["rows"][0]["track"] == "crab"
@@ -144,7 +144,7 @@ def test_eval_runs_a_trained_policy_next_to_the_controllers(tmp_path):
     by = {e["controller"]: e for e in episodes}
     assert set(by) == {"icr", "run"}  # a policy is named after its run folder
     for row in by.values():
-        assert row["status"] == "ok" and np.isfinite(row["return"]) and "mean_internal_force_N" in row
+        assert row["status"] == "ok" and np.isfinite(row["return"]) and "mean_antagonism_N" in row
     named = tmp_path / "named"
     assert main(["eval", "--controllers", f"ppo:tiny={out}", "--tracks", "crab", "--max-time", "0.5", "--no-plots",
                  "--out", str(named)]) in (0, 1)
