@@ -205,3 +205,88 @@ def test_subprocess_refusal_has_no_traceback(tmp_path, geom):
                            "--no-plots"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------- every format, written by its own writer, through the CLI
+
+_SWERVE_TOML = """schema = 1
+name = "swerve_fl_fr_bl_br"
+
+[geometry]
+steering = "unlimited"
+b_m = 0.0
+r_m = 0.0508
+""" + "".join(f"""
+[[geometry.modules]]
+name = "{name}"
+x_m = {x}
+y_m = {y}
+""" for name, x, y in (("fl", 0.3, 0.3), ("fr", 0.3, -0.3), ("bl", -0.3, 0.3), ("br", -0.3, -0.3)))
+
+
+def _rosbags_bag(path, m, storage):
+    from test_logs_formats import T0_NS, _joint_state, _ros
+
+    Writer, StoragePlugin, ts = _ros()
+    joints = [f"{mod}_steer" for mod in MODULES4] + [f"{mod}_drive" for mod in MODULES4]
+    with Writer(path, version=9, storage_plugin=getattr(StoragePlugin, storage)) as w:
+        c = w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ts)
+        for k in range(len(m.t_s)):
+            t = T0_NS + int(m.t_ns[k])
+            w.write(c, t, _joint_state(ts, t, joints, np.r_[m.beta[k], np.zeros(4)], np.r_[np.zeros(4), m.phidot[k]]))
+    return path
+
+
+def _mcap_package_file(path, m):
+    from test_logs_formats import T0_NS, _joint_state, _ros
+
+    _, _, ts = _ros()
+    mcap_writer = pytest.importorskip("mcap.writer")
+    joints = [f"{mod}_steer" for mod in MODULES4] + [f"{mod}_drive" for mod in MODULES4]
+    msgdef, _ = ts.generate_msgdef("sensor_msgs/msg/JointState", ros_version=2)
+    with open(path, "wb") as fh:
+        w = mcap_writer.Writer(fh)
+        w.start(profile="ros2", library="azimut-tests")
+        schema = w.register_schema(name="sensor_msgs/msg/JointState", encoding="ros2msg", data=msgdef.encode())
+        channel = w.register_channel(topic="/joint_states", message_encoding="cdr", schema_id=schema)
+        for k in range(len(m.t_s)):
+            t = T0_NS + int(m.t_ns[k])
+            data = _joint_state(ts, t, joints, np.r_[m.beta[k], np.zeros(4)], np.r_[np.zeros(4), m.phidot[k]])
+            w.add_message(channel_id=channel, log_time=t, data=bytes(data), publish_time=t)
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize("writer", ["rosbags-mcap", "rosbags-sqlite3", "mcap-package", "wpiutil"])
+def test_each_writers_log_through_azimut_estimate_matches_estimate_eta(writer, tmp_path, capsys, geom):
+    """A log written by the format's own writer (rosbags' Writer, the mcap package's Writer,
+    WPILib's DataLogWriter), read back by ``azimut estimate``: samples.npz holds estimate_eta's
+    λ̂, μ̂ and qua of the same arrays, bit for bit, for every estimator."""
+    argv = []
+    if writer == "wpiutil":
+        from test_logs_formats import _wpilog
+
+        from estimation import RobotGeometry
+
+        robot = tmp_path / "swerve.toml"
+        robot.write_text(_SWERVE_TOML)
+        g = RobotGeometry.from_file(robot)
+        m = motion(g, 120, noise=0.01)
+        log = tmp_path / "robot.wpilog"
+        beta, phidot = _wpilog(log, m, g)  # the module states as read: headings and flips folded
+        argv = ["--robot-file", str(robot)]
+    else:
+        m = motion(geom, 120, noise=0.01)
+        beta, phidot, g = m.beta, m.phidot, geom
+        log = (_mcap_package_file(tmp_path / "plain.mcap", m) if writer == "mcap-package"
+               else _rosbags_bag(tmp_path / "bag", m, writer.split("-")[1].upper()))
+    out = tmp_path / "out"
+    code, stdout, err = _run(["estimate", str(log), "--out", str(out), "--no-plots", *argv], capsys)
+    assert code == 0, err
+    assert "estimated 120 samples of 120 (0 skipped)" in stdout
+    with np.load(out / "samples.npz") as z:
+        for method, key in (("IT", "IT"), ("IT+", "ITplus"), ("NE", "NE"), ("LS", "LS"), ("NS", "NS")):
+            lam, mu, _, qua = estimate_eta(beta, phidot, g, method)
+            assert np.array_equal(z[f"lam_{key}"], lam), method
+            assert np.array_equal(z[f"mu_{key}"], mu), method
+            assert np.array_equal(z[f"qua_{key}"], qua), method

@@ -143,7 +143,7 @@ def test_bare_mcap_written_by_the_mcap_package(tmp_path, geom):
 # ----------------------------------------------------------------------------------------- .wpilog
 
 
-SWERVE = RobotGeometry(alpha=np.arctan2([0.3, 0.3, -0.3, -0.3], [0.3, -0.3, 0.3, -0.3]), l=0.3 * np.sqrt(2), b=0.0,
+SWERVE = RobotGeometry(alpha=np.arctan2([0.3, -0.3, 0.3, -0.3], [0.3, 0.3, -0.3, -0.3]), l=0.3 * np.sqrt(2), b=0.0,
                        r=0.0508)  # FL, FR, BL, BR as WPILib templates order them
 
 
