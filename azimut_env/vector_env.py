@@ -33,6 +33,7 @@ from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.config import front_signature, v1_kwargs
 from azimut_env.task.info import batch_info, robot_info
 from azimut_env.tracks import Track
+from azimut_env.typed_lists import generator_list
 from azimut_env.validation import ResetNeeded, check_finite, check_index_list, check_int, check_seed
 
 __all__ = ["AzimutVectorEnv", "make_v1_vector"]
@@ -201,7 +202,7 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     def _typed_rngs(self) -> NumbaList:
         """The generators as a numba typed list (rebuilt when one is replaced by a reseed)."""
         if self._rng_list is None:
-            self._rng_list = NumbaList(self._rngs)
+            self._rng_list = generator_list(self._rngs)
         return self._rng_list
 
     def _seed_list(self, seed) -> list[int | None]:

@@ -139,9 +139,7 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
 
     task = env.task
     task.physics.step = _timed(acc, task.physics.step, "physics")
-    # the noise draw and the one compiled call of azimut_env.task.compiled_step (sensors, estimation,
-    # track, termination, reward, observation)
-    task.observe = _timed(acc, task.observe, "observe")
+    task.observe = _timed(acc, task.observe, "observe")  # the noise draw and the one compiled call
     import azimut_env.env as env_module  # the info dict, built per step by the env (azimut_env.task.info)
 
     robot_info = env_module.robot_info

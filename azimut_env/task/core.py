@@ -45,7 +45,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numba.typed import List as NumbaList
 
 from azimut_env.params import RobotParams, action_from_setpoints
 from azimut_env.physics.blowup import BlowUp
@@ -85,6 +84,7 @@ from azimut_env.task.sensors import SensorState
 from azimut_env.task.start_state import start_configuration
 from azimut_env.task.termination import check_stalls, check_track_limits, episode_step_limit
 from azimut_env.tracks import TQ, Track, make_track, named_track, query_tracks
+from azimut_env.typed_lists import array_list, set_item
 from azimut_env.validation import check_int
 from estimation import estimate_eta
 from estimation.estimate import estimate_eta_rows
@@ -185,7 +185,7 @@ class AzimutTask:
         self.track_max_speed = np.array([t.max_speed for t in self.tracks])
         self.track_closed = np.array([t.closed for t in self.tracks], dtype=np.bool_)
         self.track_rho = np.array([t.progress_radius for t in self.tracks])
-        self._packs = NumbaList([t.packed() for t in self.tracks])
+        self._packs = array_list([t.packed() for t in self.tracks])
         self.kicks: list[dict | None] = [None] * N
         self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
@@ -195,8 +195,7 @@ class AzimutTask:
         self.pose_source = config.pose_source
         self.odometry = (OdometryPoses(config.localisation, config.control_period, params.geometry, N, n, K)
                          if config.pose_source == "odometry" else None)
-        #: the stages after the physics in one compiled call (:meth:`observe`); False: one by one
-        self.compiled_step = True
+        self.compiled_step = True  #: the stages after the physics in one compiled call (observe); False: one by one
         self._compiled = None  # (TaskArrays, kernel) of azimut_env.task.compiled_step, built at the first step
 
     # ------------------------------------------------------------------ reset
@@ -256,7 +255,7 @@ class AzimutTask:
         s0 = start_progress_on(track, float(options.get("start_progress", 0.0)))  # before any state changes
         if track is not self.tracks[i]:
             self.tracks[i] = track
-            self._packs[i] = track.packed()
+            set_item(self._packs, i, track.packed())
         self.track_length[i] = track.length
         self.track_max_speed[i] = track.max_speed
         self.track_closed[i] = track.closed
@@ -497,4 +496,4 @@ class AzimutTask:
 
     def __setstate__(self, d: dict) -> None:
         self.__dict__.update(d)
-        self._packs = NumbaList([t.packed() for t in self.tracks])
+        self._packs = array_list([t.packed() for t in self.tracks])

@@ -30,9 +30,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.typed import List as NumbaList
 
 from azimut_env.tracks import Track, np_interp1, project_window_kernel, wrap_pi
+from azimut_env.typed_lists import array_list, set_item
 from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress
 
 __all__ = ["BatchFollower", "FollowerBatchOutput", "FC", "FS", "FT", "FO"]
@@ -339,9 +339,9 @@ class BatchFollower:
         self.tracks[:, FT.LENGTH] = 1.0
         dummy = np.zeros((10, 2))
         dummy[_S] = [0.0, 1.0]
-        self._packs = NumbaList([dummy] * num)
-        self._stops = NumbaList([np.zeros(0)] * num)
-        self._holds = NumbaList([np.zeros((2, 0))] * num)
+        self._packs = array_list([dummy] * num)
+        self._stops = array_list([np.zeros(0)] * num)
+        self._holds = array_list([np.zeros((2, 0))] * num)
         self._track_of: list[Track | None] = [None] * num
         self._cache: dict[tuple[int, PathFollowerConfig], tuple] = {}
 
@@ -373,7 +373,8 @@ class BatchFollower:
         if progress is not None:
             progress = check_start_progress(track, progress)
         _, pack, stops, holds = self._track_arrays(track, config)
-        self._packs[i], self._stops[i], self._holds[i] = pack, stops, holds
+        for lst, value in ((self._packs, pack), (self._stops, stops), (self._holds, holds)):
+            set_item(lst, i, value)
         self._track_of[i] = track
         self.tracks[i] = (1.0 if track.closed else 0.0, track.length, track.progress_radius)
         self.cfg[i] = _config_row(config)
