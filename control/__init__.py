@@ -11,12 +11,14 @@ interface, :mod:`azimut_env.interface`).
   batch; :func:`control.rollout.run_episode`, one); ``episode``: its per-step log and metrics;
 * ``commands``: :class:`WheelCommand`, the set-points every controller returns;
 * ``path_controllers``: the controllers of ``azimut eval``, ``icr`` (path follower + ICR
-  controller) and ``twist`` (path follower + WPILib-style baseline); ``feedforward``: the
+  controller), ``twist`` (path follower + WPILib-style baseline) and ``twist-setpoint`` (path
+  follower + setpoint generator); ``feedforward``: the
   kinematic feed-forward of ``azimut sim-paper``;
 * ``icr/``: the ICR-based reference controller (``controller``: entry points; ``batch``: N
   robots as one stateful object; ``config``, ``state``, ``feasibility``, ``motion``, ``modes``;
   derivations in ``docs/icr-controller.md``);
-* ``twist/wpilib.py``: the WPILib-style twist baseline; ``follow/``: the path follower (Python
+* ``twist/wpilib.py``: the WPILib-style twist baseline; ``twist/setpoint.py``: the setpoint
+  generator (``twist-setpoint``); ``follow/``: the path follower (Python
   and compiled);
 * ``action_spaces/``: the RL action spaces (``controller``: the action-driven controller shared by
   the single and vector wrappers and a trained policy's controller; ``single``, ``vector``,

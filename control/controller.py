@@ -24,7 +24,7 @@ A minimal controller (every robot holds its wheels and stands still)::
 
 Registry: :func:`make_controller` turns a spec into a controller. A spec is
 
-* a registered name (built in: ``icr``, ``twist``, ``feedforward``; add yours with
+* a registered name (built in: ``icr``, ``twist``, ``twist-setpoint``, ``feedforward``; add yours with
   :func:`register_controller`);
 * ``PREFIX:ARG`` for a prefix an upper layer registered (``azimut eval`` registers ``ppo`` and
   ``sac``: ``ppo:PATH`` or ``ppo:NAME=PATH``, a trained policy);
@@ -89,6 +89,7 @@ class ControllerSpecError(ValueError):
 _NAMES: dict[str, Callable[..., Any] | str] = {
     "icr": "control.path_controllers:ICRPathController",
     "twist": "control.path_controllers:TwistPathController",
+    "twist-setpoint": "control.path_controllers:SetpointPathController",
     "feedforward": "control.feedforward:FeedForwardController",
 }
 #: prefix -> factory(arg, **options)

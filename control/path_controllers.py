@@ -1,10 +1,11 @@
 """The track-following controllers of ``azimut eval``: a path follower per robot feeding the ICR
-controller (``icr``) or the WPILib-style twist baseline (``twist``).
+controller (``icr``), the WPILib-style twist baseline (``twist``) or the setpoint generator
+(``twist-setpoint``).
 
-Both implement :class:`control.controller.Controller` for the N robots of an env. Each robot has
+All implement :class:`control.controller.Controller` for the N robots of an env. Each robot has
 its own path follower (on its own track, from the pose the env's observation uses,
 ``estimated_pose``), all N stepped in one compiled call (:class:`~control.follow.batch.BatchFollower`,
-equal to the bit to one :class:`~control.follow.path_follower.PathFollower` per robot), so the two
+equal to the bit to one :class:`~control.follow.path_follower.PathFollower` per robot), so the
 controllers get the same targets and a comparison isolates how the wheels are coordinated:
 
 * :class:`ICRPathController`: (λ_d, μ_d) of the follower's twist into the ICR controller
@@ -12,7 +13,10 @@ controllers get the same targets and a comparison isolates how the wheels are co
   follower slows down before the points where the reference motion needs a stop and
   reconfiguration (its ``stop_mask``, :func:`~control.icr.controller.reference_stop_mask`);
 * :class:`TwistPathController`: the follower's twist into the twist baseline
-  (:class:`~control.twist.wpilib.SwerveBatch`, all robots in one compiled step).
+  (:class:`~control.twist.wpilib.SwerveBatch`, all robots in one compiled step);
+* :class:`SetpointPathController` (``twist-setpoint``): the follower's twist into the setpoint
+  generator (:class:`~control.twist.setpoint.SetpointBatch`, all robots in one compiled step),
+  which never commands beyond the actuator limits.
 """
 
 from __future__ import annotations
@@ -30,9 +34,10 @@ from control.follow.path_follower import PathFollowerConfig
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig
 from control.icr.feasibility import reference_stop_mask
+from control.twist.setpoint import SetpointBatch, SetpointConfig
 from control.twist.wpilib import SwerveBatch, SwerveConfig
 
-__all__ = ["ICRPathController", "TwistPathController"]
+__all__ = ["ICRPathController", "TwistPathController", "SetpointPathController"]
 
 
 def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | None) -> PathFollowerConfig:
@@ -48,7 +53,7 @@ def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | N
 
 
 class _PathFollowing:
-    """The path followers of all robots (the part both controllers share), one
+    """The path followers of all robots (the part the controllers share), one
     :class:`~control.follow.batch.BatchFollower`. A scenario's track
     (``azimut_env.tracks.SCENARIO_NAMES``, whose speeds are the robot's own) is followed with
     :meth:`PathFollowerConfig.for_robot` unless a ``follower_config`` is given. Each command's
@@ -154,6 +159,37 @@ class TwistPathController(_PathFollowing):
         if self.controller is None or self.controller.num != self.followers.num:
             self.controller = SwerveBatch(self.followers.num, env.geometry, env.limits, env.control_period,
                                           self.swerve_config)
+        self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
+
+    def act(self, env, obs) -> WheelCommand:
+        return self._with_holds(self.controller.step(None, self._targets(env).twist, env.measured_beta))
+
+
+class SetpointPathController(_PathFollowing):
+    """``twist-setpoint``: path followers + the setpoint generator (see the module docstring and
+    :mod:`control.twist.setpoint`).
+
+    Args:
+        speed_scale, follower_config: as :class:`ICRPathController`.
+        setpoint_config: the generator's options.
+    """
+
+    name = "twist-setpoint"
+
+    def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
+                 setpoint_config: SetpointConfig | None = None) -> None:
+        super().__init__(speed_scale, follower_config)
+        if setpoint_config is not None and not isinstance(setpoint_config, SetpointConfig):
+            raise TypeError(f"setpoint_config must be a SetpointConfig or None, got {type(setpoint_config).__name__}")
+        self.setpoint_config = setpoint_config
+        self.controller: SetpointBatch | None = None
+
+    def reset(self, env, rows) -> None:
+        rows = np.asarray(rows, dtype=np.intp)
+        self._reset_followers(env, rows)
+        if self.controller is None or self.controller.num != self.followers.num:
+            self.controller = SetpointBatch(self.followers.num, env.geometry, env.limits, env.control_period,
+                                            self.setpoint_config)
         self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
 
     def act(self, env, obs) -> WheelCommand:

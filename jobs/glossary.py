@@ -34,8 +34,9 @@ _MOVING = ("the moving steps: the controller in its RUNNING mode (not stopping, 
 #: metric key or column name -> (header, definition)
 GLOSSARY: dict[str, Column] = {
     "controller": Column("controller", "the controller driving the robot: icr (the ICR-based controller on the IT "
-                                       "estimate), twist (the WPILib-style swerve baseline), or a trained policy by "
-                                       "its short name"),
+                                       "estimate), twist (the WPILib-style swerve baseline), twist-setpoint (a "
+                                       "swerve setpoint generator after Team 254's, within the actuator limits), or "
+                                       "a trained policy by its short name"),
     "track": Column("track", "the reference path with its heading and speed profiles (random: a track drawn from "
                              "the episode's seed)"),
     "seed": Column("seed", "the episode's seed: sensor noise, start noise, the random track, domain randomisation "

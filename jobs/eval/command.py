@@ -7,6 +7,9 @@ Controllers (``--controllers``, specs of :mod:`control.controller`, made by
   :class:`~control.follow.path_follower.PathFollower` (:class:`~control.path_controllers.ICRPathController`);
 * ``twist``: :class:`~control.twist.wpilib.SwerveController`, the WPILib-style baseline, fed by the
   same follower (:class:`~control.path_controllers.TwistPathController`);
+* ``twist-setpoint``: :class:`~control.twist.setpoint.SetpointController`, a setpoint generator in
+  the manner of Team 254's ``SwerveSetpointGenerator`` (never beyond the actuator limits), fed by the
+  same follower (:class:`~control.path_controllers.SetpointPathController`);
 * ``feedforward``: the kinematic feed-forward of ``azimut sim-paper`` (no actuator limits);
 * ``ppo:PATH``, ``sac:PATH`` (or ``ppo:NAME=PATH``): a policy ``azimut train`` wrote;
 * ``package.module:Class``: a controller of yours (a :class:`~control.controller.Controller`).
@@ -104,7 +107,7 @@ def write_report(rows: list[dict], out: Path, header: str = "") -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controllers", default=",".join(DEFAULT_CONTROLLERS), type=arg_controllers,
-                        help="comma-separated controllers: icr, twist, feedforward, trained policies ppo:PATH or "
+                        help="comma-separated controllers: icr, twist, twist-setpoint, feedforward, trained policies ppo:PATH or "
                              "sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default the run "
                              "folder's name), or package.module:Class, a controller of yours (default: icr,twist)")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_tracks,
