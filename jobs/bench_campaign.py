@@ -35,7 +35,7 @@ __all__ = ["add_arguments", "check_args", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from jobs.args import arg_choice_list, arg_float, arg_int
 
-    parser.add_argument("--controllers", type=arg_choice_list(("icr", "twist", "feedforward")),
+    parser.add_argument("--controllers", type=arg_choice_list(("icr", "twist", "twist-setpoint", "feedforward")),
                         default=list(DEFAULT_CONTROLLERS),
                         help="comma-separated controllers (default: icr,twist)")
     parser.add_argument("--tracks", type=arg_choice_list(TRACK_NAMES), default=list(DEFAULT_TRACKS),

@@ -203,7 +203,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 if inputs[controller] or robot_digest:  # only then: the default campaign's ids stay
                     key["inputs"] = {**inputs[controller], **robot_digest}
                 cost = min(nominal, max_time) if max_time else nominal
-                cost *= 1.0 if controller == "twist" else 4.0  # the ICR controller (and policies) cost more
+                # the ICR controller (and policies) cost more than the twist controllers
+                cost *= 1.0 if controller in ("twist", "twist-setpoint") else 4.0
                 group = {k: v for k, v in key.items() if k not in ("track", "seed")}
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},

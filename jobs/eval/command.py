@@ -107,9 +107,10 @@ def write_report(rows: list[dict], out: Path, header: str = "") -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controllers", default=",".join(DEFAULT_CONTROLLERS), type=arg_controllers,
-                        help="comma-separated controllers: icr, twist, twist-setpoint, feedforward, trained policies ppo:PATH or "
-                             "sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default the run "
-                             "folder's name), or package.module:Class, a controller of yours (default: icr,twist)")
+                        help="comma-separated controllers: icr, twist, twist-setpoint, feedforward, trained policies "
+                             "ppo:PATH or sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default "
+                             "the run folder's name), or package.module:Class, a controller of yours (default: "
+                             "icr,twist)")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_tracks,
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: these, paper first), "
                              f"and scenarios among {', '.join(SCENARIO_NAMES)}, scaled to the robot ('suite': all six "
