@@ -64,8 +64,8 @@ made so that compliance is visible). ``"paper"`` uses **20 N·m/rad, identified 
 own observation** (its Fig. 11: on the real robot's trajectory IT is the same as or better than NS,
 with visible differences): it is the stiffest round value at which the simulated D2 (``azimut
 record-d2``) separates the estimators by more than 0.1 point of qua on more than 5% of its
-points; at 60 N·m/rad, with every other imperfection above, they separate on 0.1% of them. It is
-a calibration to the paper's result, not a measurement: ``docs/results/physics-v3.md`` gives the
+points (25 N·m/rad: 3.3%); at 60 N·m/rad, with every other imperfection above, they separate on
+0.1% of them. It is a calibration to the paper's result, not a measurement: ``docs/results/physics-v3.md`` gives the
 sweep of stiffness and friction and what each changes. The damper keeps v1's damping ratio
 (c_s ∝ √k_s: 0.346 N·m·s/rad).
 
