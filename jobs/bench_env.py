@@ -448,8 +448,7 @@ def run(args: argparse.Namespace) -> int:
               f"~{args.vector_steps} robot-steps per N, "
               f"episodes of at most {args.episode_steps} steps (autoresets timed)")
         presets = args.imperfections or [None]
-        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}" + ("  imperfections" if args.imperfections
-                                                                                 else ""))
+        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}" + "  imperfections" * bool(presets[0]))
         rows = []
         for N in args.num_envs:
             for name in presets:
