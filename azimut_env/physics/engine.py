@@ -17,7 +17,7 @@ static obstacles. The pieces:
 * :mod:`azimut_env.physics.body_io`: the batched reads and writes of the pymunk bodies;
 * :mod:`azimut_env.physics.contacts`: the substeps through pymunk's contact solver (obstacles);
 * :mod:`azimut_env.physics.obstacles`: the obstacles and the collision shapes;
-* :mod:`azimut_env.physics.blowup`: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
+* :mod:`azimut_env.physics.blowup`, ``energy_check``: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
 
 Without obstacles the whole control period (all substeps, all robots) is one compiled call
 (:func:`~azimut_env.physics.kernels.step_kernel`) that integrates the chassis too; pymunk's
@@ -51,6 +51,7 @@ from azimut_env.physics.antagonism import SLIP_MEMORY_TIME, slip_damping
 from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.physics.body_io import BodyIO
 from azimut_env.physics.contacts import lap, step_with_contacts
+from azimut_env.physics.energy_check import EnergyCheck
 from azimut_env.physics.kernels import step_kernel, summary_kernel
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, FT, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
 from azimut_env.physics.modules import mechanical_energy, module_impulse_response
@@ -98,6 +99,7 @@ class AzimutPhysics:
         self.solver_iterations = int(solver_iterations)
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
+        self._energy_check = EnergyCheck(self.n_robots, self.blowup)
         check_stability(self.params, self.dt)
         p = self.params
         #: (n, 2) load change on each axis per unit moment (M_x, M_y) about the centre [1/m]
@@ -126,8 +128,7 @@ class AzimutPhysics:
     # ------------------------------------------------------------------ construction
 
     def stability_figures(self) -> dict[str, tuple[float, float]]:
-        """The figures of the stability budget (:func:`azimut_env.physics.stability.stability_figures`) for
-        these parameters and this substep, each with its bound: ``{name: (value, bound)}``."""
+        """``{name: (value, bound)}`` of the stability budget for these parameters and substep (stability.py)."""
         return stability_figures(self.params, self.dt)
 
     def _build_space(self) -> None:
@@ -322,6 +323,7 @@ class AzimutPhysics:
         self.commands[robot, :, CMD.BETA] = beta
         self.commands[robot, :, CMD.PHIDOT] = phidot
         self.enabled[robot] = True
+        self._energy_check.clear(robot)
         self.acc[robot] = 0.0
         self._read_robot_state(robot)
 
@@ -385,9 +387,8 @@ class AzimutPhysics:
     def step(self, times: dict[str, float] | None = None) -> None:
         """Advance all robots by one control period (``substeps`` substeps).
 
-        Timing hook: with ``times`` given (else :attr:`stage_times`, when set), the seconds spent
-        in each stage are added to it under the keys ``read``, ``force`` (the compiled kernel),
-        ``write``, ``space_step`` and ``summary`` (``azimut bench-env``'s split)."""
+        Timing hook: with ``times`` given (else :attr:`stage_times`, when set), each stage's seconds are added
+        under ``read``, ``force`` (the compiled kernel), ``write``, ``space_step``, ``summary`` (bench-env's split)."""
         self.acc[:] = 0.0
         p = self.params
         args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
@@ -397,6 +398,7 @@ class AzimutPhysics:
         tm = times if times is not None else self.stage_times
         t = time.perf_counter() if tm is not None else 0.0
         self._io.read()
+        self._energy_check.before(self)
         if tm is not None:
             t = lap(tm, "read", t)
         state = self._state
@@ -411,6 +413,7 @@ class AzimutPhysics:
             t = step_with_contacts(self.space, self._io, self._before, self.body_inertia, self.substeps, self.dt,
                                    step_kernel, args, tm, t)
         self._summarize()
+        self._energy_check.after(self)
         if tm is not None:
             lap(tm, "summary", t)
 
@@ -483,9 +486,7 @@ class AzimutPhysics:
                             SLIP_MEMORY_TIME)
 
     def energy(self) -> np.ndarray:
-        """(N,) kinetic energy (chassis with the module masses, module rotations and their coupling
-        with the chassis, wheel spins) plus the elastic energy of the steering springs and the
-        tires' contact patches [J] (:func:`~azimut_env.physics.modules.mechanical_energy`)."""
+        """(N,) kinetic plus elastic energy [J] (:func:`~azimut_env.physics.modules.mechanical_energy`)."""
         return mechanical_energy(self._state, self.body_inertia, self.joint_state, self.motor_state, self.tire_state,
                                  self.wheel_params, self._axis_xy, self.normal_loads())
 

@@ -74,7 +74,12 @@ import math
 import numpy as np
 from numba import njit
 
-from azimut_env.physics.actuators import dc_torque_limits_kernel, steer_actuator_kernel, wheel_spin_step_kernel
+from azimut_env.physics.actuators import (
+    dc_torque_limits_kernel,
+    rolling_resistance_kernel,
+    steer_actuator_kernel,
+    wheel_spin_step_kernel,
+)
 from azimut_env.physics.antagonism import antagonism_kernel, slip_damping_kernel
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, JS, MS, RS, WP, WS
@@ -169,6 +174,7 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 target = cmd[i, k, CMD.BETA]
                 if p[WP.STEER_MAX] == math.inf:
                     target = ms[i, k, MS.THETA] + _wrap_two_pi(target - ms[i, k, MS.THETA])
+                theta_before = ms[i, k, MS.THETA]
                 theta, omega, tau_s = steer_actuator_kernel(
                     dc, ms[i, k, MS.THETA], ms[i, k, MS.OMEGA], target, beta, beta_dot, on, p[WP.KP],
                     p[WP.STEER_RATE], p[WP.STEER_ACCEL], p[WP.STEER_TORQUE], p[WP.K_S], p[WP.C_S], p[WP.MOTOR_STALL],
@@ -214,8 +220,14 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
                 tau_lo = -tau_hi
                 if drive_dc:
                     tau_lo, tau_hi = dc_torque_limits_kernel(phidot, p[WP.DRIVE_STALL], p[WP.DRIVE_NO_LOAD], tau_hi)
+                phidot_before = phidot
                 phidot = wheel_spin_step_kernel(phidot, ref, f_long, on, r, p[WP.I_W], p[WP.KV], tau_lo, tau_hi,
                                                 p[WP.BEARING], p[WP.RR_TORQUE] * load * r, p[WP.RR_KNEE], dt)
+                # the motors' work on the robot this substep: the steering motor's through the spring
+                # (τ_s Δθ_m) and the drive's (τ_m φ̇' dt, τ_m recovered from the implicit spin update)
+                tau_drive = (p[WP.I_W] * (phidot - phidot_before) / dt + p[WP.BEARING] * phidot + r * f_long
+                             - rolling_resistance_kernel(phidot_before, r, p[WP.RR_TORQUE] * load * r, p[WP.RR_KNEE]))
+                acc[i, k, ACC.WORK] += tau_s * (theta - theta_before) + tau_drive * phidot * dt
                 ms[i, k, MS.PHIDOT_REF] = ref
                 ms[i, k, MS.PHIDOT] = phidot
                 ms[i, k, MS.PHI] += phidot * dt

@@ -100,9 +100,12 @@ class ACC(IntEnum):
     """Columns of the per-wheel accumulator over one step's substeps (N, n, len(ACC)): the tire
     force on the robot in the world (FX, FY) [N], the slip power |F · v_slip| [W], the normal
     load LOAD [N] and the rolling speed over the ground ROLL = |v(P)·d| [m/s] (the last two for
-    the slip dampings of the antagonism, :mod:`azimut_env.physics.antagonism`)."""
+    the slip dampings of the antagonism, :mod:`azimut_env.physics.antagonism`), and WORK [J], the
+    work the wheel's two motors did on the robot over the step (the steering motor's τ_s Δθ_m
+    through the series spring, the drive's τ_m φ̇ dt; the energy check of
+    :meth:`~azimut_env.physics.engine.AzimutPhysics.step`)."""
 
-    FX, FY, SLIP, LOAD, ROLL = range(5)
+    FX, FY, SLIP, LOAD, ROLL, WORK = range(6)
 
 
 class RS(IntEnum):
