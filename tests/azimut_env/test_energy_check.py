@@ -10,6 +10,8 @@ import pickle
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from azimut_env.env import AzimutEnv
 from azimut_env.imperfections import with_imperfections
@@ -138,3 +140,31 @@ def test_energy_limits_are_checked(bad):
 def test_a_shorter_window_flags_sooner():
     steps, codes, _, _ = _forced(0.02, limits=BlowUpLimits(energy_window=10))
     assert codes[0] == BlowUp.ENERGY and steps == 10
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(inertia=st.floats(0.004, 1.0), stiffness=st.floats(1.0, 60.0), tire=st.floats(1.0, 20.0),
+       offset=st.floats(-0.5, 0.5), speed=st.floats(0.0, 1.0))
+def test_forced_physics_never_gains_energy_silently(inertia, stiffness, tire, offset, speed):
+    """Any substep past its bound (module inertia down, spring and tire stiffnesses up: the modes
+    the budget bounds) either stays bounded or ends with a blow-up code: never a run whose energy
+    keeps growing with every code clear."""
+    p = RobotParams()
+    phys = AzimutPhysics(p)
+    wp = phys.wheel_params.copy()
+    wp[..., WP.I_MOD] *= inertia
+    wp[..., WP.K_S] *= stiffness
+    wp[..., WP.C_KAPPA] *= tire
+    wp[..., WP.C_ALPHA] *= tire
+    phys.set_wheel_params(wp)
+    lam, mu = eta_from_twist(np.array([speed, 0.0, 0.0]))
+    beta = steering_from_lambda(lam, p.geometry)
+    phys.reset_robot(0, (0.0, 0.0, 0.0), beta, (speed, 0.0, 0.0))
+    phys.set_commands(beta[None] + offset, wheel_speeds(lam, mu, p.geometry, beta=beta)[None])
+    energies = []
+    for _ in range(200):
+        phys.step()
+        if not phys.check()[0][0]:
+            return  # reported
+        energies.append(phys.energy()[0])
+    assert energies[-1] < 3.0 * max(energies[:25]) + 2.0, (energies[0], max(energies[:25]), energies[-1])
