@@ -54,13 +54,27 @@ def default_storage(out: str | Path) -> str:
 
 
 def check_args(args: argparse.Namespace) -> None:
+    """Refuse what cannot run, creating nothing: the default storage (``OUT/study.db``) is the
+    output folder's, which ``--out``'s own check has vetted; an SQLite file that does not exist yet
+    needs an existing, writable folder; any other storage is opened (and closed) here."""
     require_module("optuna", "azimut tune (the [tune] extra)")
     require_module("stable_baselines3", "azimut tune (the [rl] extra)")
     require_module("torch", "azimut tune (the [rl] extra)")
-    if args.storage is None:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        args.storage = default_storage(args.out)
     args.study_name = args.study_name or f"tune-{args.algo}-{args.action}"
+    if args.storage is None:
+        args.storage = default_storage(args.out)
+        return
+    if args.storage.startswith("sqlite:///"):
+        path = Path(args.storage[len("sqlite:///"):])
+        if path.is_dir():
+            raise ValueError(f"--storage {args.storage}: is a folder, not an SQLite file")
+        if not path.exists():
+            import os
+
+            if not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
+                raise ValueError(f"--storage {args.storage}: cannot create the SQLite file (no writable folder "
+                                 f"{str(path.parent)!r})")
+            return
     import logging
 
     import optuna
@@ -69,6 +83,7 @@ def check_args(args: argparse.Namespace) -> None:
     try:  # open it now: a storage that cannot be opened is refused before any training
         storage = optuna.storages.RDBStorage(args.storage)
         storage.get_all_studies()
+        storage.engine.dispose()
     except Exception as exc:  # noqa: BLE001 (SQLAlchemy/Optuna raise many kinds: one line)
         msg = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise ValueError(f"--storage {args.storage}: cannot open the Optuna storage ({msg})") from None

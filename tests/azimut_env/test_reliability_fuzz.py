@@ -16,6 +16,7 @@ import collections
 import importlib
 import inspect
 import math
+import os
 import shlex
 
 import numpy as np
@@ -391,6 +392,8 @@ cli_values = st.one_of(
 
 def _prop_cli(command, flags, tmp_path_factory, capsys_holder):
     tmp = tmp_path_factory.mktemp("cli")
+    cwd = tmp / "cwd"  # relative output paths land here, not in the checkout
+    cwd.mkdir()
     existing = tmp / "existing.txt"
     existing.write_text("x")
     TRIED["cli"] += 1
@@ -402,12 +405,15 @@ def _prop_cli(command, flags, tmp_path_factory, capsys_holder):
     ran = []
     real_run = module.run
     module.run = lambda args: ran.append(args) or 0  # the work itself is not fuzzed, only its entry
+    before = os.getcwd()
+    os.chdir(cwd)
     try:
         code = main(argv)
     except SystemExit as exc:  # main returns codes; a SystemExit escaping it is a defect too
         raise AssertionError(f"SystemExit({exc.code}) escaped main for {shlex.join(argv)}") from None
     finally:
         module.run = real_run
+        os.chdir(before)
     err = capsys_holder.readouterr().err
     assert code in (0, 2), (argv, code)
     if code == 2:
@@ -417,6 +423,7 @@ def _prop_cli(command, flags, tmp_path_factory, capsys_holder):
     else:
         assert ran or "--help" in argv
     assert existing.read_text() == "x"  # nothing written before the work
+    assert not any(cwd.iterdir()), (argv, sorted(p.name for p in cwd.iterdir()))  # checks create nothing
 
 
 def _cli_test(max_examples):
