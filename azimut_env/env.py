@@ -216,8 +216,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       drive's torque–speed line, steering-axis zero offsets and rolling-radius errors, finer wheel
       encoders, and a 20 N·m/rad steering spring identified from the paper's Fig. 11;
       :mod:`azimut_env.imperfections`) or ``"ideal"`` (none: ``Azimut-v1``'s physics), applied on
-      top of the robot; default ``None``: ``"paper"`` for the default AZIMUT-3 robot, and the
-      robot as given for ``params``, description files and the other presets. ``sensors``: ``SensorParams`` or
+      top of the robot; default ``None``: the robot as given, with the preset its description
+      file names (``[imperfections]`` ``preset``: ``"paper"`` for the default robot ``azimut3``,
+      ``"ideal"`` for ``swerve``, ``tri``, ``hex``); ``params`` as they are. ``sensors``: ``SensorParams`` or
       ``"ideal"`` (overrides ``params.sensors``). ``noise_scale``: multiplies the sensor noise
       standard deviations (0: noise-free, quantisation kept).
     * ``domain_randomization``: relative spread d ∈ [0, 0.5]: at each reset the friction, steering

@@ -79,28 +79,41 @@ robots", IEEE Trans. Robotics and Automation 12(6):869–880, 1996.
 :func:`with_imperfections` applies a preset to any :class:`~azimut_env.params.RobotParams`: it
 sets the fields above and leaves every other one. The ``"paper"`` values are AZIMUT-3's (the
 per-wheel offsets are four; a robot with another wheel count gets its own draw of the same
-spread, ``numpy.random.default_rng(2010)``); a robot from a description file sets its own in its
-``[steering]``, ``[wheel]``, ``[sensors]`` and ``[imperfections]`` tables.
+spread, ``numpy.random.default_rng(2010)``). A robot description file names the preset it carries
+(``[imperfections]`` ``preset = "paper"``: the shipped ``azimut3`` does, so the preset ``azimut3``
+and its file are the Azimut-v2 default robot; the other shipped robots name ``"ideal"``) and sets
+its own values in its ``[steering]``, ``[wheel]``, ``[sensors]`` and ``[imperfections]`` tables
+(they override the preset's: :func:`azimut_env.robot_file.params_from_description`); the envs'
+and the command line's ``imperfections`` apply a preset on top of the robot
+(:func:`azimut_env.task.config.resolve_params`).
+
+This module does not import :mod:`azimut_env.params` (the description reader, which
+``RobotParams.from_file`` calls, applies a file's preset): it builds the ``ImperfectionParams``
+from the class of the robot's own.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import is_dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
-from azimut_env.params import ImperfectionParams, RobotParams
-
 __all__ = ["IMPERFECTION_PRESETS", "DEFAULT_IMPERFECTIONS", "with_imperfections", "check_imperfections",
-           "resolve_imperfections", "imperfections_of",
+           "imperfections_of",
            "PAPER_SPRING", "IDEAL_SPRING", "PAPER_FRICTION", "PAPER_MODULE", "STEER_OFFSET_STD", "RADIUS_ERROR_STD",
            "PAPER_WHEEL_CPR", "IDEAL_WHEEL_CPR"]
 
 #: the presets, by name
 IMPERFECTION_PRESETS = ("paper", "ideal")
-#: the envs' default (``Azimut-v2``); ``Azimut-v1`` is registered with ``"ideal"``
+#: the default robot's (``Azimut-v2``'s: the preset ``azimut3`` names it in its file);
+#: ``Azimut-v1`` is registered with ``"ideal"``
 DEFAULT_IMPERFECTIONS = "paper"
+#: the robot parameters' type (``azimut_env.params.RobotParams``, not imported here)
+P = TypeVar("P")
+#: the groups of RobotParams that a preset sets
+_GROUPS = ("geometry", "steering", "wheel", "sensors", "imperfections")
 
 #: the steering spring and damper of the "paper" preset [N·m/rad, N·m·s/rad] (identified, see above)
 PAPER_SPRING = dict(stiffness=20.0, damping=0.6 * math.sqrt(20.0 / 60.0))
@@ -141,7 +154,7 @@ def _paper_draw(n: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return tuple(np.round(offsets, 5).tolist()), tuple(np.round(errors, 5).tolist())
 
 
-def with_imperfections(params: RobotParams, name: str) -> RobotParams:
+def with_imperfections(params: P, name: str) -> P:
     """``params`` with the imperfections preset ``name`` (module docstring): ``"ideal"`` turns
     friction, the module's centre-of-mass offset, the drive's torque–speed line and the geometric
     imperfections off and sets v1's 4,096-count wheel encoders (``RobotParams()`` is ideal
@@ -153,43 +166,28 @@ def with_imperfections(params: RobotParams, name: str) -> RobotParams:
     ``with_imperfections(with_imperfections(p, "paper"), "ideal") == p`` for ``p = RobotParams()``
     and a robot with a spring or module of its own keeps it."""
     check_imperfections(name)
-    if not isinstance(params, RobotParams):
+    if isinstance(params, type) or not is_dataclass(params) or not all(hasattr(params, g) for g in _GROUPS):
         raise TypeError(f"params must be RobotParams, got {type(params).__name__}")
+    imperfection_params = type(params.imperfections)  # ImperfectionParams
     if name == "ideal":
         st = params.steering
         back = {k: v for k, v in _V1_STEERING.items() if getattr(st, k) == _PAPER_STEERING[k]}
         return replace(params, steering=replace(st, **_IDEAL_STEERING, **back),
                        wheel=replace(params.wheel, drive_model="current_limit"),
-                       sensors=replace(params.sensors, wheel_cpr=IDEAL_WHEEL_CPR), imperfections=ImperfectionParams())
+                       sensors=replace(params.sensors, wheel_cpr=IDEAL_WHEEL_CPR), imperfections=imperfection_params())
     offsets, errors = _paper_draw(params.n)
     return replace(params, steering=replace(params.steering, **PAPER_SPRING, **PAPER_FRICTION, **PAPER_MODULE),
                    wheel=replace(params.wheel, drive_model="dc"),
                    sensors=replace(params.sensors, wheel_cpr=PAPER_WHEEL_CPR),
-                   imperfections=ImperfectionParams(steer_offset=offsets, radius_error=errors,
-                                                    steer_offset_std=STEER_OFFSET_STD,
-                                                    radius_error_std=RADIUS_ERROR_STD))
+                   imperfections=imperfection_params(steer_offset=offsets, radius_error=errors,
+                                                     steer_offset_std=STEER_OFFSET_STD,
+                                                     radius_error_std=RADIUS_ERROR_STD))
 
 
-def imperfections_of(params: RobotParams) -> str | None:
+def imperfections_of(params) -> str | None:
     """The preset ``params`` carries: ``"paper"`` or ``"ideal"`` when applying it changes nothing,
     else None (a robot with imperfections of its own)."""
     for name in IMPERFECTION_PRESETS:
         if with_imperfections(params, name) == params:
             return name
     return None
-
-
-def resolve_imperfections(params: RobotParams | None, imperfections: str | None,
-                          default_robot: bool | None = None) -> RobotParams:
-    """The envs' rule: ``params`` (None: ``RobotParams()``) with the preset ``imperfections``;
-    ``None`` means :data:`DEFAULT_IMPERFECTIONS` for the default AZIMUT-3 robot and the robot as
-    given otherwise (``params``, description files and the other presets carry their own).
-    ``default_robot``: whether ``params`` is the default robot (default: ``params is None``)."""
-    if imperfections is not None:
-        check_imperfections(imperfections)
-    elif default_robot if default_robot is not None else params is None:
-        imperfections = DEFAULT_IMPERFECTIONS
-    params = params if params is not None else RobotParams()
-    if not isinstance(params, RobotParams):
-        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
-    return with_imperfections(params, imperfections) if imperfections is not None else params

@@ -8,8 +8,11 @@ module reads the parameter tables, one per group of ``RobotParams`` (``[chassis]
 ``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``, ``[sensors]``,
 ``[imperfections]``), whose
 keys are the fields of the group's dataclass in its units (SI; angles in radians), and the
-top-level ``gravity`` [m/s²]. A group or key the file leaves out keeps the default of
-``RobotParams`` (the AZIMUT-3 stand-in). The steering range of ``[limits]`` is not a key: it
+top-level ``gravity`` [m/s²]. ``[imperfections]`` may also name the imperfections preset the
+robot carries, ``preset = "paper"`` or ``"ideal"`` (:mod:`azimut_env.imperfections`): the preset
+sets its values first, and the file's own keys override them. A group or key the file leaves
+out keeps the preset's value, or without one the default of ``RobotParams`` (the AZIMUT-3
+stand-in without imperfections). The steering range of ``[limits]`` is not a key: it
 comes from ``[geometry]`` (``steering``, ``steer_range_deg``); unlimited steering sets
 ``steer_min = −inf``, ``steer_max = +inf``.
 
@@ -23,10 +26,11 @@ from __future__ import annotations
 import functools
 import math
 import os
-from dataclasses import MISSING, Field, fields, is_dataclass
+from dataclasses import MISSING, Field, fields, is_dataclass, replace
 from importlib import resources
 from typing import Any
 
+from azimut_env.imperfections import IMPERFECTION_PRESETS, with_imperfections
 from estimation.geometry import RobotGeometry
 from estimation.robot_file import (
     PARAMETER_TABLES,
@@ -37,13 +41,16 @@ from estimation.robot_file import (
     where,
 )
 
-__all__ = ["PRESET_NAMES", "DEFAULT_PRESET", "RobotFileError", "params_from_file", "params_from_description",
-           "preset_params", "preset_source", "check_preset_name", "resolve_robot"]
+__all__ = ["PRESET_NAMES", "DEFAULT_PRESET", "PRESET_KEY", "RobotFileError", "params_from_file",
+           "params_from_description", "preset_params", "preset_source", "check_preset_name", "resolve_robot"]
 
 #: the robots shipped with the package (``azimut_env/robots/NAME.toml``)
 PRESET_NAMES = ("azimut3", "swerve", "tri", "hex")
-#: the preset equal to ``RobotParams()``
+#: the default robot of the envs (``Azimut-v2``): ``RobotParams()`` with the ``"paper"``
+#: imperfections, which its file names
 DEFAULT_PRESET = "azimut3"
+#: the key of ``[imperfections]`` that names the robot's imperfections preset
+PRESET_KEY = "preset"
 #: keys of ``[limits]`` that the file may not set (the steering range comes from ``[geometry]``)
 _FROM_GEOMETRY = {"steer_min", "steer_max"}
 
@@ -76,29 +83,44 @@ def _value(default: Any, value: Any, source: str, key: str) -> Any:
     raise RobotFileError(f"{where(source, key)}: this parameter cannot be set from a file")
 
 
-def _group(cls: type, table: Any, source: str, section: str, extra: dict | None = None) -> Any:
-    """An instance of the dataclass ``cls`` from its table (missing keys: the class's defaults)."""
+def _group(base: Any, table: Any, source: str, section: str) -> Any:
+    """The dataclass instance ``base`` with the keys of its table (missing keys keep ``base``'s
+    values: the class's defaults, or the imperfections preset's)."""
     if not isinstance(table, dict):
         raise RobotFileError(f"{where(source, f'[{section}]')} = {table!r}: must be a table")
-    known = {f.name: f for f in fields(cls) if f.init}
+    known = {f.name: f for f in fields(base) if f.init}
     kwargs: dict[str, Any] = {}
     for key, value in table.items():
+        if key == PRESET_KEY and section == "imperfections":
+            continue  # read by _imperfections_preset
         if key in _FROM_GEOMETRY and section == "limits":
             raise RobotFileError(f"{where(source, f'[{section}].{key}')}: the steering range is set in [geometry] "
                                  "(steering = 'limited' with steer_range_deg, or 'unlimited')")
         if key not in known:
-            names = ", ".join(k for k in known if not (section == "limits" and k in _FROM_GEOMETRY))
+            names = ", ".join([k for k in known if not (section == "limits" and k in _FROM_GEOMETRY)]
+                              + [PRESET_KEY] * (section == "imperfections"))
             raise RobotFileError(f"{where(source, f'[{section}]')}: unknown key {key!r} (known: {names})")
         default = _default(known[key])
         if is_dataclass(default):
-            kwargs[key] = _group(type(default), value, source, f"{section}.{key}")
+            kwargs[key] = _group(getattr(base, key), value, source, f"{section}.{key}")
         else:
             kwargs[key] = _value(default, value, source, f"[{section}].{key}")
-    kwargs.update(extra or {})
     try:
-        return cls(**kwargs)
+        return replace(base, **kwargs)
     except (ValueError, TypeError) as exc:
         raise RobotFileError(f"{where(source, f'[{section}]')}: {exc}") from None
+
+
+def _imperfections_preset(data: dict, source: str) -> str | None:
+    """The imperfections preset the description names (``[imperfections]`` ``preset``), or None."""
+    table = data.get("imperfections")
+    if not isinstance(table, dict) or PRESET_KEY not in table:
+        return None
+    name = table[PRESET_KEY]
+    if not isinstance(name, str) or name not in IMPERFECTION_PRESETS:
+        raise RobotFileError(f"{where(source, f'[imperfections].{PRESET_KEY}')} = {name!r}: must be one of "
+                             f"{', '.join(map(repr, IMPERFECTION_PRESETS))}")
+    return name
 
 
 def params_from_description(data: dict, params_cls: type) -> Any:
@@ -111,16 +133,21 @@ def params_from_description(data: dict, params_cls: type) -> Any:
     if missing:  # a group added to RobotParams without its table in estimation.robot_file
         raise RuntimeError(f"RobotParams groups {missing} are not tables of the robot file format "
                            "(add them to estimation.robot_file.PARAMETER_TABLES)")
+    preset = _imperfections_preset(data, source)
     steer = (-math.inf, math.inf) if geometry.unlimited_steering else (geometry.steer_min, geometry.steer_max)
-    kwargs: dict[str, Any] = {"geometry": geometry}
-    for name, f in groups.items():
-        extra = dict(steer_min=steer[0], steer_max=steer[1]) if name == "limits" else None
-        if name in data or extra:
-            kwargs[name] = _group(type(_default(f)), data.get(name, {}), source, name, extra)
+    limits = replace(_default(groups["limits"]), steer_min=steer[0], steer_max=steer[1])
+    try:
+        base = params_cls(geometry=geometry, limits=limits)
+    except (ValueError, TypeError) as exc:
+        raise RobotFileError(f"robot file {source}: {exc}") from None
+    if preset is not None:
+        base = with_imperfections(base, preset)
+    kwargs: dict[str, Any] = {name: _group(getattr(base, name), data[name], source, name)
+                              for name in groups if name in data}
     if "gravity" in data:
         kwargs["gravity"] = number(data["gravity"], source, "gravity")
     try:
-        return params_cls(**kwargs)
+        return replace(base, **kwargs)
     except (ValueError, TypeError) as exc:
         raise RobotFileError(f"robot file {source}: {exc}") from None
 

@@ -19,7 +19,8 @@ from azimut_env.validation import check_range
 
 __all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_output_layout",
            "require_module",
-           "arg_robot", "arg_robot_file", "add_robot_arguments", "robot_params", "robot_env_kwargs", "robot_label"]
+           "arg_robot", "arg_robot_file", "arg_imperfections", "add_robot_arguments", "robot_params",
+           "robot_env_kwargs", "robot_args_kwargs", "robot_label"]
 
 
 def arg_int(min_value: int | None = None, max_value: int | None = None) -> Callable[[str], int]:
@@ -244,35 +245,65 @@ def arg_robot_file(text: str) -> str:
     return text
 
 
-def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--robot NAME`` and ``--robot-file PATH`` (exclusive: one robot per run)."""
+def arg_imperfections(text: str) -> str:
+    """``type=`` of ``--imperfections``: a preset of :mod:`azimut_env.imperfections`."""
+    from azimut_env.imperfections import check_imperfections
+
+    try:
+        return check_imperfections(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser, *, imperfections: bool = False,
+                        several: bool = False) -> None:
+    """``--robot NAME`` and ``--robot-file PATH`` (exclusive: one robot per run), and with
+    ``imperfections`` the ``--imperfections`` flag (``several``: a comma-separated list, each
+    timed in turn by ``azimut bench-env``; default None: the robot as chosen)."""
+    from azimut_env.imperfections import IMPERFECTION_PRESETS
     from azimut_env.robot_file import PRESET_NAMES
 
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--robot", type=arg_robot, default=None, metavar="NAME",
                        help=f"the robot, a preset among {', '.join(PRESET_NAMES)} (default azimut3, the AZIMUT-3 "
-                            "stand-in; docs/robots.md)")
+                            "stand-in with the paper's imperfections; docs/robots.md)")
     group.add_argument("--robot-file", type=arg_robot_file, default=None, metavar="PATH",
                        help="the robot, from a description file (TOML, schema in docs/robots.md)")
+    if imperfections:
+        names = ", ".join(IMPERFECTION_PRESETS)
+        parser.add_argument("--imperfections", default=None,
+                            type=arg_choice_list(IMPERFECTION_PRESETS) if several else arg_imperfections,
+                            metavar="NAME[,NAME...]" if several else "NAME",
+                            help=f"the imperfections preset ({names}) put on the robot (default: the one its "
+                                 "description file names, paper for azimut3, ideal for swerve, tri, hex; "
+                                 "azimut_env/imperfections.py)"
+                                 + ("; several: each in turn, with the ratio to the first" if several else ""))
+
+
+def robot_args_kwargs(args: argparse.Namespace) -> dict:
+    """:func:`robot_env_kwargs` of ``--robot``/``--robot-file`` and ``--imperfections`` (its first
+    preset where it takes several)."""
+    value = getattr(args, "imperfections", None)
+    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None),
+                            value[0] if isinstance(value, list) else value)
 
 
 def robot_params(args: argparse.Namespace):
-    """The ``RobotParams`` of ``--robot``/``--robot-file``, or None for the default robot."""
-    from azimut_env.params import RobotParams
+    """The ``RobotParams`` the envs make of ``--robot``/``--robot-file`` and ``--imperfections``;
+    the default robot when none is given."""
+    from azimut_env.task.config import resolve_params
 
-    if getattr(args, "robot_file", None):
-        return RobotParams.from_file(args.robot_file)
-    if getattr(args, "robot", None):
-        return RobotParams.preset(args.robot)
-    return None
+    kwargs = robot_args_kwargs(args)
+    return resolve_params(None, None, 1.0, kwargs.get("robot"), kwargs.get("imperfections"))
 
 
-def robot_env_kwargs(robot: str | None = None, robot_file: str | None = None) -> dict:
-    """The env keyword arguments of a robot given by preset name or file path (empty for the
-    default): ``{"robot": name}`` or ``{"robot": absolute path}``, plain strings (JSON-safe)."""
-    if robot_file:
-        return {"robot": os.path.abspath(robot_file)}
-    return {"robot": robot} if robot else {}
+def robot_env_kwargs(robot: str | None = None, robot_file: str | None = None,
+                     imperfections: str | None = None) -> dict:
+    """The env keyword arguments of a robot given by preset name or file path and of an
+    imperfections preset (empty for the default robot as it is): ``{"robot": name}`` or
+    ``{"robot": absolute path}``, and ``{"imperfections": name}``, plain strings (JSON-safe)."""
+    kwargs = {"robot": os.path.abspath(robot_file)} if robot_file else ({"robot": robot} if robot else {})
+    return {**kwargs, "imperfections": imperfections} if imperfections else kwargs
 
 
 def robot_label(args: argparse.Namespace) -> str:

@@ -26,7 +26,6 @@ import time
 
 import numpy as np
 
-from azimut_env.imperfections import IMPERFECTION_PRESETS
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, robot_label
 from jobs.bench_speed import JOBS, check_baseline, load_average, reference_steps_per_s, run_baseline_bench
@@ -317,7 +316,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robots for --action (default 16)")
     parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,
                         help="single-env steps in the end-to-end loop")
-    add_robot_arguments(parser)
+    add_robot_arguments(parser, imperfections=True, several=True)  # several: the vector env timed with each
     parser.add_argument("--track", default="paper", choices=TRACK_NAMES,
                         help=f"built-in track among {', '.join(TRACK_NAMES)}")
     parser.add_argument("--substeps", type=arg_int(1, 10_000), default=8, help="physics substeps per control step")
@@ -328,10 +327,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robot-steps per N in the vector env's timed loop (at least 20 calls)")
     parser.add_argument("--episode-steps", type=arg_int(1, 100_000_000), default=6000,
                         help="vector env time limit; short values put (timed) autoresets in the loop")
-    parser.add_argument("--imperfections", default=None, metavar="NAME[,NAME...]",
-                        type=arg_choice_list(IMPERFECTION_PRESETS),
-                        help="the robot's imperfections (paper, ideal; default: the envs' rule); several: the vector "
-                             "env is timed with each in turn at every N, with the ratio to the first")
     parser.add_argument("--solver-iterations", type=arg_int(1, 10_000), default=20,
                         help="pymunk solver iterations per substep in the vector env (default 20, as the envs)")
     parser.add_argument("--reference", default="Pendulum-v1",
@@ -375,8 +370,7 @@ def _robot_kwargs(args: argparse.Namespace, imperfections: str | None = None) ->
     from jobs.args import robot_env_kwargs
 
     imperfections = imperfections or (getattr(args, "imperfections", None) or [None])[0]
-    kwargs = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
-    return {**kwargs, "imperfections": imperfections} if imperfections else kwargs
+    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None), imperfections)
 
 
 def run_action_bench(args: argparse.Namespace) -> int:

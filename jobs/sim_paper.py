@@ -18,7 +18,6 @@ import argparse
 import json
 import sys
 
-from azimut_env.imperfections import IMPERFECTION_PRESETS, resolve_imperfections
 from azimut_env.tracks import TRACK_NAMES
 from control.episode import MOVING_MU
 from control.feedforward import FeedForwardController  # re-exported
@@ -120,10 +119,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speeds", type=arg_float(0.0, 3.0, lo_open=True), nargs="+", default=list(DEFAULT_SPEEDS),
                         help="speed scales of the track's profile (default 0.5 1 1.4)")
     parser.add_argument("--seed", type=arg_int(0), default=0)
-    add_robot_arguments(parser)
-    parser.add_argument("--imperfections", choices=IMPERFECTION_PRESETS, default=None,
-                        help="the robot's imperfections (default: paper for the default robot, the robot's own "
-                             "otherwise; azimut_env.imperfections)")
+    add_robot_arguments(parser, imperfections=True)
     parser.add_argument("--causes", nargs="+", default=list(COUNTERFACTUALS), metavar="CAUSE",
                         choices=[*COUNTERFACTUALS, "none"],
                         help=f"counterfactuals to run, among: {', '.join(COUNTERFACTUALS)} (default all; none: the "
@@ -146,10 +142,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _robot(args: argparse.Namespace):
     """The robot of ``--robot``/``--robot-file`` with ``--imperfections`` (the envs' rule)."""
-    from azimut_env.robot_file import DEFAULT_PRESET
-
-    default = getattr(args, "robot_file", None) is None and getattr(args, "robot", None) in (None, DEFAULT_PRESET)
-    return resolve_imperfections(robot_params(args), args.imperfections, default)
+    return robot_params(args)
 
 
 def check_args(args: argparse.Namespace) -> None:

@@ -119,19 +119,25 @@ def resolve_params(params: RobotParams | None, sensors: SensorParams | str | Non
     """The robot parameters with the imperfections preset, the ``sensors`` override and the
     ``noise_scale`` applied.
 
-    ``robot`` is a preset's name (``RobotParams.preset``); giving it with ``params`` raises
-    ``ValueError`` (a preset with parameters of its own is two robots). ``imperfections``
-    (:mod:`azimut_env.imperfections`): ``"paper"`` or ``"ideal"`` applied on top of the robot;
-    ``None`` means ``"paper"`` for the default AZIMUT-3 robot (no ``params``, ``robot`` None or
-    ``"azimut3"``) and the robot as given otherwise (``params``, description files and the other
-    presets carry their own)."""
-    from azimut_env.imperfections import check_imperfections, resolve_imperfections
+    ``robot`` is a preset's name (``RobotParams.preset``) or a description file's path; giving it
+    with ``params`` raises ``ValueError`` (a preset with parameters of its own is two robots);
+    neither: the default robot, the preset ``azimut3`` (AZIMUT-3 with the ``"paper"``
+    imperfections, which its file names). ``imperfections`` (:mod:`azimut_env.imperfections`):
+    ``"paper"`` or ``"ideal"`` applied on top of the robot; ``None``: the robot as given (a
+    description file and a preset carry the preset their ``[imperfections]`` table names;
+    ``params`` are used as they are)."""
+    from azimut_env.imperfections import check_imperfections, with_imperfections
     from azimut_env.robot_file import DEFAULT_PRESET, resolve_robot
 
     if imperfections is not None:
         check_imperfections(imperfections)  # before the robot file is read
-    default_robot = params is None and robot in (None, DEFAULT_PRESET)
-    params = resolve_imperfections(resolve_robot(robot, params, RobotParams), imperfections, default_robot)
+    params = resolve_robot(robot, params, RobotParams)
+    if params is None:
+        params = RobotParams.preset(DEFAULT_PRESET)
+    elif not isinstance(params, RobotParams):
+        raise TypeError(f"params must be RobotParams or None, got {type(params).__name__}")
+    if imperfections is not None:
+        params = with_imperfections(params, imperfections)
     if sensors is not None:
         if isinstance(sensors, str):
             if sensors != "ideal":

@@ -2,7 +2,8 @@
 :mod:`jobs.campaign.engine`, statistics over seeds, and one report to open.
 
 An episode is defined by its key, ``(controller, track, seed, speed_scale, domain_randomization,
-kicks, max_time)``: the env is reset with ``seed`` (sensor and start noise, the ``random``
+kicks, max_time)`` and, when they are not the default, the robot (``robot`` or ``robot_file``)
+and its ``imperfections`` preset: the env is reset with ``seed`` (sensor and start noise, the ``random``
 track, domain randomisation) and the kick, if any, is drawn from ``seed`` too, so an episode's
 metrics are the same whichever executor, worker or position in the queue runs it. The episodes of
 one controller with the same options (all but track and seed) run as one batch on a vector env
@@ -67,13 +68,13 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
 
 
 def _episode_setup(track: str, seed: int, speed_scale: float, domain_randomization: float, kicks: bool,
-                   max_time: float | None, robot: str | None,
-                   robot_file: str | None) -> tuple[dict | None, dict | None]:
+                   max_time: float | None, robot: str | None, robot_file: str | None,
+                   imperfections: str | None = None) -> tuple[dict | None, dict | None]:
     """An episode's kick (None: none) and env keyword arguments (None: the defaults)."""
     from jobs.args import robot_env_kwargs
 
-    robot_kw = robot_env_kwargs(robot, robot_file)
-    params = _robot_params(robot_kw["robot"]) if robot_kw else None
+    robot_kw = robot_env_kwargs(robot, robot_file, imperfections)
+    params = _robot_params(robot_kw.get("robot"), imperfections) if robot_kw else None
     n_wheels = params.n if params is not None else 4
     kick = draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels, params=params) if kicks else None
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
@@ -102,22 +103,24 @@ def _episode_result(log, track: str, seed: int, kick: dict | None, return_log: b
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
                  return_log: bool = False, robot: str | None = None, robot_file: str | None = None,
-                 inputs: dict | None = None) -> dict:
+                 inputs: dict | None = None, imperfections: str | None = None) -> dict:
     """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
     ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
     ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
-    name) or ``robot_file`` (a description file) pick the robot (default: azimut3). ``inputs``:
+    name) or ``robot_file`` (a description file) pick the robot (default: azimut3), ``imperfections``
+    the preset put on it (default: the one its file names). ``inputs``:
     the content digests of the files the episode reads (:func:`episode_tasks`), in its key so
     that a changed file is a new episode; not read here."""
     kick, env_kwargs = _episode_setup(track, seed, speed_scale, domain_randomization, kicks, max_time, robot,
-                                      robot_file)
+                                      robot_file, imperfections)
     log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
                       env_kwargs=env_kwargs)
     return _episode_result(log, track, seed, kick, return_log)
 
 
 #: the key entries that every episode of one batch shares (all but the track and the seed)
-_SHARED = ("controller", "speed_scale", "domain_randomization", "kicks", "max_time", "robot", "robot_file", "inputs")
+_SHARED = ("controller", "speed_scale", "domain_randomization", "kicks", "max_time", "robot", "robot_file",
+           "imperfections", "inputs")
 
 
 def episode_batch(keys: list[dict], extras: list[dict]) -> list[dict]:
@@ -129,7 +132,7 @@ def episode_batch(keys: list[dict], extras: list[dict]) -> list[dict]:
     if any({name: k.get(name) for name in _SHARED} != shared for k in keys):
         raise ValueError("episode_batch: the episodes of a batch must differ only in track and seed")
     opts = {name: shared[name] for name in ("speed_scale", "domain_randomization", "kicks", "max_time", "robot",
-                                             "robot_file")}
+                                             "robot_file", "imperfections")}
     opts["speed_scale"] = 1.0 if opts["speed_scale"] is None else opts["speed_scale"]
     opts["domain_randomization"] = opts["domain_randomization"] or 0.0
     opts["kicks"] = bool(opts["kicks"])
@@ -163,23 +166,24 @@ def check_episode_result(result: Any, key: dict) -> None:
             raise TypeError(f"metrics[{name!r}] = {v!r} is not a {'bool' if name == 'completed' else 'number'}")
 
 
-def _robot_params(robot: str | None):
-    """The RobotParams of a robot (a preset's name or a file's path; None: the default)."""
-    from azimut_env.params import RobotParams
-    from azimut_env.robot_file import resolve_robot
+def _robot_params(robot: str | None, imperfections: str | None = None):
+    """The RobotParams of the env's robot (a preset's name or a file's path, None: the default;
+    with the preset ``imperfections``, None: the robot's own)."""
+    from azimut_env.task.config import resolve_params
 
-    return resolve_robot(robot, None, RobotParams) if robot else RobotParams()
+    return resolve_params(None, None, 1.0, robot, imperfections)
 
 
 def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequence[int], *,
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
                   robot_file: str | None = None, names: dict[str, str] | None = None,
-                  all_logs: bool = False) -> list[Task]:
+                  all_logs: bool = False, imperfections: str | None = None) -> list[Task]:
     """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes (every
     episode with ``all_logs``: the export) return their logs; ``names`` (spec -> name) labels
-    them. The robot (``robot``, ``robot_file``) is in each task's key only when it is not the
-    default, so the default campaign's task ids are those of before."""
+    them. The robot (``robot``, ``robot_file``) and the ``imperfections`` preset are in each
+    task's key only when they are given, so the default campaign's task ids are those of before
+    (and ``--resume`` never reuses an episode of another robot)."""
     from jobs.eval.controllers import controller_files
 
     names = names or {}
@@ -189,7 +193,7 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
     inputs = {c: {role: file_digest(p) for role, p in controller_files(c).items()} for c in controllers}
     robot_digest = {"robot_file": file_digest(robot_file)} if robot_file else {}
     for track in tracks:
-        params = _robot_params(str(Path(robot_file).resolve()) if robot_file else robot)
+        params = _robot_params(str(Path(robot_file).resolve()) if robot_file else robot, imperfections)
         nominal = nominal_duration(named_track(track, params, rng=np.random.default_rng(0)), speed_scale)
         for controller in controllers:
             for seed in seeds:
@@ -200,6 +204,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                     key["robot_file"] = str(Path(robot_file).resolve())
                 elif robot:
                     key["robot"] = robot
+                if imperfections:
+                    key["imperfections"] = imperfections
                 if inputs[controller] or robot_digest:  # only then: the default campaign's ids stay
                     key["inputs"] = {**inputs[controller], **robot_digest}
                 cost = min(nominal, max_time) if max_time else nominal
@@ -323,12 +329,14 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     video = getattr(args, "video", None)
     video_dir = out / "videos"
     robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
+    imperfections = getattr(args, "imperfections", None)
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=seeds[0] if (plot_seed is not None or video) else None, robot=robot,
-                          robot_file=robot_file, names=names, all_logs=bool(getattr(args, "export", None)))
+                          robot_file=robot_file, names=names, all_logs=bool(getattr(args, "export", None)),
+                          imperfections=imperfections)
     executor = run_kwargs(args)["executor"]
-    env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file))
+    env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file, imperfections))
     geom, limits = env0.geometry, env0.limits
     if not args.resume and plot_dir.is_dir():
         for p in plot_dir.glob("*.png"):

@@ -117,7 +117,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "scenarios; docs/robots.md)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
                         help="env seed (noise, start, random track); default 0")
-    add_robot_arguments(parser)
+    add_robot_arguments(parser, imperfections=True)
     parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
                         help="multiply every track's speed profile (default 1: the track's nominal speed)")
     parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
@@ -158,9 +158,11 @@ def check_args(args: argparse.Namespace) -> None:
             if model_file(policy_name(item.split(":", 1)[1])[1]).suffix != ".pt":  # RLlib's export: torch only
                 require_module("stable_baselines3", f"--controllers {item} (the [rl] extra)")
             require_module("torch", f"--controllers {item} (the [rl] extra)")
-    other_robot = getattr(args, "robot", None) not in (None, "azimut3") or getattr(args, "robot_file", None)
+    other_robot = (getattr(args, "robot", None) not in (None, "azimut3") or getattr(args, "robot_file", None)
+                   or getattr(args, "imperfections", None) not in (None, "paper"))
     if args.kick_runs > 0 and other_robot:
-        raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3) only")
+        raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3, paper imperfections) "
+                         "only")
     args.controller_names = check_controllers(list(args.controllers), args.speed_scale)
     campaign.check_args(args)
 

@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="training track (default random: a new track per episode, so that the built-ins are "
                              "held out)")
     parser.add_argument("--seed", type=arg_int(0, 2**31 - 1), default=0, help="seed (default 0)")
-    add_robot_arguments(parser)
+    add_robot_arguments(parser, imperfections=True)
     parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1000000)")
     parser.add_argument("--out", type=arg_output_path(directory=True), required=True, help="run folder")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
@@ -194,11 +194,11 @@ def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[
 
 
 def _robot_kwargs(args: argparse.Namespace) -> dict:
-    """The env keyword arguments of ``--robot``/``--robot-file`` (kept in run.json's env_kwargs,
-    so the trained policy is evaluated on its robot)."""
-    from jobs.args import robot_env_kwargs
+    """The env keyword arguments of ``--robot``/``--robot-file`` and ``--imperfections`` (kept in
+    run.json's env_kwargs, so the trained policy is evaluated on its robot)."""
+    from jobs.args import robot_args_kwargs
 
-    return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None))
+    return robot_args_kwargs(args)
 
 
 def _print_final(record: dict) -> None:

@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="Optuna storage URL shared by the processes of one study (default sqlite:///OUT/study.db)")
     parser.add_argument("--study-name", default=None, help="study name (default: tune-ALGO-ACTION)")
     parser.add_argument("--torch-threads", type=arg_int(1, 256), default=1, help="torch CPU threads (default 1)")
-    add_robot_arguments(parser)
+    add_robot_arguments(parser, imperfections=True)
 
 
 def default_storage(out: str | Path) -> str:
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.torch_threads)
     import optuna
 
-    from jobs.args import robot_env_kwargs
+    from jobs.args import robot_args_kwargs
     from jobs.records import provenance, write_json
     from train.tuning import best_hyperparams_file, make_objective, open_study
 
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     eval_every = max(args.steps // args.evals, 1)
     study = open_study(args.storage, args.study_name, args.seed, n_startup_trials=min(5, args.trials),
                        n_warmup_steps=eval_every)
-    env_kwargs = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None)) or None
+    env_kwargs = robot_args_kwargs(args) or None
     prov = provenance()
     objective = make_objective(args.algo, args.action, args.track, args.seed, args.steps, out, args.num_robots,
                                tuple(args.eval_tracks), eval_every, env_kwargs=env_kwargs,

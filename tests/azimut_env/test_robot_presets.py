@@ -8,19 +8,82 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from azimut_env.imperfections import PAPER_FRICTION, imperfections_of, with_imperfections
 from azimut_env.params import RobotParams
 from azimut_env.physics.stability import check_stability
 from azimut_env.robot_file import PRESET_NAMES, RobotFileError, preset_source, resolve_robot
 from estimation.geometry import RobotGeometry
 
 
-def test_azimut3_preset_is_the_default_bit_for_bit():
+def test_azimut3_preset_is_the_default_robot_bit_for_bit():
+    """The preset azimut3 is Azimut-v2's default robot: RobotParams() with the paper's imperfections,
+    which its file names; without them ("ideal") it is RobotParams() bit for bit."""
     p = RobotParams.preset("azimut3")
-    assert p == RobotParams()
+    assert p == with_imperfections(RobotParams(), "paper") and imperfections_of(p) == "paper"
+    assert with_imperfections(p, "ideal") == RobotParams()
     d = RobotParams()
     for a, b in ((p.geometry.alpha, d.geometry.alpha), (p.geometry.l, d.geometry.l), (p.geometry.b, d.geometry.b),
                  (p.geometry.r, d.geometry.r)):
         assert a.tobytes() == b.tobytes()
+    assert [imperfections_of(RobotParams.preset(n)) for n in PRESET_NAMES] == ["paper", "ideal", "ideal", "ideal"]
+
+
+def test_the_preset_its_file_and_the_default_are_one_robot():
+    """``robot="azimut3"``, the shipped file's path and no robot give the same env robot; the
+    ``imperfections`` argument overrides what the file names."""
+    from importlib import resources
+
+    from azimut_env.env import AzimutEnv
+
+    path = str(resources.files("azimut_env").joinpath("robots", "azimut3.toml"))
+    paper = RobotParams.preset("azimut3")
+    assert RobotParams.from_file(path) == paper
+    for kwargs in ({}, {"robot": "azimut3"}, {"robot": path}):
+        assert AzimutEnv(**kwargs).params == paper
+        assert AzimutEnv(**kwargs, imperfections="ideal").params == RobotParams()
+    assert AzimutEnv(params=RobotParams()).params == RobotParams()  # given parameters are used as given
+    assert AzimutEnv(robot="tri", imperfections="paper").params == with_imperfections(RobotParams.preset("tri"),
+                                                                                        "paper")
+
+
+def _with_table(name: str, table: str) -> str:
+    """Preset ``name``'s file with its ``[imperfections]`` table replaced by ``table``."""
+    text = preset_source(name)
+    head, _, rest = text.partition("[imperfections]")
+    return head + table + "\n[geometry]" + rest.partition("[geometry]")[2]
+
+
+def test_a_file_names_its_imperfections_preset_and_its_keys_override_it(tmp_path):
+    path = tmp_path / "r.toml"
+    path.write_text(_with_table("tri", "[imperfections]\npreset = 'paper'\n"))
+    tri = RobotParams.preset("tri")
+    assert RobotParams.from_file(path) == with_imperfections(tri, "paper")  # its own draw for 3 wheels
+    path.write_text(_with_table("tri", "[imperfections]\npreset = 'paper'\nsteer_offset = [0.01, 0.0, -0.01]\n"
+                                       "[steering]\nstiffness = 30.0\n[wheel]\ndrive_model = 'current_limit'\n"))
+    p = RobotParams.from_file(path)
+    assert p.imperfections.steer_offset == (0.01, 0.0, -0.01) and p.steering.stiffness == 30.0
+    assert p.wheel.drive_model == "current_limit"
+    assert p.steering.friction_coulomb == PAPER_FRICTION["friction_coulomb"]  # the rest is the preset's
+    assert p.imperfections.radius_error == with_imperfections(tri, "paper").imperfections.radius_error
+    assert imperfections_of(p) is None  # neither preset: the robot's own
+    path.write_text(_with_table("tri", ""))  # no preset named: the tables' values (RobotParams' defaults)
+    assert RobotParams.from_file(path) == tri and imperfections_of(tri) == "ideal"
+
+
+@pytest.mark.parametrize("table, needle", [
+    ("[imperfections]\npreset = 'real'\n", "[imperfections].preset = 'real': must be one of 'paper', 'ideal'"),
+    ("[imperfections]\npreset = 1\n", "[imperfections].preset = 1: must be one of"),
+    ("[imperfections]\npresets = 'paper'\n", "unknown key 'presets' (known: steer_offset"),
+    ("[imperfections]\npreset = 'paper'\nsteer_offset = [0.0]\n", "has 1 values for 3 wheels"),
+])
+def test_bad_imperfections_preset_refused(tmp_path, table, needle):
+    path = tmp_path / "r.toml"
+    path.write_text(_with_table("tri", table))
+    with pytest.raises(RobotFileError) as exc:
+        RobotParams.from_file(path)
+    assert needle in str(exc.value) and str(path) in str(exc.value)
+    if "presets" in table:
+        assert "preset)" in str(exc.value)  # the preset key is listed among the known ones
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
@@ -83,7 +146,7 @@ def test_bad_parameters_refused(tmp_path, extra, needle):
     path = tmp_path / "r.toml"
     path.write_text(head + extra + "\n[geometry]" + rest)
     if needle is None:
-        assert RobotParams.from_file(path) == RobotParams()
+        assert RobotParams.from_file(path) == RobotParams.preset("azimut3")
         return
     with pytest.raises(RobotFileError) as exc:
         RobotParams.from_file(path)

@@ -18,7 +18,14 @@ from jobs.cli import main
     (["eval", "--robot-file", "{bad}"], "missing table [geometry]"),
     (["eval", "--tracks", "suite,hold"], "repeated entries"),
     (["eval", "--tracks", "zigzag"], "unknown 'zigzag'"),
-    (["eval", "--robot", "swerve", "--kick-runs", "3", "--no-plots"], "default robot (azimut3) only"),
+    (["eval", "--robot", "swerve", "--kick-runs", "3", "--no-plots"], "default robot (azimut3, paper"),
+    (["eval", "--imperfections", "ideal", "--kick-runs", "3", "--no-plots"], "default robot (azimut3, paper"),
+    (["eval", "--imperfections", "real"], "imperfections must be one of 'paper', 'ideal', got 'real'"),
+    (["eval", "--imperfections", "paper,ideal"], "imperfections must be one of"),
+    (["train", "--imperfections", "real", "--out", "x"], "imperfections must be one of"),
+    (["tune", "--imperfections", "Paper", "--out", "x"], "imperfections must be one of"),
+    (["sim-paper", "--imperfections", "none"], "imperfections must be one of"),
+    (["bench-env", "--imperfections", "ideal,real"], "unknown 'real'"),
 ])
 def test_refused_in_one_line(tmp_path, capsys, argv, needle):
     good = tmp_path / "r.toml"
@@ -71,3 +78,49 @@ def test_bench_env_times_each_imperfections_preset():
     swerve = argparse.Namespace(robot="swerve", robot_file=None, imperfections=None)
     assert _robot_kwargs(swerve) == {"robot": "swerve"}  # no preset given: the envs' rule
     assert _robot_kwargs(swerve, "paper") == {"robot": "swerve", "imperfections": "paper"}
+
+
+def test_imperfections_flag_reaches_the_episodes_and_the_report(tmp_path):
+    """``azimut eval --imperfections ideal``: in every task's key (so --resume does not reuse an
+    episode of the paper robot), in the env of every episode, and named by metrics.json; without
+    the flag the keys are those of before and the default robot is the paper one."""
+    import argparse
+
+    from jobs.eval.campaign import _episode_setup, episode_tasks
+    from jobs.training.command import _robot_kwargs
+
+    ideal = episode_tasks(["twist"], ["circle", "hold"], [0, 1], imperfections="ideal")
+    plain = episode_tasks(["twist"], ["circle", "hold"], [0, 1])
+    assert all(t.key["imperfections"] == "ideal" for t in ideal) and all("imperfections" not in t.key for t in plain)
+    assert not {t.id for t in ideal} & {t.id for t in plain}
+    assert _episode_setup("hold", 0, 1.0, 0.0, False, None, "tri", None, "paper")[1] == {"robot": "tri",
+                                                                                         "imperfections": "paper"}
+    assert _episode_setup("hold", 0, 1.0, 0.0, False, None, None, None)[1] is None
+    out = tmp_path / "eval"
+    assert main(["eval", "--imperfections", "ideal", "--tracks", "hold", "--controllers", "twist", "--max-time", "1",
+                 "--no-plots", "--out", str(out)]) in (0, 1)
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["campaign"]["imperfections"] == "ideal" and "(imperfections: ideal)" in (out / "report.md").read_text()
+    ns = argparse.Namespace(robot="hex", robot_file=None, imperfections="paper")
+    assert _robot_kwargs(ns) == {"robot": "hex", "imperfections": "paper"}  # azimut train's env kwargs
+
+
+def test_sim_paper_robot_follows_the_file_and_the_flag(tmp_path):
+    """sim-paper's robot: the file's preset, --imperfections on top (one definition of the flag)."""
+    import argparse
+
+    from azimut_env.imperfections import with_imperfections
+    from azimut_env.params import RobotParams
+    from azimut_env.robot_file import preset_source
+    from jobs.sim_paper import _robot, add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    path = tmp_path / "a3.toml"
+    path.write_text(preset_source("azimut3"))
+    paper = RobotParams.preset("azimut3")
+    assert paper == with_imperfections(RobotParams(), "paper")
+    for argv, expected in (([], paper), (["--robot", "azimut3"], paper), (["--robot-file", str(path)], paper),
+                           (["--robot-file", str(path), "--imperfections", "ideal"], RobotParams()),
+                           (["--robot", "swerve"], RobotParams.preset("swerve"))):
+        assert _robot(parser.parse_args(argv)) == expected, argv
