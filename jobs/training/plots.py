@@ -1,5 +1,7 @@
 """Learning curves of several ``azimut train`` runs in one figure:
-``python -m jobs.training.plots OUT.png RUN_DIR [RUN_DIR ...]`` (needs matplotlib)."""
+``python -m jobs.training.plots OUT.png RUN_DIR [RUN_DIR ...]``; of several ``azimut train --seeds``
+campaigns over their seeds: ``python -m jobs.training.plots --seeds OUT.png [--drift] NAME=DIR ...``
+(:func:`plot_seed_groups`; ``--drift``: the :data:`DRIFT_PANELS` of residual agents; needs matplotlib)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,22 @@ import sys
 from pathlib import Path
 
 __all__ = ["plot_runs", "training_returns", "evaluation_history", "training_label", "evaluation_label",
-           "write_learning_curve", "learning_curve_figure"]
+           "write_learning_curve", "learning_curve_figure", "seed_curve", "plot_seed_groups", "SEED_CURVE_PANELS",
+           "DRIFT_PANELS"]
+
+#: the panels of :func:`plot_seed_groups`: (title, track or None for the mean over the evaluation
+#: tracks, the evaluation row's key, scale, y label)
+SEED_CURVE_PANELS = [("evaluation return (mean over the run's evaluation tracks)", None, "return", 1.0, "return"),
+                     ("circle: mean null-space force", "circle", "mean_nullspace_force_N", 1.0, "N"),
+                     ("circle: mean antagonism", "circle", "mean_antagonism_N", 1.0, "N"),
+                     ("circle: RMS lateral error", "circle", "rms_lateral_m", 100.0, "cm")]
+#: the panels of ``--drift``: how far residual agents move from their reference controller
+DRIFT_PANELS = [("circle: mean squared correction (clipped action)", "circle", "mean_sq_action", 1.0, "mean a²"),
+                ("figure8: mean squared correction (clipped action)", "figure8", "mean_sq_action", 1.0, "mean a²"),
+                ("circle: RMS lateral error", "circle", "rms_lateral_m", 100.0, "cm"),
+                ("figure8: RMS lateral error", "figure8", "rms_lateral_m", 100.0, "cm"),
+                ("circle: mean antagonism", "circle", "mean_antagonism_N", 1.0, "N"),
+                ("figure8: mean antagonism", "figure8", "mean_antagonism_N", 1.0, "N")]
 
 
 def training_label(track: str) -> str:
@@ -122,8 +139,110 @@ def learning_curve_figure(out: Path, record: dict, plt):
     return fig
 
 
+def _complete_seed_runs(folder: Path) -> list[Path]:
+    """The seed runs of an ``azimut train --seeds`` folder that reached their step budget."""
+    runs = []
+    for p in sorted(Path(folder).glob("seed_*"), key=lambda q: int(q.name.split("_", 1)[1])
+                    if q.name.split("_", 1)[1].isdigit() else -1):
+        rec = p / "run.json"
+        if rec.is_file() and json.loads(rec.read_text()).get("complete", True) is not False:
+            runs.append(p)
+    return runs
+
+
+def seed_curve(folder: Path, track: str | None, key: str, n_resamples: int = 2_000) -> list[dict]:
+    """Per evaluation step held by every complete seed of an ``azimut train --seeds`` folder: the
+    IQM of the seeds' values of ``key`` (on ``track``'s evaluation row; None: the entry's
+    ``mean_return`` when ``key`` is ``return``, else the mean over its rows) and its 95%
+    bootstrap interval (:func:`jobs.campaign.statistics.stratified_bootstrap_iqm`, one stratum),
+    with every seed's value (``"scores"``). The final evaluation stands at its step."""
+    from jobs.campaign.statistics import stratified_bootstrap_iqm
+
+    per_seed = []
+    for run in _complete_seed_runs(folder):
+        values = {}
+        for e in evaluation_history(run):
+            if track is None:
+                v = e["mean_return"] if key == "return" else sum(float(r[key]) for r in e["rows"]) / len(e["rows"])
+            else:
+                rows = [r for r in e["rows"] if r["track"] == track]
+                if not rows:
+                    continue
+                v = float(rows[0][key])
+            values[int(e["timesteps"])] = float(v)
+        per_seed.append(values)
+    if not per_seed:
+        return []
+    common = sorted(set.intersection(*(set(d) for d in per_seed)))
+    return [{"timesteps": t, "scores": [d[t] for d in per_seed],
+             **stratified_bootstrap_iqm([[d[t] for d in per_seed]], n_resamples=n_resamples, seed=t)}
+            for t in common]
+
+
+def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> None:
+    """One figure: per panel of ``panels`` (default :data:`SEED_CURVE_PANELS`), per group (name ->
+    ``azimut train --seeds`` folder), the IQM over the seeds against environment steps with its
+    95% bootstrap interval (shaded) and each seed (thin lines)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = panels or SEED_CURVE_PANELS
+    cols = 2
+    rows = (len(panels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(12, 3.6 * rows), squeeze=False)
+    for ax, (title, track, key, scale, unit) in zip(axes.flat, panels):
+        for i, (name, folder) in enumerate(groups.items()):
+            curve = seed_curve(Path(folder), track, key)
+            if not curve:
+                continue
+            t = [c["timesteps"] for c in curve]
+            n = len(curve[0]["scores"])
+            for j in range(n):
+                ax.plot(t, [scale * c["scores"][j] for c in curve], color=f"C{i}", lw=0.6, alpha=0.35)
+            ax.plot(t, [scale * c["iqm"] for c in curve], "o-", ms=3, color=f"C{i}", label=f"{name} ({n} seeds)")
+            ax.fill_between(t, [scale * c["lo"] for c in curve], [scale * c["hi"] for c in curve], color=f"C{i}",
+                            alpha=0.2)
+        ax.set_title(title, fontsize=9)
+        ax.set_xscale("log")
+        ax.set_xlabel("environment steps (all robots)")
+        ax.set_ylabel(unit)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "no evaluation on this track", ha="center", va="center", transform=ax.transAxes)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle("IQM over training seeds (thick), 95% bootstrap interval (shaded), each seed (thin)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+
+
+def _main(argv: list[str]) -> int:
+    if len(argv) >= 3 and argv[0] == "--seeds":
+        drift = argv[2] == "--drift"
+        groups = {}
+        for item in argv[3 if drift else 2:]:
+            name, sep, folder = item.partition("=")
+            if not sep or not Path(folder).is_dir():
+                print(f"plots: error: {item!r} is not NAME=DIR with DIR an azimut train --seeds folder",
+                      file=sys.stderr)
+                return 2
+            groups[name] = Path(folder)
+        if not groups:
+            print("plots: error: no NAME=DIR given", file=sys.stderr)
+            return 2
+        plot_seed_groups(groups, Path(argv[1]), DRIFT_PANELS if drift else None)
+        return 0
+    if len(argv) < 2:
+        print("usage: python -m jobs.training.plots OUT.png RUN_DIR [RUN_DIR ...]\n"
+              "       python -m jobs.training.plots --seeds OUT.png [--drift] NAME=DIR [NAME=DIR ...]", file=sys.stderr)
+        return 2
+    plot_runs([Path(p) for p in argv[1:]], Path(argv[0]))
+    return 0
+
+
 if __name__ == "__main__":
-    if len(sys.argv) < 3:
-        print("usage: python -m jobs.training.plots OUT.png RUN_DIR [RUN_DIR ...]", file=sys.stderr)
-        raise SystemExit(2)
-    plot_runs([Path(p) for p in sys.argv[2:]], Path(sys.argv[1]))
+    raise SystemExit(_main(sys.argv[1:]))
