@@ -130,6 +130,16 @@ def test_bad_engine_cost_and_storage_refused_with_one_line(tmp_path, argv, capsy
     assert rc == 2 and len(err) == 1 and err[0].startswith(f"azimut {argv[0]}: error:"), err
 
 
+def test_a_storage_file_that_is_not_a_database_is_refused_with_one_line(tmp_path, capsys):
+    pytest.importorskip("optuna")
+    db = tmp_path / "study.db"
+    db.write_text("not an SQLite database\n")
+    rc = main(["tune", "--storage", f"sqlite:///{db}", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "cannot open the Optuna storage" in err[0], err
+    assert not (tmp_path / "o").exists() and db.read_text() == "not an SQLite database\n"
+
+
 def _rllib_importable() -> bool:
     try:
         import ray.rllib  # noqa: F401
