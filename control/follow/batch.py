@@ -8,7 +8,8 @@ every robot's :class:`~control.follow.path_follower.FollowerOutput` fields as ar
 (:class:`FollowerBatchOutput`).
 
 The kernel is ``PathFollower.step`` written row by row with the same operations in the same
-order, one compiled function per stage of the step: projection (``Track.project``), holds,
+order, one compiled function per stage of the step: projection (``Track.project``, and at a cusp
+the same compiled :func:`~control.follow.cusps.cusp_progress` as the follower's), holds,
 feed-forward (preview point, curvature and stop speed caps, ``Track.reference_twist``), feedback
 (anti-windup integral, capped corrections), rotation into the chassis frame and
 ``estimation.hrep.eta_from_twist``. Track lookups use :func:`~azimut_env.tracks.np_interp1`
@@ -33,6 +34,7 @@ from numba import njit
 
 from azimut_env.tracks import Track, np_interp1, project_window_kernel, wrap_pi
 from azimut_env.typed_lists import array_list, set_item
+from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
 from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress
 
 __all__ = ["BatchFollower", "FollowerBatchOutput", "FC", "FS", "FT", "FO"]
@@ -176,7 +178,7 @@ def _distance_to_stop(stops, closed, length, s, window):
 
 
 @njit(cache=True)
-def _feed_forward(P, stops, closed, length, c, s, finished, ref):
+def _feed_forward(P, stops, cusps, closed, length, rho, c, s, reached, finished, ref):
     """The preview point s_ff, its capped speed v_ff and the reference world twist there into
     ``ref`` (3,) (zero once finished); also the reference pose and ψ at s into ``ref[3:7]``
     (x_r, y_r, θ_r, ψ)."""
@@ -210,6 +212,8 @@ def _feed_forward(P, stops, closed, length, c, s, finished, ref):
         ref[0] = np_interp1(S, P[_DX], sffw) * v_ff
         ref[1] = np_interp1(S, P[_DY], sffw) * v_ff
         ref[2] = np_interp1(S, P[_DTH], sffw) * v_ff
+        if cusps.shape[0]:
+            cusp_feed_forward(S, cusps, rho, closed, length, s_ff, max(reached, s), v_ff, ref)
     ref[3], ref[4], ref[5], ref[6] = x_r, y_r, th_r, psi
 
 
@@ -265,9 +269,10 @@ def _eta(out):
 
 
 @njit(cache=True)
-def follow_kernel(packs, stops, holds, tracks, cfg, state, poses, rows, dt, out):
+def follow_kernel(packs, stops, holds, cusps, tracks, cfg, state, poses, rows, dt, out):
     """``PathFollower.step`` of the robots ``rows`` (M,) at ``poses`` (N, 3): robot i's packed
-    track ``packs[i]`` (10, m), stop points ``stops[i]``, holds ``holds[i]`` (2, h), track scalars
+    track ``packs[i]`` (10, m), stop points ``stops[i]``, holds ``holds[i]`` (2, h), cusps ``cusps[i]``
+    (:func:`~control.follow.cusps.cusp_table`), track scalars
     ``tracks[i]`` (columns :class:`FT`), gains ``cfg[i]`` (:class:`FC`) and state ``state[i]``
     (:class:`FS`, updated in place); one output row per robot of ``rows`` into ``out`` (M, len(FO))."""
     ref = np.empty(7)
@@ -277,6 +282,8 @@ def follow_kernel(packs, stops, holds, tracks, cfg, state, poses, rows, dt, out)
         closed, length = tracks[i, FT.CLOSED] != 0, tracks[i, FT.LENGTH]
         px, py, pth = poses[i, 0], poses[i, 1], poses[i, 2]
         s = _project(P, closed, length, tracks[i, FT.RHO], px, py, pth, st[FS.PROGRESS], st[FS.HAS_PROGRESS] != 0)
+        if cusps[i].shape[0]:
+            s = cusp_progress(P[_S], P[_X], P[_Y], P[_TH], tracks[i, FT.RHO], closed, length, cusps[i], px, py, pth, s)
         st[FS.PROGRESS] = s
         st[FS.HAS_PROGRESS] = 1.0
         finished = s >= length - 1e-6  # Track.finished
@@ -286,7 +293,8 @@ def follow_kernel(packs, stops, holds, tracks, cfg, state, poses, rows, dt, out)
             o[FO.TWIST_X], o[FO.TWIST_Y], o[FO.TWIST_W] = 0.0, 0.0, 0.0
             o[FO.HOLDING] = 1.0
         else:
-            _feed_forward(P, stops[i], closed, length, c, s, finished, ref)
+            reached = st[FS.MAX_PROGRESS] if st[FS.HAS_MAX] != 0 else s
+            _feed_forward(P, stops[i], cusps[i], closed, length, tracks[i, FT.RHO], c, s, reached, finished, ref)
             _feedback(c, st, s, finished, px, py, pth, ref, dt, o)
             o[FO.HOLDING] = 0.0
         _eta(o)
@@ -342,6 +350,7 @@ class BatchFollower:
         self._packs = array_list([dummy] * num)
         self._stops = array_list([np.zeros(0)] * num)
         self._holds = array_list([np.zeros((2, 0))] * num)
+        self._cusps = array_list([np.zeros((0, 9))] * num)
         self._track_of: list[Track | None] = [None] * num
         self._cache: dict[tuple[int, PathFollowerConfig], tuple] = {}
 
@@ -373,7 +382,8 @@ class BatchFollower:
         if progress is not None:
             progress = check_start_progress(track, progress)
         _, pack, stops, holds = self._track_arrays(track, config)
-        for lst, value in ((self._packs, pack), (self._stops, stops), (self._holds, holds)):
+        for lst, value in ((self._packs, pack), (self._stops, stops), (self._holds, holds),
+                           (self._cusps, cusp_table(track))):
             set_item(lst, i, value)
         self._track_of[i] = track
         self.tracks[i] = (1.0 if track.closed else 0.0, track.length, track.progress_radius)
@@ -388,7 +398,7 @@ class BatchFollower:
         """Every output of the robots ``rows`` (default all) at ``poses`` (N, 3) [m, m, rad]."""
         rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.int64)
         out = np.empty((rows.size, len(FO)))
-        follow_kernel(self._packs, self._stops, self._holds, self.tracks, self.cfg, self.state,
+        follow_kernel(self._packs, self._stops, self._holds, self._cusps, self.tracks, self.cfg, self.state,
                       np.ascontiguousarray(poses, dtype=np.float64), rows, self.dt, out)
         return FollowerBatchOutput(out[:, FO.TWIST_X:FO.TWIST_W + 1].copy(), out[:, FO.LAM_U:FO.LAM_W + 1].copy(),
                                    out[:, FO.MU].copy(), out[:, FO.PROGRESS].copy(), out[:, FO.FINISHED] != 0,

@@ -6,7 +6,9 @@ baseline through ξ̇_d), so a comparison isolates how the wheels are coordinate
 Per step, with the pose (x, y, θ) in the world:
 
 1. progress s = the nearest reference pose (``Track.project``, windowed around the last s, so it
-   is continuous and waits for the robot when it stops);
+   is continuous and waits for the robot when it stops); within one segment of a cusp (the path
+   turning back on itself), the projection onto the nearer of the cusp's two legs
+   (:mod:`control.follow.cusps`);
 2. feed-forward: the reference world twist at s + max(v_ref·τ, d_min), the preview shrinking
    to d_min before a sharp corner, and the speed capped so the robot can slow down for it
    (``Track.reference_twist``; τ is a short preview that compensates the controllers' lag);
@@ -34,6 +36,7 @@ import numpy as np
 
 from azimut_env.tracks import Track, wrap_angle
 from azimut_env.validation import check_fields, check_finite
+from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
 from estimation.hrep import eta_from_twist
 
 __all__ = ["PathFollowerConfig", "PathFollower", "FollowerOutput", "check_start_progress"]
@@ -187,6 +190,7 @@ class PathFollower:
         self._hold_next = 0  # index of the next hold of the track
         self._hold_left = 0  # control periods left in the current hold (0: not holding)
         self.stops = self._find_stops(stop_mask)
+        self._cusps = cusp_table(track)
 
     def reset(self, progress: float | None = None) -> None:
         """Forget the progress (the next step searches the whole track unless given) and the
@@ -257,6 +261,9 @@ class PathFollower:
             raise ValueError(f"pose must be a finite (3,) array, got {pose!r}")
         cfg, tr = self.config, self.track
         s = tr.project(pose, s_hint=self.progress)
+        if self._cusps.shape[0]:  # a cusp: the nearer of its two legs (control.follow.cusps)
+            s = float(cusp_progress(tr.s, tr.xy[:, 0], tr.xy[:, 1], tr.heading, tr.progress_radius, tr.closed,
+                                    tr.length, self._cusps, pose[0], pose[1], pose[2], s))
         self.progress = s
         finished = tr.finished(s)
         if self._holding(s):
@@ -284,6 +291,11 @@ class PathFollower:
         tw_ref = tr.reference_twist(s_ff, speed=v_ff)
         if finished:
             tw_ref = np.zeros(3)
+        elif self._cusps.shape[0]:  # at a cusp, along its legs (control.follow.cusps)
+            tw_ref = np.array(tw_ref, dtype=np.float64)
+            reached = s if self._max_progress is None else max(self._max_progress, s)
+            cusp_feed_forward(tr.s, self._cusps, tr.progress_radius, tr.closed, tr.length, s_ff, reached, v_ff,
+                              tw_ref)
         err = np.array([x_r - pose[0], y_r - pose[1]])
         psi = float(tr.tangent_at(s))
         normal = np.array([-math.sin(psi), math.cos(psi)])

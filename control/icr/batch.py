@@ -36,7 +36,7 @@ def _blank_state(num: int, n: int) -> ICRBatchState:
         mu=np.zeros(num), lam_rate=np.zeros((num, 3)), beta=np.zeros((num, n)), beta_rate=np.zeros((num, n)),
         phidot=np.zeros((num, n)), mode_time=np.zeros(num), reconfig_lam=np.zeros((num, 3)),
         has_reconfig_lam=np.zeros(num, dtype=np.bool_), events=np.zeros(num, dtype=np.int64),
-        beta_meas=np.zeros((num, n)), has_beta_meas=np.zeros(num, dtype=np.bool_), held_time=np.zeros(num))
+        beta_meas=np.zeros((num, n)), has_beta_meas=np.zeros(num, dtype=np.bool_), held_miss=np.zeros(num))
 
 
 class BatchICRController:

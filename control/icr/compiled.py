@@ -32,7 +32,9 @@ from control.icr.kernels import (
     C_AXIS_MARGIN,
     C_COUPLING_MEAS,
     C_FREEZE,
-    C_HOLD_LIMIT,
+    C_HOLD_ANGLE,
+    C_HOLD_DIST,
+    C_HOLD_SPEED,
     C_HOLD_TOL,
     C_KICK,
     C_RECONFIG_TIMEOUT,
@@ -74,6 +76,8 @@ from control.icr.kernels import (
     speed_coefs_row,
     steering_difference1,
     steering_row,
+    stop_hold_row,
+    stop_normals,
     unit3,
     wrap_half1,
 )
@@ -94,7 +98,7 @@ _ERRORS = ("lam_hat contains NaN or inf", "lam_hat is the zero vector, not a poi
 
 def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(limit constants (N_LIM,), tuning (17,), κ grid) of the kernel: every constant the NumPy
+    """(limit constants (N_LIM,), tuning (19,), κ grid) of the kernel: every constant the NumPy
     version computes in Python floats, by the same expressions (so with the same bits)."""
     sam, srm, wsm, wam = (float(limits.steer_accel_max), float(limits.steer_rate_max), float(limits.wheel_speed_max),
                           float(limits.wheel_accel_max))
@@ -119,10 +123,11 @@ def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRC
     lim[L_BRAKE_DT] = sam * dt
     lim[L_UNLIMITED] = 1.0 if geom.unlimited_steering else 0.0
     tune = np.array([config.zero_mu_tol, config.axis_margin, config.arc_step, np.sin(0.5 * config.axis_margin),
-                     config.stop_hysteresis, config.stop_hold_time + 1e-9, config.kick_tol, config.stop_mu_tol,
+                     config.stop_hysteresis, config.stop_hold_distance, config.kick_tol, config.stop_mu_tol,
                      config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
                      config.reconfig_still_tol, config.reconfig_timeout, config.k_lambda,
-                     float(config.coupling_from_measurement), float(config.mu_own_scale)], dtype=np.float64)
+                     float(config.coupling_from_measurement), float(config.mu_own_scale), config.stop_hold_speed,
+                     config.stop_hold_angle], dtype=np.float64)
     return lim, tune, np.linspace(0.0, 1.0, config.n_kappa)
 
 
@@ -166,6 +171,17 @@ def _must_stop(lam, lam_d, E, P, steer_max, s_unit, tune, unlimited) -> bool:
 
 
 @njit(cache=True)
+def _differs(rlam, ld, md, speed) -> bool:
+    """Whether the motion (λ_d, μ_d) differs from one at ``rlam`` by ``speed`` or more: |μ_d| times
+    the chord between ``rlam`` and the nearer of ±λ_d (the retargeting test of
+    :func:`control.icr.modes.mode_transitions`)."""
+    a0, a1, a2 = rlam[0] - ld[0], rlam[1] - ld[1], rlam[2] - ld[2]
+    b0, b1, b2 = rlam[0] + ld[0], rlam[1] + ld[1], rlam[2] + ld[2]
+    chord = min(math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), math.sqrt(b0 * b0 + b1 * b1 + b2 * b2))
+    return abs(md) * chord >= speed
+
+
+@njit(cache=True)
 def _clamp_mu(lam_d, mu_d, E, P, b, r, steer_max, lim) -> float:
     """:func:`control.icr.feasibility.clamp_mu` of one target (with ``mu_headroom``)."""
     n = E.shape[0]
@@ -180,10 +196,10 @@ def _clamp_mu(lam_d, mu_d, E, P, b, r, steer_max, lim) -> float:
 
 @njit(cache=True)
 def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0,
-                 bmeas0, has_bmeas0, held_time0, mu_hat, beta_meas, lam_d_in, mu_d_in, E, P, b, r, steer_min,
+                 bmeas0, has_bmeas0, held_miss0, mu_hat, beta_meas, lam_d_in, mu_d_in, E, P, b, r, steer_min,
                  steer_max, s_unit, lim, tune, kappa, dt,
                  mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1,
-                 has_bmeas1, held_time1, beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap,
+                 has_bmeas1, held_miss1, beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap,
                  event_out, kappa_out, saturated, held_out) -> None:
     """The step of the robots ``rows`` (state arrays ``*0`` (N, …) in, ``*1`` out, already copies of
     ``*0``; the inputs and the per-step outputs are (M, …), row m of them is robot rows[m])."""
@@ -191,6 +207,10 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
     unlimited = lim[L_UNLIMITED] != 0.0
     ld = np.empty(3)
     scratch = np.empty(3)
+    hp = np.empty(3)
+    cell = np.empty(3)
+    normals = np.empty((n, 3))
+    stop_normals(E, P, steer_max, normals)
     bt = np.empty(n)
     measured_rate = np.zeros(n)
     for m in range(rows.shape[0]):
@@ -226,7 +246,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         s_mu = mu0[i]
         s_lam_rate = lam_rate0[i].copy()
         held = False
-        held_time = 0.0
+        held_miss = 0.0
         kicked = False
         for k in range(n):
             kicked = kicked or abs(wrap_half1(beta_meas[m, k] - beta0[i, k])) > tune[C_KICK]
@@ -235,15 +255,29 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         if running and not zero:
             reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
                                                 tune[C_ARC_STEP], unlimited)
-            near_stop = reason == ARC_STOP and theta - free < tune[C_STOP_HYST]
-            ht = held_time0[i] + dt
-            hold = near_stop and ht <= tune[C_HOLD_LIMIT]
-            if hold:
-                slerp3(lam, ld, free, ld)
-                reason = ARC_NONE
+            hold = False
+            if reason == ARC_STOP:
+                # the hold point: the nearest point of λ's cell, else the arc's last sample
+                slerp3(lam, ld, free, hp)
+                beyond = theta - free
+                angle = stop_hold_row(lam, ld, normals, cell)
+                if angle >= 0.0:
+                    ok, _, _ = arc_check_row(lam, cell, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
+                                             tune[C_ARC_STEP], unlimited)
+                    if ok == ARC_NONE:
+                        hp[0], hp[1], hp[2] = cell[0], cell[1], cell[2]
+                        beyond = angle
+                d0, d1, d2 = hp[0] - ld[0], hp[1] - ld[1], hp[2] - ld[2]
+                miss = max(abs(md), abs(mu0[i])) * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                grazing = beyond < tune[C_STOP_HYST] and miss < tune[C_HOLD_SPEED]
+                missed = held_miss0[i] + (0.0 if grazing else miss * dt)
+                hold = beyond < tune[C_HOLD_ANGLE] and missed <= tune[C_HOLD_DIST]
+                if hold:
+                    ld[0], ld[1], ld[2] = hp[0], hp[1], hp[2]
+                    reason = ARC_NONE
+                    held_miss = missed
             blocked = reason
             held = hold
-            held_time = ht if hold else 0.0
         trig = running and (kicked or blocked != ARC_NONE)
         event = (_EV_KICK if kicked else blocked + 1) if trig else _EV_NONE
         if trig:
@@ -266,7 +300,8 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
                 far = 0.0
                 for k in range(n):
                     far = max(far, abs(steering_difference1(beta0[i, k], bt[k], unlimited)))
-                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune, unlimited):
+                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune, unlimited) and \
+                        _differs(rlam, ld, md, tune[C_HOLD_SPEED]):
                     rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
             steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
             for k in range(n):  # unlimited steering: the nearer angle of each axis
@@ -335,7 +370,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         if not has_rl:
             rlam[:] = 0.0
         has_bmeas1[i] = True
-        held_time1[i] = held_time
+        held_miss1[i] = held_miss
         event_out[m] = event
         kappa_out[m] = kap
         saturated[m] = sat
@@ -399,17 +434,17 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
                         mode_time=s.mode_time.copy(), reconfig_lam=s.reconfig_lam.copy(),
                         has_reconfig_lam=s.has_reconfig_lam.copy(), events=s.events.copy(),
                         beta_meas=s.beta_meas.copy(), has_beta_meas=s.has_beta_meas.copy(),
-                        held_time=s.held_time.copy())
+                        held_miss=s.held_miss.copy())
     out = [np.empty((M, n)) for _ in range(5)]
     lam_target, mu_target = np.empty((M, 3)), np.empty(M)
     axis_cap, event = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)
     kap, saturated, held = np.empty(M), np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_)
     _step_kernel(idx, s.mode, s.lam, s.mu, s.lam_rate, s.beta, s.beta_rate, s.phidot, s.mode_time, s.reconfig_lam,
-                 s.has_reconfig_lam, s.events, s.beta_meas, s.has_beta_meas, s.held_time, mu_hat, beta_meas, lam_d,
+                 s.has_reconfig_lam, s.events, s.beta_meas, s.has_beta_meas, s.held_miss, mu_hat, beta_meas, lam_d,
                  mu_d, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_min), float(geom.steer_max),
                  geom.s_unit, lim, tune, kappa, float(dt),
                  new.mode, new.lam, new.mu, new.lam_rate, new.beta, new.beta_rate, new.phidot, new.mode_time,
-                 new.reconfig_lam, new.has_reconfig_lam, new.events, new.beta_meas, new.has_beta_meas, new.held_time,
+                 new.reconfig_lam, new.has_reconfig_lam, new.events, new.beta_meas, new.has_beta_meas, new.held_miss,
                  *out, lam_target, mu_target, axis_cap, event, kap, saturated, held)
     info = {"lam_target": lam_target, "mu_target": mu_target, "axis_cap": axis_cap, "mode": new.mode[idx],
             "events": new.events[idx], "kappa": kap, "saturated": saturated, "event": event, "held_at_stop": held}

@@ -56,9 +56,11 @@ class ICRControllerConfig:
             wheel knocked out of place; it triggers stop-and-reconfigure.
         reconfig_tol: steering error [rad] below which a reconfiguration is complete.
         reconfig_freeze: while RECONFIGURING, the configuration being reached follows a new target
-            only if that target is not reachable from it without another stop, and only while
-            some steering command is farther than this [rad] from it (so it converges exactly;
-            the RUNNING mode then takes the remaining motion).
+            only if that target is not reachable from it without another stop, differs from it by
+            a motion of at least ``stop_hold_speed`` (|μ_d| times the chord between the two λ, the
+            nearer representative), and only while some steering command is farther than this
+            [rad] from it (so it converges exactly; the RUNNING mode then takes the remaining
+            motion).
         reconfig_timeout: time [s] after which RECONFIGURING resumes even if a measured wheel
             angle has not settled within ``reconfig_tol`` (commands have).
         reconfig_hold_tol, reconfig_still_tol: a wheel also counts as settled (once the commands
@@ -80,13 +82,24 @@ class ICRControllerConfig:
             acceleration limits, which bind while λ turns quickly, do not involve μ). μ then
             follows μ_d at its ramp while λ is being turned instead of waiting for λ: for targets
             that change often (an exploring RL policy, :mod:`control.action_spaces.shaping`).
-        stop_hysteresis: a target less than this arc [rad] past a steering stop is held at the
-            stop (the robot goes on with λ at the stop) instead of triggering a reconfiguration.
-        stop_hold_time: longest time [s] a target may stay held at a steering stop: one that stays
-            past the stop longer is not jitter but a motion the wheels cannot make from this side
-            (the held λ then misses it, the path follower's feedback pushes it farther past, and
-            the tracking error grows until the hysteresis is exceeded, at speed), so the robot
-            stops and reconfigures at once.
+        stop_hysteresis: a target beyond a steering stop by less than this angle [rad] (from the
+            hold point, below) whose missed speed is below ``stop_hold_speed`` is held at the stop
+            for as long as it stays so: it does not draw on ``stop_hold_distance``.
+        stop_hold_speed: [m/s] the missed speed below which a hold at a steering stop is free
+            (with ``stop_hysteresis``), and the speed difference below which a reconfiguration
+            does not follow a new target (see ``reconfig_freeze``).
+        stop_hold_angle: a target beyond a steering stop by less than this angle [rad] is held at
+            the stop, within ``stop_hold_distance``; one farther beyond stops the robot at once.
+        stop_hold_distance: [m] how much motion a hold at a steering stop may miss before the robot
+            stops and reconfigures. A target beyond a stop is held at the point of the current
+            configuration's cell nearest to it (:func:`control.icr.feasibility.stop_hold_point_batch`);
+            each period the hold misses ``max(|μ_d|, |μ|)·‖λ_hold − λ_d‖·dt`` of motion (the speed
+            of the twist difference, the robot's own μ counted while it is still faster than the
+            target), summed while the target stays beyond the stop. A target that keeps asking for
+            the other side (a corner, a motion the wheels cannot make from here) is reconfigured for
+            within that much missed motion, at any speed; one that only grazes the stop (jitter, a
+            path running along a wheel's stop, a slow target pointing anywhere) is held: the wheels
+            are not turned by π for motion the robot hardly needs.
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -107,7 +120,9 @@ class ICRControllerConfig:
     reconfig_still_tol: float = np.deg2rad(0.5)
     stop_timeout: float = 0.5
     stop_hysteresis: float = np.deg2rad(6.0)
-    stop_hold_time: float = 0.1
+    stop_hold_speed: float = 0.04
+    stop_hold_angle: float = np.deg2rad(30.0)
+    stop_hold_distance: float = 0.01
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
@@ -118,7 +133,8 @@ class ICRControllerConfig:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
         for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
-                     "stop_hysteresis", "stop_hold_time", "reconfig_hold_tol", "reconfig_still_tol"):
+                     "stop_hysteresis", "stop_hold_speed", "stop_hold_angle", "stop_hold_distance", "reconfig_hold_tol",
+                     "reconfig_still_tol"):
             fix(name, check_positive(f"ICRControllerConfig.{name}", getattr(self, name)))
         for name in ("mu_headroom", "reconfig_rate_fraction", "reconfig_accel_fraction"):  # fractions of a limit
             fix(name, check_range(f"ICRControllerConfig.{name}", getattr(self, name), 0.0, 1.0, lo_open=True))

@@ -21,9 +21,11 @@ One control period (:func:`icr_control_step_batch`, N robots at once):
    (λ_d, μ_d) nearer to λ, moved out of the steering-axis caps, μ_d clamped to the wheel-speed
    limits at λ_d;
 2. the mode transitions (:func:`control.icr.modes.mode_transitions`): RUNNING -> STOPPING ->
-   RECONFIGURING -> RUNNING when the great-circle arc λ -> λ_d crosses a steering stop or axis
-   or a wheel is knocked out of place; a target only just past a stop is held at the stop for
-   at most ``stop_hold_time``;
+   RECONFIGURING -> RUNNING when the great-circle arc λ -> λ_d crosses a steering axis, or a
+   steering stop farther than a hold takes, or a wheel is knocked out of place; a target beyond a
+   stop is held at the nearest point of the current configuration's cell
+   (:func:`control.icr.feasibility.stop_hold_point_batch`) until the hold has missed
+   ``stop_hold_distance`` of motion;
 3. the commands of each mode (:func:`control.icr.modes.mode_commands`): a time-scaled step of
    (λ, μ) (:func:`control.icr.motion.coordinated_step`: the largest κ ∈ [0, 1] blending the previous
    motion with the desired one for which every wheel's β̇, β̈, φ̇, φ̈ stays within

@@ -5,6 +5,8 @@
   undefined (:func:`project_off_axes`);
 * great-circle arcs: whether λ can move to λ_d without a wheel crossing its steering stop or λ
   passing a steering axis (:func:`arc_check`, :func:`reference_stop_mask`);
+* holds at a steering stop: the point of λ's cell (the region bounded by the wheels' stop
+  circles) nearest to a target beyond it (:func:`stop_hold_point_batch`);
 * steering stops: the room each wheel has to brake before its stop (:func:`stop_room`,
   :func:`safe_stop_speed`) and the per-wheel saturation fallback (:func:`saturate`).
 
@@ -26,13 +28,15 @@ import numpy as np
 
 from control.checks import check_unit, check_unit_batch
 from control.icr.config import ICRControllerConfig
+from control.icr.kernels import stop_hold_row, stop_normals
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 from estimation.hrep import nearer_representative, slerp, sphere_angle
 from estimation.kinematics import steering_from_lambda, wheel_speed_coefficients
 
 __all__ = ["mu_bounds", "clamp_mu", "feasible_target", "project_off_axes_batch", "project_off_axes",
-           "arc_check_batch", "arc_check", "arc_blocked", "must_stop", "reference_stop_mask", "stop_room",
+           "arc_check_batch", "arc_check", "arc_blocked", "must_stop", "reference_stop_mask", "stop_hold_point_batch",
+           "stop_room",
            "safe_stop_speed", "saturate", "wrap_half", "ArcReason"]
 
 
@@ -188,6 +192,32 @@ def must_stop(lam: np.ndarray, lam_d: np.ndarray, geom: RobotGeometry, config: I
     passes a steering axis, or goes past a steering stop by more than ``stop_hysteresis``."""
     reason, free, theta = arc_check_batch(lam, lam_d, geom, config.axis_margin, config.arc_step)
     return (reason == ArcReason.AXIS) | ((reason == ArcReason.STOP) & (theta - free >= config.stop_hysteresis))
+
+
+def stop_hold_point_batch(lam, lam_d, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Where to hold a target λ_d that lies beyond a steering stop, row by row (λ, λ_d (N, 3)).
+
+    Wheel k's steering stop β_k = β_max (mod π) is a great circle through ŝ_k, its *stop circle*
+    n_k·λ = 0 with n_k = sin β_max (a_k − l_k) − cos β_max a⊥_k (eq. (15) at β_max; for AZIMUT's
+    ±π/2 stops n_k = a_k − l_k, the denominator of eq. (16)). The stop circles cut the sphere into
+    convex *cells* in which no β_k passes its stop. The hold point is the point of λ's cell nearest
+    to λ_d (on an edge or at a vertex, moved 1e-7 rad into the cell): the motion the wheels can
+    make without a reconfiguration that misses the target's least. A path that runs *along* a stop
+    circle (a wheel at ±π/2 for a while) is then followed exactly, sliding along the circle,
+    instead of being held at one point of it.
+
+    Returns (points (N, 3), angle from each point to λ_d [rad], −1 where λ_d is in λ's cell or no
+    point is found). One compiled function computes each row (:func:`control.icr.kernels.stop_hold_row`),
+    for this reference and for the compiled step alike."""
+    lam = np.ascontiguousarray(lam, dtype=np.float64)
+    lam_d = np.ascontiguousarray(lam_d, dtype=np.float64)
+    normals = np.empty((geom.n, 3))
+    stop_normals(geom.a_minus_l, geom.a_perp, float(geom.steer_max), normals)
+    points = np.zeros(lam.shape)
+    angle = np.empty(lam.shape[0])
+    for i in range(lam.shape[0]):
+        angle[i] = stop_hold_row(lam[i], lam_d[i], normals, points[i])
+    return points, angle
 
 
 def reference_stop_mask(lams, geom: RobotGeometry, axis_margin: float = np.deg2rad(3.0)) -> np.ndarray:

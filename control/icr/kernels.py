@@ -25,7 +25,7 @@ from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _grad_wheel, _speed
 
 __all__ = ["norm3", "unit3", "dot3", "nearest1", "steering_difference1", "sphere_angle3", "slerp3", "wrap_half1",
            "steering_row", "speed_coefs_row", "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1",
-           "saturate_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
+           "saturate_row", "stop_normals", "stop_hold_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS", "HOLD_NUDGE"]
 
 # indices into the limit constants ``lim`` (control.icr.compiled.compiled_constants)
 L_SAM, L_SRM, L_WSM, L_WAM, L_A_DT, L_WA_DT, L_STEER_LO = 0, 1, 2, 3, 4, 5, 6
@@ -41,12 +41,16 @@ L_UNLIMITED = 26  # 1.0: unlimited steering (RobotGeometry.unlimited_steering), 
 N_LIM = 27
 
 # the tuning as a float array (indices C_*)
-(C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_LIMIT, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
+(C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_DIST, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
  C_FREEZE, C_RECONFIG_TOL, C_HOLD_TOL, C_STILL_TOL, C_RECONFIG_TIMEOUT, C_K_LAMBDA, C_COUPLING_MEAS,
- C_MU_OWN) = range(17)
+ C_MU_OWN, C_HOLD_SPEED, C_HOLD_ANGLE) = range(19)
 
 #: :class:`control.icr.feasibility.ArcReason` codes
 ARC_NONE, ARC_STOP, ARC_AXIS = 0, 1, 2
+
+#: how far [rad] a hold point is moved into its cell, off the stop circle it lies on, so that F(λ)
+#: at the held λ is on the current side of every steering stop (rounding included)
+HOLD_NUDGE = 1e-7
 
 
 @njit(cache=True, inline="always")
@@ -304,3 +308,82 @@ def saturate_row(beta_prev, rate_prev, phidot_prev, beta_want, phidot_want, stee
         beta_out[k] = beta
         ph = min(max(phidot_want[k], phidot_prev[k] - wa_dt), phidot_prev[k] + wa_dt)
         phidot_out[k] = min(max(ph, -wsm), wsm)
+
+
+@njit(cache=True)
+def stop_normals(E, P, steer_max, out) -> None:
+    """Unit normals (n, 3) into ``out`` of the wheels' *stop circles*: β_k(λ) = β_max (mod π), the
+    steering stop, exactly where n_k·λ = 0 with n_k = sin β_max (a_k − l_k) − cos β_max a⊥_k
+    (eq. (15) at β = β_max: every great circle through ŝ_k has one β_k; this one is the stop)."""
+    sb, cb = math.sin(steer_max), math.cos(steer_max)
+    for k in range(E.shape[0]):
+        x0 = sb * E[k, 0] - cb * P[k, 0]
+        x1 = sb * E[k, 1] - cb * P[k, 1]
+        x2 = sb * E[k, 2] - cb * P[k, 2]
+        nrm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        out[k, 0], out[k, 1], out[k, 2] = x0 / nrm, x1 / nrm, x2 / nrm
+
+
+@njit(cache=True)
+def _inside(q, N, side) -> bool:
+    """Whether q is strictly on λ's side (``side``) of every stop circle."""
+    for j in range(N.shape[0]):
+        if side[j] * dot3(N[j], q) <= 0.0:
+            return False
+    return True
+
+
+@njit(cache=True)
+def stop_hold_row(lam_in, lam_d_in, N, out) -> float:
+    """The point of λ's *cell* nearest to λ_d, into ``out`` (3,); returns its angle to λ_d [rad],
+    or −1.0 (``out`` untouched) when λ_d is in the cell or no candidate is.
+
+    The stop circles (:func:`stop_normals`, ``N`` (n, 3)) cut the sphere into cells: inside one,
+    every β_k = F_k(λ) is continuous (no wheel passes its stop), and the cell is convex (an
+    intersection of hemispheres). Its point nearest to an outside λ_d lies on an edge (the
+    projection of λ_d onto one stop circle) or at a vertex (one of the two intersections of two
+    circles): every such candidate, moved ``HOLD_NUDGE`` into the cell off the circles it lies
+    on, is kept if it is strictly inside, and the one nearest to λ_d wins (the first on a tie)."""
+    n = N.shape[0]
+    lam = np.empty(3)
+    lam_d = np.empty(3)
+    unit3(lam_in, lam)
+    unit3(lam_d_in, lam_d)
+    side = np.empty(n)
+    outside = False
+    for k in range(n):
+        side[k] = 1.0 if dot3(N[k], lam) >= 0.0 else -1.0
+        outside = outside or side[k] * dot3(N[k], lam_d) < 0.0
+    if not outside:
+        return -1.0
+    q = np.empty(3)
+    best = np.empty(3)
+    best_dot = -2.0
+    for a in range(n):
+        for b in range(a, n):
+            for sign in (1.0, -1.0):
+                if a == b:  # the projection of λ_d onto circle a (one point)
+                    if sign < 0.0:
+                        continue
+                    d = dot3(N[a], lam_d)
+                    q[0], q[1], q[2] = lam_d[0] - d * N[a, 0], lam_d[1] - d * N[a, 1], lam_d[2] - d * N[a, 2]
+                else:  # the intersections ±(n_a × n_b) of circles a and b
+                    cross3(N[a], N[b], q)
+                    q[0], q[1], q[2] = sign * q[0], sign * q[1], sign * q[2]
+                if norm3(q) < 1e-12:
+                    continue
+                unit3(q, q)
+                for j in range(3):
+                    q[j] = q[j] + HOLD_NUDGE * side[a] * N[a, j]
+                    if a != b:
+                        q[j] = q[j] + HOLD_NUDGE * side[b] * N[b, j]
+                unit3(q, q)
+                if _inside(q, N, side):
+                    dq = dot3(q, lam_d)
+                    if dq > best_dot:
+                        best_dot = dq
+                        best[0], best[1], best[2] = q[0], q[1], q[2]
+    if best_dot == -2.0:
+        return -1.0
+    out[0], out[1], out[2] = best[0], best[1], best[2]
+    return sphere_angle3(best, lam_d)

@@ -1,9 +1,10 @@
 """The ICR controller's state machine, batched over robots: the mode transitions of one control
 period (:func:`mode_transitions`), then each mode's commands (:func:`mode_commands`).
 
-RUNNING -> STOPPING when a wheel is knocked out of place or the arc to the target crosses a
-steering stop (by more than the hysteresis, or for longer than ``stop_hold_time``) or a steering
-axis; STOPPING -> RECONFIGURING once the reference is at rest and μ̂ ≈ 0 (or after
+RUNNING -> STOPPING when a wheel is knocked out of place, the arc to the target crosses a
+steering axis, or the target lies beyond a steering stop farther than a hold takes (a target just
+beyond is held at the nearest point of the current cell, until the hold has missed
+``stop_hold_distance`` of motion); STOPPING -> RECONFIGURING once the reference is at rest and μ̂ ≈ 0 (or after
 ``stop_timeout``); RECONFIGURING -> RUNNING once the steering commands have reached the new
 configuration and the measured wheels are within ``reconfig_tol`` of it (or after
 ``reconfig_timeout``). The modes are per-row masks; see ``docs/icr-controller.md``, "Modes".
@@ -17,7 +18,7 @@ import numpy as np
 
 from control.commands import WheelCommand
 from control.icr.config import Event, ICRControllerConfig, Mode
-from control.icr.feasibility import ArcReason, arc_check_batch, must_stop, wrap_half
+from control.icr.feasibility import ArcReason, arc_check_batch, must_stop, stop_hold_point_batch, wrap_half
 from control.icr.motion import coordinated_step, reconfigure_step
 from control.icr.state import ICRBatchState
 from control.limits import ActuatorLimits
@@ -33,7 +34,7 @@ class ModeUpdate:
     """The outcome of :func:`mode_transitions` for N robots ((N, …) arrays).
 
     Attributes:
-        mode, mode_time, events, reconfig_lam, has_reconfig_lam, held_time: the new values of
+        mode, mode_time, events, reconfig_lam, has_reconfig_lam, held_miss: the new values of
             those :class:`~control.icr.state.ICRBatchState` fields.
         lam, mu, lam_rate: the reference H state the commands start from (the reconfigured λ at
             rest where RECONFIGURING has just ended, else the state's).
@@ -49,7 +50,7 @@ class ModeUpdate:
     events: np.ndarray
     reconfig_lam: np.ndarray
     has_reconfig_lam: np.ndarray
-    held_time: np.ndarray
+    held_miss: np.ndarray
     lam: np.ndarray
     mu: np.ndarray
     lam_rate: np.ndarray
@@ -76,10 +77,10 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
     reconfig_lam, has_rl = state.reconfig_lam.copy(), state.has_reconfig_lam.copy()
     s_lam, s_mu, s_lam_rate = state.lam.copy(), state.mu.copy(), state.lam_rate.copy()
     held = np.zeros(nrows, dtype=np.bool_)
-    held_time = np.zeros(nrows)
+    held_miss = np.zeros(nrows)
 
     # RUNNING -> STOPPING: a wheel knocked out of place (measured far from commanded), or an arc
-    # to the target that crosses a steering stop or axis
+    # to the target that crosses a steering axis, or a steering stop beyond what a hold takes
     kicked = np.max(np.abs(wrap_half(beta_meas - state.beta)), axis=-1) > config.kick_tol
     running = mode == Mode.RUNNING
     blocked = np.zeros(nrows, dtype=np.int64)
@@ -87,18 +88,33 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
     if np.any(check):
         r = np.flatnonzero(check)
         reason, free, theta = arc_check_batch(state.lam[r], lam_d[r], geom, config.axis_margin, config.arc_step)
-        near_stop = (reason == ArcReason.STOP) & (theta - free < config.stop_hysteresis)
-        ht = state.held_time[r] + dt
-        # only just past a steering stop: wait at the stop instead of turning wheels by π; a
-        # target that keeps going (or stays past) reconfigures once, a jittering one never does
-        hold = near_stop & (ht <= config.stop_hold_time + 1e-9)
+        stop = reason == ArcReason.STOP
+        # the hold point: the nearest point of λ's cell (sliding along a stop circle), else the
+        # last sample of the arc before the stop
+        point = slerp(state.lam[r], lam_d[r], free)
+        beyond = theta - free
+        if np.any(stop):
+            rs = np.flatnonzero(stop)
+            cell, angle = stop_hold_point_batch(state.lam[r[rs]], lam_d[r[rs]], geom)
+            found = angle >= 0.0
+            if np.any(found):
+                ok, _, _ = arc_check_batch(state.lam[r[rs[found]]], cell[found], geom, config.axis_margin,
+                                           config.arc_step)
+                found[found] = ok == ArcReason.NONE
+            point[rs[found]] = cell[found]
+            beyond[rs[found]] = angle[found]
+        # the motion the hold misses: the twist difference's speed, the robot's own μ counted
+        # while it is still faster than the target
+        miss = np.maximum(np.abs(mu_d[r]), np.abs(state.mu[r])) * np.linalg.norm(point - lam_d[r], axis=-1)
+        grazing = (beyond < config.stop_hysteresis) & (miss < config.stop_hold_speed)
+        missed = state.held_miss[r] + np.where(grazing, 0.0, miss * dt)
+        hold = stop & (beyond < config.stop_hold_angle) & (missed <= config.stop_hold_distance)
         if np.any(hold):
-            rh = r[hold]
-            lam_d[rh] = slerp(state.lam[rh], lam_d[rh], free[hold])
+            lam_d[r[hold]] = point[hold]
         reason = np.where(hold, ArcReason.NONE, reason)
         blocked[r] = reason
         held[r] = hold
-        held_time[r] = np.where(hold, ht, 0.0)
+        held_miss[r] = np.where(hold, missed, 0.0)
     trig = running & (kicked | (blocked != ArcReason.NONE))
     # an arc's reason code + 1 is its Event code (STOP 1 -> 2, AXIS 2 -> 3)
     event = np.where(trig, np.where(kicked, Event.KICK, blocked + 1), Event.NONE)
@@ -127,7 +143,13 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
             rc = r[cand]
             # retarget only if the latest target could not be reached continuously from the
             # configuration being reached (RUNNING does the rest); no chasing a jittery target
-            rt = rc[must_stop(reconfig_lam[rc], lam_d[rc], geom, config)]
+            # a target whose motion differs from the one being reached by less than
+            # stop_hold_speed is not worth another reconfiguration either (a slow target's λ_d
+            # points anywhere)
+            chord = np.minimum(np.linalg.norm(reconfig_lam[rc] - lam_d[rc], axis=-1),
+                               np.linalg.norm(reconfig_lam[rc] + lam_d[rc], axis=-1))
+            differs = np.abs(mu_d[rc]) * chord >= config.stop_hold_speed
+            rt = rc[must_stop(reconfig_lam[rc], lam_d[rc], geom, config) & differs]
             reconfig_lam[rt] = lam_d[rt]
         bt = steering_from_lambda(reconfig_lam[r], geom, singular_fill=state.beta[r])
         bt = geom.nearest_steering(bt, state.beta[r])  # unlimited steering: the nearer angle of each axis
@@ -147,7 +169,7 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
             mode[rr], mode_time[rr], has_rl[rr] = int(Mode.RUNNING), 0.0, False
             lam_d[rr], mu_d[rr] = nearer_representative(s_lam[rr], lam_d[rr], mu_d[rr])
     return ModeUpdate(mode=mode, mode_time=mode_time, events=events, reconfig_lam=reconfig_lam,
-                      has_reconfig_lam=has_rl, held_time=held_time, lam=s_lam, mu=s_mu, lam_rate=s_lam_rate,
+                      has_reconfig_lam=has_rl, held_miss=held_miss, lam=s_lam, mu=s_mu, lam_rate=s_lam_rate,
                       lam_d=lam_d, mu_d=mu_d, held=held, event=event, beta_target=beta_target)
 
 
@@ -210,7 +232,7 @@ def mode_commands(state: ICRBatchState, upd: ModeUpdate, beta_meas: np.ndarray, 
                               phidot=phidot_c, mode_time=upd.mode_time,
                               reconfig_lam=np.where(has_rl[:, None], upd.reconfig_lam, 0.0), has_reconfig_lam=has_rl,
                               events=upd.events, beta_meas=beta_meas.copy(),
-                              has_beta_meas=np.ones(nrows, dtype=np.bool_), held_time=upd.held_time)
+                              has_beta_meas=np.ones(nrows, dtype=np.bool_), held_miss=upd.held_miss)
     cmd = WheelCommand(beta=beta_c.copy(), phidot=phidot_c.copy(), beta_rate=rate_c.copy(), beta_accel=accel,
                        phiddot=phiddot, info=info)
     return new_state, cmd

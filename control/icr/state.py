@@ -34,7 +34,8 @@ class ICRBatchState:
         events: (N,) number of stop-and-reconfigure sequences started so far.
         beta_meas: (N, n) the previous step's measured steering angles [rad] (for the measured
             steering rate; where ``has_beta_meas``).
-        held_time: (N,) how long [s] the target has been held at a steering stop without a break.
+        held_miss: (N,) the motion [m] a hold at a steering stop has missed so far, without a break
+            (``ICRControllerConfig.stop_hold_distance``).
     """
 
     mode: np.ndarray  # (N,) int64, Mode values
@@ -50,7 +51,7 @@ class ICRBatchState:
     events: np.ndarray  # (N,) int64
     beta_meas: np.ndarray  # (N, n)
     has_beta_meas: np.ndarray  # (N,) bool
-    held_time: np.ndarray  # (N,)
+    held_miss: np.ndarray  # (N,)
 
 
     @property
@@ -76,7 +77,7 @@ class ICRBatchState:
 
 
 #: fields of :class:`ICRBatchState` that one robot reads as Python scalars (the others as arrays)
-_SCALAR = {"mode": Mode, "mu": float, "mode_time": float, "events": int, "held_time": float}
+_SCALAR = {"mode": Mode, "mu": float, "mode_time": float, "events": int, "held_miss": float}
 #: fields valid only where their ``has_*`` flag is set (None for one robot otherwise)
 _OPTIONAL = ("reconfig_lam", "beta_meas")
 
@@ -86,7 +87,7 @@ class ICRControllerState:
     """One robot's controller state: an :class:`ICRBatchState` of one row (``batch``).
 
     Its fields read row 0 of the batch: ``mode`` (a :class:`~control.icr.config.Mode`), ``mu``,
-    ``mode_time``, ``held_time`` [s] and ``events`` as Python scalars; ``lam``, ``lam_rate``,
+    ``mode_time`` [s], ``held_miss`` [m] and ``events`` as Python scalars; ``lam``, ``lam_rate``,
     ``beta``, ``beta_rate``, ``phidot`` as arrays; ``reconfig_lam`` and ``beta_meas`` as arrays or
     None (see :class:`ICRBatchState` for their meaning and units).
     """
@@ -123,7 +124,7 @@ def initial_state_batch(lam_hat, beta, phidot, geom: RobotGeometry,
         mu=np.zeros(nrows), lam_rate=np.zeros((nrows, 3)), beta=beta.copy(), beta_rate=np.zeros((nrows, geom.n)),
         phidot=phidot.copy(), mode_time=np.zeros(nrows), reconfig_lam=np.where(reconf[:, None], lam, 0.0),
         has_reconfig_lam=reconf.copy(), events=np.zeros(nrows, dtype=np.int64), beta_meas=beta.copy(),
-        has_beta_meas=np.ones(nrows, dtype=np.bool_), held_time=np.zeros(nrows))
+        has_beta_meas=np.ones(nrows, dtype=np.bool_), held_miss=np.zeros(nrows))
 
 
 def initial_state(lam_hat, beta, phidot, geom: RobotGeometry,

@@ -18,6 +18,8 @@ from control.icr.controller import (
     nearer_target,
     project_off_axes,
 )
+from control.icr.feasibility import stop_hold_point_batch
+from control.icr.kernels import stop_normals
 from control.kinematic_model import KinematicRobot, twist_from_wheels
 from control.limits import ActuatorLimits, limit_violations
 from estimation import RobotGeometry, eta_from_twist, lambda_distance, steering_from_lambda, twist_from_eta
@@ -228,28 +230,152 @@ def test_state_machine_on_stop_crossing():
     assert lambda_distance(ctl.state.lam, y) < 1e-9
 
 
-def test_target_that_stays_just_past_a_stop_reconfigures_after_the_hold_time():
-    """A rotation about a point 0.40 m to the side (the paper track's rounded corner) puts wheels 1
-    and 2 3.5° inside their stops; 0.45 m puts them past (an ICR arc of 2.4°, inside the
-    hysteresis). Held at the stop, λ would miss that target for as long as it stays there, so the
-    hold lasts at most ``stop_hold_time``; a target jittering across the stop is held throughout."""
-    lam_in = eta_from_twist(np.array([0.0, 1.0, 1 / 0.40]))[0]
-    lam_past = eta_from_twist(np.array([0.0, 1.0, 1 / 0.45]))[0]
-    assert arc_blocked(lam_in, lam_past, GEOM, np.deg2rad(3), np.deg2rad(0.5)) == "stop"
-    hold = ICRControllerConfig().stop_hold_time
-    ctl, robot, log = _run([(lam_in, 0.5, 150), (lam_past, 0.5, 250)])
-    modes = [m for m, *_ in log[150:]]
-    first_stop = modes.index(Mode.STOPPING)
-    assert all(log[150 + i][3].info.get("held_at_stop") for i in range(first_stop))
-    assert first_stop == int(round(hold / DT))
+def _side_target(radius):
+    """λ of a turn about a point ``radius`` [m] to the side at unit forward speed (the paper
+    track's rounded corner is 0.40 m: wheels 1 and 2 3.5° inside their stops)."""
+    return eta_from_twist(np.array([0.0, 1.0, 1.0 / radius]))[0]
+
+
+def _hold_run(targets, config=None):
+    """_run, with the state's held_miss and the step's held flag after every period."""
+    ctl = ICRController(GEOM, LIM, DT, config)
+    robot = KinematicRobot.at_rest(GEOM)
+    out = []
+    for lam_d, mu_d, steps in targets:
+        for _ in range(steps):
+            lam_hat = ctl.state.lam if ctl.state is not None else np.array([0, 0, 1.0])
+            mu_hat = ctl.state.mu if ctl.state is not None else 0.0
+            prev = 0.0 if ctl.state is None else ctl.state.held_miss
+            lam_before = None if ctl.state is None else ctl.state.lam.copy()
+            cmd = ctl.step(lam_hat, mu_hat, robot.beta.copy(), robot.phidot, lam_d, mu_d)
+            assert not limit_violations(cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot, LIM).any()
+            robot.step(cmd.beta, cmd.phidot, DT)
+            out.append((cmd.info["mode"], bool(cmd.info.get("held_at_stop")), prev, ctl.state.held_miss, lam_before,
+                        cmd.info["mu_target"]))
+    return ctl, out
+
+
+def test_target_past_a_stop_is_held_until_it_has_missed_the_hold_distance():
+    """Past its stop by more than a graze (a 0.5 m turn after the 0.40 m one, at 1 m/s: 3.6° from
+    the nearest point of the current cell, a twist difference of 0.062 m/s > ``stop_hold_speed``),
+    the target is held at the cell's nearest point while the motion the hold misses,
+    max(|μ_d|, |μ|)·‖λ_hold − λ_d‖ per second, adds up to ``stop_hold_distance``; the period that
+    would exceed it stops the robot, which reconfigures and reaches the target."""
+    cfg = ICRControllerConfig()
+    lam_in, lam_past = _side_target(0.40), _side_target(0.50)
+    assert arc_blocked(lam_in, lam_past, GEOM, cfg.axis_margin, cfg.arc_step) == "stop"
+    ctl, out = _hold_run([(lam_in, 1.0, 150), (lam_past, 1.0, 250)])
+    run = out[150:]
+    first_stop = [m for m, *_ in run].index(Mode.STOPPING)
+    assert first_stop > 0 and all(held for _, held, *_ in run[:first_stop])
+    for _, _, prev, now, lam_before, mu_t in run[:first_stop]:
+        point, angle = stop_hold_point_batch(lam_before[None], lam_past[None], GEOM)
+        assert np.rad2deg(angle[0]) == pytest.approx(3.58, abs=0.05)
+        miss = max(abs(mu_t), 1.0) * np.linalg.norm(point[0] - lam_past) * DT  # μ = 1 m/s on the 0.40 m turn
+        assert now == pytest.approx(prev + miss, rel=1e-9) and now <= cfg.stop_hold_distance
+    # stopped in the period that would have taken the missed motion past the distance
+    assert run[first_stop - 1][3] + miss > cfg.stop_hold_distance
+    assert first_stop == int(cfg.stop_hold_distance // miss)
     assert ctl.mode == Mode.RUNNING and lambda_distance(ctl.state.lam, lam_past) < 1e-6
-    # the old behaviour (hold for good) stays available, and a jittering target never stops
-    forever = ICRController(GEOM, LIM, DT, ICRControllerConfig(stop_hold_time=1e6))
-    _, _, log = _run([(lam_in, 0.5, 150), (lam_past, 0.5, 100)], ctl=forever)
-    assert all(m == Mode.RUNNING for m, *_ in log)
-    jitter = [(lam_in, 0.5, 150)] + [(t, 0.5, 2) for t in (lam_past, lam_in) * 50]
-    _, _, log = _run(jitter)
-    assert all(m == Mode.RUNNING for m, *_ in log[1:])
+
+
+def test_grazing_target_is_held_for_good_and_jitter_never_stops():
+    """A target that only grazes a stop (a 0.45 m turn: 1.2° beyond, 0.022 m/s of missed motion at
+    1 m/s, below ``stop_hold_speed``) is held at the stop for as long as it stays: the wheels are
+    not turned by π for it; a target jittering across the stop never stops the robot either; the
+    held λ sits on the current side of the stop, within 1e-6 of the cell's nearest point."""
+    lam_in, lam_graze = _side_target(0.40), _side_target(0.45)
+    ctl, out = _hold_run([(lam_in, 1.0, 150), (lam_graze, 1.0, 300)])
+    assert all(m == Mode.RUNNING for m, *_ in out[1:]) and all(held for _, held, *_ in out[150:])
+    assert all(prev == 0.0 and now == 0.0 for _, _, prev, now, *_ in out[150:])
+    point, _ = stop_hold_point_batch(ctl.state.lam[None], lam_graze[None], GEOM)
+    assert lambda_distance(ctl.state.lam, point[0]) < 1e-6
+    assert np.all(np.abs(steering_from_lambda(ctl.state.lam, GEOM) - steering_from_lambda(lam_in, GEOM)) < np.pi / 2)
+    jitter = [(lam_in, 1.0, 150)] + [(t, 1.0, 2) for t in (_side_target(0.5), lam_in) * 50]
+    _, out = _hold_run(jitter)
+    assert all(m == Mode.RUNNING for m, *_ in out[1:])
+
+
+def test_target_far_beyond_a_stop_stops_at_once():
+    """Beyond ``stop_hold_angle`` (a 0.8 m turn: 15.7° beyond, with the angle at 10°) no hold:
+    the robot stops in the first period."""
+    cfg = ICRControllerConfig(stop_hold_angle=np.deg2rad(10.0))
+    _, out = _hold_run([(_side_target(0.40), 1.0, 150), (_side_target(0.8), 1.0, 5)], cfg)
+    assert out[150][0] == Mode.STOPPING and not out[150][1]
+    _, out = _hold_run([(_side_target(0.40), 1.0, 150), (_side_target(0.8), 1.0, 5)])
+    assert out[150][0] == Mode.RUNNING and out[150][1]  # 15.7° < 30°: held, within the distance
+
+
+def test_hold_slides_along_a_stop_circle():
+    """A target just outside wheel 0's stop circle and moving along it (a path that keeps a wheel
+    at ±90°, as a tri robot's translation along X or the icr-axis scenario does) is followed along
+    the circle: held throughout, never stopped, λ within 1e-3 rad of the target's foot on the
+    circle. (Held at one point of the circle, as the arc's last sample was, the λ would stay
+    behind: the drift that made the controller flip that wheel back and forth.)"""
+    normals = np.empty((GEOM.n, 3))
+    stop_normals(GEOM.a_minus_l, GEOM.a_perp, float(GEOM.steer_max), normals)
+    n0 = normals[0]
+    u0 = _unit(np.cross(n0, GEOM.s_unit[0]))
+    v0 = _unit(np.cross(n0, u0))
+    on_circle = lambda a: np.cos(a) * u0 + np.sin(a) * v0  # noqa: E731
+    # a stretch of the circle far from the other wheels' stop circles and from the axes
+    grid = np.linspace(0.0, 2 * np.pi, 721)
+    clear = np.array([min(np.min(np.abs(normals[1:] @ on_circle(a))),
+                          np.min(np.linalg.norm(np.cross(on_circle(a), GEOM.s_unit), axis=1))) for a in grid])
+    a0 = grid[int(np.argmax(clear))]
+    assert clear.max() > 0.2
+    start = _unit(on_circle(a0) + 0.01 * n0)
+    assert arc_blocked(start, _unit(on_circle(a0) - 0.01 * n0), GEOM, np.deg2rad(3), np.deg2rad(0.5)) == "stop"
+    path = [_unit(on_circle(a) - 0.004 * n0) for a in a0 + np.linspace(0.0, 0.1, 60)]
+    ctl, out = _hold_run([(start, 0.5, 150)] + [(t, 0.5, 3) for t in path])
+    assert all(m == Mode.RUNNING for m, *_ in out[150:])
+    assert sum(held for _, held, *_ in out[150:]) > 150
+    foot = _unit(path[-1] - np.dot(path[-1], n0) * n0)
+    assert lambda_distance(ctl.state.lam, foot) < 1e-3
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1),
+       st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1),
+       st.integers(0, 2**31 - 1))
+def test_hold_point_is_the_nearest_point_of_the_cell(lam, lam_d, seed):
+    """Where λ_d is outside λ's cell (the region no stop circle cuts), the hold point is strictly
+    inside it, and no point of the cell near λ_d is nearer to λ_d (random samples)."""
+    lam, lam_d = _unit(lam), _unit(lam_d)
+    normals = np.empty((GEOM.n, 3))
+    stop_normals(GEOM.a_minus_l, GEOM.a_perp, float(GEOM.steer_max), normals)
+    side = np.where(normals @ lam >= 0, 1.0, -1.0)
+    point, angle = stop_hold_point_batch(lam[None], lam_d[None], GEOM)
+    outside = np.any(side * (normals @ lam_d) < 0)
+    if not outside:
+        assert angle[0] == -1.0
+        return
+    assert angle[0] >= 0.0
+    assert np.all(side * (normals @ point[0]) > 0)
+    rng = np.random.default_rng(seed)
+    q = lam_d + rng.normal(scale=rng.uniform(0.01, 1.0), size=(500, 3))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    inside = np.all(side * (q @ normals.T) > 0, axis=1)
+    if np.any(inside):
+        assert angle[0] <= np.min(np.arccos(np.clip(q[inside] @ lam_d, -1, 1))) + 1e-6
+
+
+def test_reconfiguration_follows_a_new_target_only_for_a_motion_that_matters():
+    """While the wheels turn in place, a new target that would need another stop replaces the one
+    being reached only if its motion differs from it by ``stop_hold_speed`` or more (|μ_d| times
+    the chord between the two λ): a slow target's λ_d, which feedback noise swings anywhere, does
+    not make the reconfiguration chase it."""
+    x = eta_from_twist(np.array([1.0, 0, 0]))[0]
+    y = eta_from_twist(np.array([0, 1.0, 0]))[0]
+    for mu_d, follows in ((0.02, False), (0.5, True)):
+        ctl = ICRController(GEOM, LIM, DT)
+        robot = KinematicRobot.at_rest(GEOM)
+        ctl.reset(x, robot.beta + 1.0, robot.phidot)  # wheels far from F(x): starts RECONFIGURING for x
+        assert ctl.mode == Mode.RECONFIGURING
+        ctl.step(x, 0.0, robot.beta + 1.0, robot.phidot, x, mu_d)
+        assert lambda_distance(ctl.state.reconfig_lam, x) < 1e-12
+        ctl.step(x, 0.0, robot.beta + 1.0, robot.phidot, y, mu_d)  # y needs a stop from x
+        assert (lambda_distance(ctl.state.reconfig_lam, y) < 1e-12) == follows
 
 
 def test_kicked_wheel_triggers_stop_and_reconfigure():
@@ -288,7 +414,7 @@ def test_bad_input_raises():
 
 
 @pytest.mark.parametrize("args", [(None,), ("geom",), (GEOM, "limits"), (GEOM, LIM, "0.02"), (GEOM, LIM, True),
-                                  (GEOM, LIM, DT, {"stop_hold_time": 1.0}), (LIM, GEOM)])
+                                  (GEOM, LIM, DT, {"stop_hold_distance": 1.0}), (LIM, GEOM)])
 def test_constructor_refuses_wrong_types(args):
     """New-user trial: ``ICRController(None)`` was accepted and failed at the first step()."""
     with pytest.raises(TypeError, match="geom|limits|config|dt"):
@@ -366,7 +492,7 @@ def test_reconfigurations_end_when_wheels_stop_where_stiction_holds_them():
     from control.icr.config import ICRControllerConfig, Mode
     from control.rollout import run_episode
 
-    log = run_episode("icr", "figure8", seed=0, max_time=25.0)
+    log = run_episode("icr", "paper", seed=0, max_time=40.0)  # figure8 now takes its stops without one
     recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
     edges = np.flatnonzero(np.diff(recon))
     lengths = (edges[1::2] - edges[::2]) * log.dt

@@ -104,6 +104,23 @@ def test_path_following_episodes_bit_for_bit(monkeypatch):
     assert seen["events"] >= 3
 
 
+@pytest.mark.parametrize("robot, tracks", [(None, ["icr-axis", "spin", "reverse"]), ("tri", ["strafe90", "icr-axis"])])
+def test_holds_at_steering_stops_bit_for_bit(monkeypatch, robot, tracks):
+    """The scenarios where targets graze or run along a steering stop: holds at the nearest point
+    of the current cell (sliding along a stop circle), holds that run out of
+    ``stop_hold_distance``, reconfigurations that do not chase a slow target."""
+    from control.path_controllers import ICRPathController
+    from control.rollout import run_episodes
+
+    rec = _Recorder(monkeypatch)
+    run_episodes(ICRPathController(), tracks, [0] * len(tracks), max_time=12.0,
+                 env_kwargs=None if robot is None else {"robot": robot})
+    seen = _replay(rec)
+    assert seen["steps"] == 600
+    assert seen["held"] >= 50 and seen["events"] >= 2
+    assert seen["modes"] == {int(Mode.RUNNING), int(Mode.STOPPING), int(Mode.RECONFIGURING)}
+
+
 def test_unlimited_steering_bit_for_bit(monkeypatch):
     """The swerve preset (no steering stops: nearest axis angles, no stop room, no clipping)."""
     from control.path_controllers import ICRPathController

@@ -7,7 +7,8 @@ from azimut_env.tracks import Track
 from control.episode import EpisodeLog, scenario_metrics
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollower
-from control.rollout import run_episode
+from control.path_controllers import ICRPathController
+from control.rollout import run_episode, run_episodes
 
 
 def test_follower_holds_exactly_zero_for_the_duration():
@@ -87,3 +88,64 @@ def test_hold_scenario_episode():
     assert log.hold.sum() == 100  # 2 s of zero command
     m = scenario_metrics(log)
     assert m["hold_steer_cmd_rad"] == 0.0 and m["hold_chassis_m"] < 0.01
+
+
+def _cusp_track():
+    """Two legs meeting at a cusp (the second leg 20° off the way back, as ``reverse``'s), the
+    speed falling to zero there; samples 2 cm apart."""
+    from azimut_env.tracks.scenarios import _line
+
+    p1 = np.array([1.0, 0.0])
+    back = np.deg2rad(160.0)
+    p2 = p1 + np.array([np.cos(back), np.sin(back)])
+    xy = np.vstack([_line((0.0, 0.0), p1), _line(p1, p2), p2[None]])
+    speed = np.minimum(1.0, np.abs(np.hypot(*(xy - p1).T)) * 5 + 0.02)
+    return Track("cusp", xy, 0.0, speed)
+
+
+def test_progress_past_a_cusp_is_the_cusp_and_the_preview_turns_to_the_next_leg():
+    """A robot 6 mm past a cusp along the incoming leg is nearest to the cusp sample; the
+    projection's refinement along the *outgoing* leg (pointing back) put its progress up to one
+    segment before the cusp, where the follower's feed-forward and feedback balanced: the
+    ``reverse`` scenario's stall. The follower's progress is the cusp (control.follow.cusps), and
+    once there the preview points along the outgoing leg; the compiled follower gives the same
+    bits."""
+    from control.follow.cusps import cusp_table
+
+    tr = _cusp_track()
+    table = cusp_table(tr)
+    assert table.shape[0] == 1
+    i = int(table[0, 0])
+    s_cusp = tr.s[i]
+    pose = np.array([1.006, 0.0, 0.0])
+    assert tr.project(pose, s_hint=s_cusp - 0.05) < s_cusp - 0.005  # the projection alone: before the cusp
+    f = PathFollower(tr, dt=0.02)
+    f.reset(s_cusp - 0.05)
+    out = f.step(pose)
+    assert out.progress == s_cusp
+    batch = BatchFollower(1, dt=0.02)
+    batch.reset(0, tr, s_cusp - 0.05)
+    b = batch.step_all(pose[None])
+    assert b.progress[0] == out.progress and np.array_equal(b.twist[0], out.twist)
+    # at the cusp (reached): the feed-forward along the outgoing leg, not the legs' bisector
+    f.reset(s_cusp)
+    ff = f.step(np.array([*tr.xy[i], 0.0]))
+    direction = np.arctan2(ff.twist[1], ff.twist[0])
+    assert abs(direction - np.deg2rad(160.0)) < 1e-9
+    # a smooth track has no cusp, and its follower is the projection's
+    assert cusp_table(Track("line", [[0, 0], [1, 0], [2, 0.5]], 0.0, 0.5)).shape[0] == 0
+
+
+@pytest.mark.parametrize("robot, tracks", [(None, ["reverse", "icr-axis"]), ("tri", ["strafe90"])])
+def test_icr_controller_finishes_the_scenarios_it_stalled_on(robot, tracks):
+    """Issue 19's not-done rows: on the default robot (AZIMUT-3 with the paper's imperfections)
+    ``reverse`` (stalled at its second cusp, 20 stop-and-reconfigure events) and ``icr-axis``
+    (wheel 0 flipped back and forth across its stop, 14 events); on ``tri``, ``strafe90`` (the
+    front wheel at 90° along every X leg, flipped at each hold's end, 15 events). Each now
+    finishes, within the actuator limits, with few stops."""
+    logs = run_episodes(ICRPathController(), tracks, [0] * len(tracks),
+                        env_kwargs=None if robot is None else {"robot": robot})
+    for log in logs:
+        assert log.completed, log.track.name
+        assert not np.any(log.violations)
+        assert log.events <= 11, (log.track.name, log.events)
