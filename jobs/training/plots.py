@@ -15,9 +15,10 @@ __all__ = ["plot_runs", "training_returns", "evaluation_history", "training_labe
            "DRIFT_PANELS"]
 
 #: the panels of :func:`plot_seed_groups`: (title, track or None for the mean over the evaluation
-#: tracks, the evaluation row's key, scale, y label)
+#: tracks, the evaluation row's key, scale, y label[, a horizontal line: (value, its label)])
 SEED_CURVE_PANELS = [("evaluation return (mean over the run's evaluation tracks)", None, "return", 1.0, "return"),
-                     ("circle: mean null-space force", "circle", "mean_nullspace_force_N", 1.0, "N"),
+                     ("circle: mean null-space force", "circle", "mean_nullspace_force_N", 1.0, "N",
+                      (30.0, "the raw-action bar, 30 N")),
                      ("circle: mean antagonism", "circle", "mean_antagonism_N", 1.0, "N"),
                      ("circle: RMS lateral error", "circle", "rms_lateral_m", 100.0, "cm")]
 #: the panels of ``--drift``: how far residual agents move from their reference controller
@@ -179,10 +180,11 @@ def seed_curve(folder: Path, track: str | None, key: str, n_resamples: int = 2_0
             for t in common]
 
 
-def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> None:
+def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> list[str]:
     """One figure: per panel of ``panels`` (default :data:`SEED_CURVE_PANELS`), per group (name ->
     ``azimut train --seeds`` folder), the IQM over the seeds against environment steps with its
-    95% bootstrap interval (shaded) and each seed (thin lines)."""
+    95% bootstrap interval (shaded) and each seed (thin lines). Returns one line per panel and group:
+    the IQM and interval at the first and the last evaluation step (the figures the plot shows)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -192,7 +194,10 @@ def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> None:
     cols = 2
     rows = (len(panels) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(12, 3.6 * rows), squeeze=False)
-    for ax, (title, track, key, scale, unit) in zip(axes.flat, panels):
+    summary = []
+    for ax, (title, track, key, scale, unit, *line) in zip(axes.flat, panels):
+        if line:
+            ax.axhline(line[0][0], color="k", ls="--", lw=0.8, label=line[0][1])
         for i, (name, folder) in enumerate(groups.items()):
             curve = seed_curve(Path(folder), track, key)
             if not curve:
@@ -204,6 +209,9 @@ def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> None:
             ax.plot(t, [scale * c["iqm"] for c in curve], "o-", ms=3, color=f"C{i}", label=f"{name} ({n} seeds)")
             ax.fill_between(t, [scale * c["lo"] for c in curve], [scale * c["hi"] for c in curve], color=f"C{i}",
                             alpha=0.2)
+            ends = "; ".join(f"{c['timesteps']} steps: {scale * c['iqm']:.4g} [{scale * c['lo']:.4g}, "
+                             f"{scale * c['hi']:.4g}]" for c in (curve[0], curve[-1]))
+            summary.append(f"{title} [{unit}], {name} ({n} seeds): {ends}")
         ax.set_title(title, fontsize=9)
         ax.set_xscale("log")
         ax.set_xlabel("environment steps (all robots)")
@@ -218,6 +226,7 @@ def plot_seed_groups(groups: dict[str, Path], out: Path, panels=None) -> None:
     fig.tight_layout()
     fig.savefig(out, dpi=100)
     plt.close(fig)
+    return summary
 
 
 def _main(argv: list[str]) -> int:
@@ -234,7 +243,8 @@ def _main(argv: list[str]) -> int:
         if not groups:
             print("plots: error: no NAME=DIR given", file=sys.stderr)
             return 2
-        plot_seed_groups(groups, Path(argv[1]), DRIFT_PANELS if drift else None)
+        for line in plot_seed_groups(groups, Path(argv[1]), DRIFT_PANELS if drift else None):
+            print(line)
         return 0
     if len(argv) < 2:
         print("usage: python -m jobs.training.plots OUT.png RUN_DIR [RUN_DIR ...]\n"
