@@ -34,6 +34,7 @@ from control.icr.kernels import (
     C_FREEZE,
     C_HOLD_ANGLE,
     C_HOLD_DIST,
+    C_HOLD_MARGIN,
     C_HOLD_SPEED,
     C_HOLD_TOL,
     C_KICK,
@@ -98,7 +99,7 @@ _ERRORS = ("lam_hat contains NaN or inf", "lam_hat is the zero vector, not a poi
 
 def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(limit constants (N_LIM,), tuning (19,), κ grid) of the kernel: every constant the NumPy
+    """(limit constants (N_LIM,), tuning (20,), κ grid) of the kernel: every constant the NumPy
     version computes in Python floats, by the same expressions (so with the same bits)."""
     sam, srm, wsm, wam = (float(limits.steer_accel_max), float(limits.steer_rate_max), float(limits.wheel_speed_max),
                           float(limits.wheel_accel_max))
@@ -127,7 +128,7 @@ def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRC
                      config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
                      config.reconfig_still_tol, config.reconfig_timeout, config.k_lambda,
                      float(config.coupling_from_measurement), float(config.mu_own_scale), config.stop_hold_speed,
-                     config.stop_hold_angle], dtype=np.float64)
+                     config.stop_hold_angle, config.stop_hold_margin], dtype=np.float64)
     return lim, tune, np.linspace(0.0, 1.0, config.n_kappa)
 
 
@@ -260,7 +261,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
                 # the hold point: the nearest point of λ's cell, else the arc's last sample
                 slerp3(lam, ld, free, hp)
                 beyond = theta - free
-                angle = stop_hold_row(lam, ld, normals, cell)
+                angle = stop_hold_row(lam, ld, normals, tune[C_HOLD_MARGIN], cell)
                 if angle >= 0.0:
                     ok, _, _ = arc_check_row(lam, cell, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
                                              tune[C_ARC_STEP], unlimited)

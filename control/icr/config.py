@@ -100,6 +100,12 @@ class ICRControllerConfig:
             within that much missed motion, at any speed; one that only grazes the stop (jitter, a
             path running along a wheel's stop, a slow target pointing anywhere) is held: the wheels
             are not turned by π for motion the robot hardly needs.
+        stop_hold_margin: [rad] how far inside the current cell the hold point lies, off the stop
+            circles it is on: the held wheel is commanded at least this far (in β, ≥ 0.17° for the
+            default) short of its hard stop, where a compliant steering with stiction would press
+            it against the stop at speed (on the default robot's ``figure8``, holds at 1e-7 rad raised
+            the slip energy from 14.8 J to 23.5 J); the held motion then misses a path that runs
+            exactly along the stop by this angle, too little to need a reconfiguration.
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -123,6 +129,7 @@ class ICRControllerConfig:
     stop_hold_speed: float = 0.04
     stop_hold_angle: float = np.deg2rad(30.0)
     stop_hold_distance: float = 0.01
+    stop_hold_margin: float = 0.003
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
@@ -133,8 +140,8 @@ class ICRControllerConfig:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
         for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
-                     "stop_hysteresis", "stop_hold_speed", "stop_hold_angle", "stop_hold_distance", "reconfig_hold_tol",
-                     "reconfig_still_tol"):
+                     "stop_hysteresis", "stop_hold_speed", "stop_hold_angle", "stop_hold_distance", "stop_hold_margin",
+                     "reconfig_hold_tol", "reconfig_still_tol"):
             fix(name, check_positive(f"ICRControllerConfig.{name}", getattr(self, name)))
         for name in ("mu_headroom", "reconfig_rate_fraction", "reconfig_accel_fraction"):  # fractions of a limit
             fix(name, check_range(f"ICRControllerConfig.{name}", getattr(self, name), 0.0, 1.0, lo_open=True))

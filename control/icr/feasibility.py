@@ -194,15 +194,17 @@ def must_stop(lam: np.ndarray, lam_d: np.ndarray, geom: RobotGeometry, config: I
     return (reason == ArcReason.AXIS) | ((reason == ArcReason.STOP) & (theta - free >= config.stop_hysteresis))
 
 
-def stop_hold_point_batch(lam, lam_d, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
+def stop_hold_point_batch(lam, lam_d, geom: RobotGeometry, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Where to hold a target λ_d that lies beyond a steering stop, row by row (λ, λ_d (N, 3)).
 
     Wheel k's steering stop β_k = β_max (mod π) is a great circle through ŝ_k, its *stop circle*
     n_k·λ = 0 with n_k = sin β_max (a_k − l_k) − cos β_max a⊥_k (eq. (15) at β_max; for AZIMUT's
     ±π/2 stops n_k = a_k − l_k, the denominator of eq. (16)). The stop circles cut the sphere into
     convex *cells* in which no β_k passes its stop. The hold point is the point of λ's cell nearest
-    to λ_d (on an edge or at a vertex, moved 1e-7 rad into the cell): the motion the wheels can
-    make without a reconfiguration that misses the target's least. A path that runs *along* a stop
+    to λ_d (on an edge or at a vertex), moved ``margin`` [rad] into the cell
+    (``ICRControllerConfig.stop_hold_margin``): the motion the wheels can make without a
+    reconfiguration that misses the target's least, with every wheel at least ``margin`` (in β:
+    |∂β_k/∂λ| ≥ ‖a_k − l_k‖ ≥ 1 on its stop circle) short of its stop. A path that runs *along* a stop
     circle (a wheel at ±π/2 for a while) is then followed exactly, sliding along the circle,
     instead of being held at one point of it.
 
@@ -216,7 +218,7 @@ def stop_hold_point_batch(lam, lam_d, geom: RobotGeometry) -> tuple[np.ndarray, 
     points = np.zeros(lam.shape)
     angle = np.empty(lam.shape[0])
     for i in range(lam.shape[0]):
-        angle[i] = stop_hold_row(lam[i], lam_d[i], normals, points[i])
+        angle[i] = stop_hold_row(lam[i], lam_d[i], normals, float(margin), points[i])
     return points, angle
 
 

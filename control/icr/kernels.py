@@ -25,7 +25,7 @@ from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _grad_wheel, _speed
 
 __all__ = ["norm3", "unit3", "dot3", "nearest1", "steering_difference1", "sphere_angle3", "slerp3", "wrap_half1",
            "steering_row", "speed_coefs_row", "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1",
-           "saturate_row", "stop_normals", "stop_hold_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS", "HOLD_NUDGE"]
+           "saturate_row", "stop_normals", "stop_hold_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
 
 # indices into the limit constants ``lim`` (control.icr.compiled.compiled_constants)
 L_SAM, L_SRM, L_WSM, L_WAM, L_A_DT, L_WA_DT, L_STEER_LO = 0, 1, 2, 3, 4, 5, 6
@@ -43,14 +43,10 @@ N_LIM = 27
 # the tuning as a float array (indices C_*)
 (C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_DIST, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
  C_FREEZE, C_RECONFIG_TOL, C_HOLD_TOL, C_STILL_TOL, C_RECONFIG_TIMEOUT, C_K_LAMBDA, C_COUPLING_MEAS,
- C_MU_OWN, C_HOLD_SPEED, C_HOLD_ANGLE) = range(19)
+ C_MU_OWN, C_HOLD_SPEED, C_HOLD_ANGLE, C_HOLD_MARGIN) = range(20)
 
 #: :class:`control.icr.feasibility.ArcReason` codes
 ARC_NONE, ARC_STOP, ARC_AXIS = 0, 1, 2
-
-#: how far [rad] a hold point is moved into its cell, off the stop circle it lies on, so that F(λ)
-#: at the held λ is on the current side of every steering stop (rounding included)
-HOLD_NUDGE = 1e-7
 
 
 @njit(cache=True, inline="always")
@@ -334,7 +330,7 @@ def _inside(q, N, side) -> bool:
 
 
 @njit(cache=True)
-def stop_hold_row(lam_in, lam_d_in, N, out) -> float:
+def stop_hold_row(lam_in, lam_d_in, N, margin, out) -> float:
     """The point of λ's *cell* nearest to λ_d, into ``out`` (3,); returns its angle to λ_d [rad],
     or −1.0 (``out`` untouched) when λ_d is in the cell or no candidate is.
 
@@ -342,8 +338,9 @@ def stop_hold_row(lam_in, lam_d_in, N, out) -> float:
     every β_k = F_k(λ) is continuous (no wheel passes its stop), and the cell is convex (an
     intersection of hemispheres). Its point nearest to an outside λ_d lies on an edge (the
     projection of λ_d onto one stop circle) or at a vertex (one of the two intersections of two
-    circles): every such candidate, moved ``HOLD_NUDGE`` into the cell off the circles it lies
-    on, is kept if it is strictly inside, and the one nearest to λ_d wins (the first on a tie)."""
+    circles): every such candidate, moved ``margin`` [rad] into the cell along the normals of the
+    circles it lies on, is kept if it is strictly inside, and the one nearest to λ_d wins (the
+    first on a tie)."""
     n = N.shape[0]
     lam = np.empty(3)
     lam_d = np.empty(3)
@@ -374,9 +371,9 @@ def stop_hold_row(lam_in, lam_d_in, N, out) -> float:
                     continue
                 unit3(q, q)
                 for j in range(3):
-                    q[j] = q[j] + HOLD_NUDGE * side[a] * N[a, j]
+                    q[j] = q[j] + margin * side[a] * N[a, j]
                     if a != b:
-                        q[j] = q[j] + HOLD_NUDGE * side[b] * N[b, j]
+                        q[j] = q[j] + margin * side[b] * N[b, j]
                 unit3(q, q)
                 if _inside(q, N, side):
                     dq = dot3(q, lam_d)

@@ -95,7 +95,7 @@ def mode_transitions(state: ICRBatchState, mu_hat: np.ndarray, beta_meas: np.nda
         beyond = theta - free
         if np.any(stop):
             rs = np.flatnonzero(stop)
-            cell, angle = stop_hold_point_batch(state.lam[r[rs]], lam_d[r[rs]], geom)
+            cell, angle = stop_hold_point_batch(state.lam[r[rs]], lam_d[r[rs]], geom, config.stop_hold_margin)
             found = angle >= 0.0
             if np.any(found):
                 ok, _, _ = arc_check_batch(state.lam[r[rs[found]]], cell[found], geom, config.axis_margin,

@@ -257,7 +257,8 @@ def _hold_run(targets, config=None):
 
 def test_target_past_a_stop_is_held_until_it_has_missed_the_hold_distance():
     """Past its stop by more than a graze (a 0.5 m turn after the 0.40 m one, at 1 m/s: 3.6° from
-    the nearest point of the current cell, a twist difference of 0.062 m/s > ``stop_hold_speed``),
+    the nearest point of the current cell's boundary, ~3.8° from the hold point ``stop_hold_margin``
+    inside it, a twist difference of 0.066 m/s > ``stop_hold_speed``),
     the target is held at the cell's nearest point while the motion the hold misses,
     max(|μ_d|, |μ|)·‖λ_hold − λ_d‖ per second, adds up to ``stop_hold_distance``; the period that
     would exceed it stops the robot, which reconfigures and reaches the target."""
@@ -269,8 +270,8 @@ def test_target_past_a_stop_is_held_until_it_has_missed_the_hold_distance():
     first_stop = [m for m, *_ in run].index(Mode.STOPPING)
     assert first_stop > 0 and all(held for _, held, *_ in run[:first_stop])
     for _, _, prev, now, lam_before, mu_t in run[:first_stop]:
-        point, angle = stop_hold_point_batch(lam_before[None], lam_past[None], GEOM)
-        assert np.rad2deg(angle[0]) == pytest.approx(3.58, abs=0.05)
+        point, angle = stop_hold_point_batch(lam_before[None], lam_past[None], GEOM, cfg.stop_hold_margin)
+        assert 3.57 < np.rad2deg(angle[0]) < 3.59 + 2 * np.rad2deg(cfg.stop_hold_margin)  # 3.58° on the circle
         miss = max(abs(mu_t), 1.0) * np.linalg.norm(point[0] - lam_past) * DT  # μ = 1 m/s on the 0.40 m turn
         assert now == pytest.approx(prev + miss, rel=1e-9) and now <= cfg.stop_hold_distance
     # stopped in the period that would have taken the missed motion past the distance
@@ -288,7 +289,7 @@ def test_grazing_target_is_held_for_good_and_jitter_never_stops():
     ctl, out = _hold_run([(lam_in, 1.0, 150), (lam_graze, 1.0, 300)])
     assert all(m == Mode.RUNNING for m, *_ in out[1:]) and all(held for _, held, *_ in out[150:])
     assert all(prev == 0.0 and now == 0.0 for _, _, prev, now, *_ in out[150:])
-    point, _ = stop_hold_point_batch(ctl.state.lam[None], lam_graze[None], GEOM)
+    point, _ = stop_hold_point_batch(ctl.state.lam[None], lam_graze[None], GEOM, ICRControllerConfig().stop_hold_margin)
     assert lambda_distance(ctl.state.lam, point[0]) < 1e-6
     assert np.all(np.abs(steering_from_lambda(ctl.state.lam, GEOM) - steering_from_lambda(lam_in, GEOM)) < np.pi / 2)
     jitter = [(lam_in, 1.0, 150)] + [(t, 1.0, 2) for t in (_side_target(0.5), lam_in) * 50]
@@ -310,8 +311,9 @@ def test_hold_slides_along_a_stop_circle():
     """A target just outside wheel 0's stop circle and moving along it (a path that keeps a wheel
     at ±90°, as a tri robot's translation along X or the icr-axis scenario does) is followed along
     the circle: held throughout, never stopped, λ within 1e-3 rad of the target's foot on the
-    circle. (Held at one point of the circle, as the arc's last sample was, the λ would stay
-    behind: the drift that made the controller flip that wheel back and forth.)"""
+    circle, ``stop_hold_margin`` inside it. (Held at one point of the circle, as the arc's last
+    sample was, the λ would stay behind: the drift that made the controller flip that wheel back
+    and forth.)"""
     normals = np.empty((GEOM.n, 3))
     stop_normals(GEOM.a_minus_l, GEOM.a_perp, float(GEOM.steer_max), normals)
     n0 = normals[0]
@@ -331,7 +333,7 @@ def test_hold_slides_along_a_stop_circle():
     assert all(m == Mode.RUNNING for m, *_ in out[150:])
     assert sum(held for _, held, *_ in out[150:]) > 150
     foot = _unit(path[-1] - np.dot(path[-1], n0) * n0)
-    assert lambda_distance(ctl.state.lam, foot) < 1e-3
+    assert lambda_distance(ctl.state.lam, foot) < ICRControllerConfig().stop_hold_margin + 1e-3
 
 
 @settings(max_examples=200, deadline=None)
@@ -340,12 +342,14 @@ def test_hold_slides_along_a_stop_circle():
        st.integers(0, 2**31 - 1))
 def test_hold_point_is_the_nearest_point_of_the_cell(lam, lam_d, seed):
     """Where λ_d is outside λ's cell (the region no stop circle cuts), the hold point is strictly
-    inside it, and no point of the cell near λ_d is nearer to λ_d (random samples)."""
+    inside it, and no point of the cell near λ_d is nearer to λ_d (random samples) by more than
+    the hold's margin into the cell (at a vertex it is moved off two circles)."""
     lam, lam_d = _unit(lam), _unit(lam_d)
     normals = np.empty((GEOM.n, 3))
     stop_normals(GEOM.a_minus_l, GEOM.a_perp, float(GEOM.steer_max), normals)
     side = np.where(normals @ lam >= 0, 1.0, -1.0)
-    point, angle = stop_hold_point_batch(lam[None], lam_d[None], GEOM)
+    margin = ICRControllerConfig().stop_hold_margin
+    point, angle = stop_hold_point_batch(lam[None], lam_d[None], GEOM, margin)
     outside = np.any(side * (normals @ lam_d) < 0)
     if not outside:
         assert angle[0] == -1.0
@@ -357,7 +361,7 @@ def test_hold_point_is_the_nearest_point_of_the_cell(lam, lam_d, seed):
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     inside = np.all(side * (q @ normals.T) > 0, axis=1)
     if np.any(inside):
-        assert angle[0] <= np.min(np.arccos(np.clip(q[inside] @ lam_d, -1, 1))) + 1e-6
+        assert angle[0] <= np.min(np.arccos(np.clip(q[inside] @ lam_d, -1, 1))) + 2 * margin + 1e-6
 
 
 def test_reconfiguration_follows_a_new_target_only_for_a_motion_that_matters():
