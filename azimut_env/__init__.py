@@ -14,6 +14,7 @@ vectorization_mode="vector_entry_point")`` returns), ``rendering``, ``validation
 adapter is ``train.sb3_vec_env``; ``azimut bench-env`` and ``azimut sim-paper`` are in ``jobs``.)
 """
 
+import estimation.numba_cache  # noqa: F401, I001 (first: numba's cache keyed by the sources, before any kernel)
 from gymnasium.envs.registration import register, registry
 
 __all__ = ["ENV_ID", "ENV_ID_V1"]

@@ -27,6 +27,7 @@ interface, :mod:`azimut_env.interface`).
   kinematic test bench.
 """
 
+import estimation.numba_cache  # noqa: F401, I001 (first: numba's cache keyed by the sources, before any kernel)
 from control.commands import WheelCommand
 from control.controller import Controller, ControllerSpecError, make_controller, register_controller
 from control.follow.path_follower import PathFollower, PathFollowerConfig

@@ -4,6 +4,7 @@ Reference: the paper "Estimation of the Instantaneous Centre of Rotation with No
 Omnidirectional Mobile Robots" (§2–4). Equation numbers in docstrings refer to it.
 """
 
+import estimation.numba_cache  # noqa: F401, I001 (first: numba's cache keyed by the sources, before any kernel)
 from estimation.datasets import dataset_d1, dataset_d2, dataset_d3
 from estimation.estimate import IT_BEST, IT_PAPER, METHODS, ITDiagnostics, estimate_eta, estimate_icr, estimate_icr_it
 from estimation.geometry import AZIMUT3_ASSUMPTIONS, RobotGeometry

@@ -12,3 +12,5 @@
 Importing this package does not import torch or stable-baselines3; its modules that need them
 import them when used.
 """
+
+import estimation.numba_cache  # noqa: F401, I001 (first: numba's cache keyed by the sources, before any kernel)
