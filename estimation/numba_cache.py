@@ -3,9 +3,11 @@
 numba's on-disk cache (``@njit(cache=True)``) is invalidated by the time stamp of the file that
 defines a kernel, not by the files of the functions it calls and inlines: after an update that
 changes only a callee's module, a kernel would keep running the old compiled code, silently. So the
-cache lives in a folder named by a digest of every source file of the five packages (and the
-numba and Python versions): any change of any source selects a fresh folder, and the kernels are
-compiled again once.
+cache lives in a folder named by a digest of every source file of the packages that hold kernels
+(``estimation``, ``azimut_env``, ``control``: by the layer order a kernel can reach nothing above
+them, and ``train`` and ``jobs`` define none, which a test keeps true) and the numba and Python
+versions: any change of those sources selects a fresh folder, and the kernels are compiled again
+once.
 
 The folder is ``$AZIMUT_CACHE_DIR/numba/<digest>``, by default under the user's cache directory
 (``$XDG_CACHE_HOME`` or ``~/.cache``, ``azimut``). A ``NUMBA_CACHE_DIR`` set by the user is
@@ -25,8 +27,9 @@ from pathlib import Path
 
 __all__ = ["PACKAGES", "CACHE_DIR", "source_digest", "cache_dir", "configure"]
 
-#: the packages whose sources key the cache (the layer order of ARCHITECTURE.md)
-PACKAGES = ("estimation", "azimut_env", "control", "train", "jobs")
+#: the packages whose sources key the cache: those that define compiled kernels (the layers below
+#: ``train`` and ``jobs`` in ARCHITECTURE.md's order)
+PACKAGES = ("estimation", "azimut_env", "control")
 
 
 def source_digest(root: Path | None = None) -> str:

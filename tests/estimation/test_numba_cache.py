@@ -63,3 +63,27 @@ def test_a_fresh_process_writes_its_kernels_there_and_workers_agree(tmp_path):
     out3 = subprocess.run([sys.executable, "-c", "import estimation.numba_cache as c; print(c.CACHE_DIR)"], env=env3,
                           capture_output=True, text=True, check=True).stdout.strip()
     assert Path(out3).parent == tmp_path / "mine" / "numba"
+
+
+def test_train_and_jobs_define_no_kernel():
+    """The digest covers the packages that hold kernels; a kernel in ``train`` or ``jobs`` would need
+    its package added to ``numba_cache.PACKAGES`` (numba used for anything else, such as capping its
+    threads, is fine)."""
+    import ast
+
+    kernel_decorators = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "jitclass", "generated_jit", "overload",
+                         "register_jitable", "overload_method", "intrinsic"}
+
+    def name(node):
+        node = node.func if isinstance(node, ast.Call) else node
+        return node.attr if isinstance(node, ast.Attribute) else getattr(node, "id", "")
+
+    root = Path(numba_cache.__file__).resolve().parents[1]
+    found = []
+    for pkg in ("train", "jobs"):
+        for path in (root / pkg).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and any(
+                        name(d) in kernel_decorators for d in node.decorator_list):
+                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert not found, f"compiled kernels outside {numba_cache.PACKAGES}: {found}"
