@@ -27,7 +27,7 @@ from azimut_env.tracks import TRACK_NAMES
 from jobs.campaign.args import arg_seeds
 from jobs.campaign.engine import EXECUTORS, resolve_executor, run_tasks
 from jobs.eval.campaign import episode_task, episode_tasks
-from jobs.eval.command import DEFAULT_CONTROLLERS, DEFAULT_TRACKS
+from jobs.eval.command import DEFAULT_TRACKS
 
 __all__ = ["add_arguments", "check_args", "run"]
 
@@ -36,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from jobs.args import arg_choice_list, arg_float, arg_int
 
     parser.add_argument("--controllers", type=arg_choice_list(("icr", "twist", "twist-setpoint", "feedforward")),
-                        default=list(DEFAULT_CONTROLLERS),
+                        default=["icr", "twist"],  # its results page's campaign (not azimut eval's default)
                         help="comma-separated controllers (default: icr,twist)")
     parser.add_argument("--tracks", type=arg_choice_list(TRACK_NAMES), default=list(DEFAULT_TRACKS),
                         help="comma-separated tracks (default: all six)")

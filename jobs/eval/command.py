@@ -54,8 +54,9 @@ from jobs.eval.video import VIDEO_FORMATS, check_video_format
 __all__ = ["DEFAULT_CONTROLLERS", "POLICY_PREFIXES", "MOVING_MU", "EpisodeLog", "moving_mask", "episode_metrics",
            "is_policy", "arg_controllers", "write_plots", "write_report", "add_arguments", "run"]
 
-#: the controllers ``azimut eval`` compares by default
-DEFAULT_CONTROLLERS = ("icr", "twist")
+#: the controllers ``azimut eval`` compares by default: the ICR controller and both twist
+#: baselines (the plain WPILib-style one and the setpoint generator, the strongest)
+DEFAULT_CONTROLLERS = ("icr", "twist", "twist-setpoint")
 #: Default evaluation order: the paper track first.
 DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
 
@@ -110,7 +111,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated controllers: icr, twist, twist-setpoint, feedforward, trained policies "
                              "ppo:PATH or sac:PATH (the model.zip azimut train wrote; ppo:NAME=PATH names it, default "
                              "the run folder's name), or package.module:Class, a controller of yours (default: "
-                             "icr,twist)")
+                             f"{','.join(DEFAULT_CONTROLLERS)})")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_tracks,
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: these, paper first), "
                              f"and scenarios among {', '.join(SCENARIO_NAMES)}, scaled to the robot ('suite': all six "

@@ -124,3 +124,21 @@ def test_sim_paper_robot_follows_the_file_and_the_flag(tmp_path):
                            (["--robot-file", str(path), "--imperfections", "ideal"], RobotParams()),
                            (["--robot", "swerve"], RobotParams.preset("swerve"))):
         assert _robot(parser.parse_args(argv)) == expected, argv
+
+
+def test_eval_compares_the_icr_controller_with_both_twist_baselines_by_default():
+    """The main job's report has the strongest twist baseline (the setpoint generator) beside the
+    plain one; bench-campaign keeps the two-controller campaign its results page measured."""
+    import argparse
+
+    from jobs.bench_campaign import add_arguments as bench_arguments
+    from jobs.eval.command import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args([])
+    assert list(args.controllers) == ["icr", "twist", "twist-setpoint"]
+    assert args.tracks == ["paper", "circle", "figure8", "square", "crab", "random"]
+    bench = argparse.ArgumentParser()
+    bench_arguments(bench)
+    assert bench.parse_args([]).controllers == ["icr", "twist"]
