@@ -58,9 +58,18 @@ class TrainedPolicy:
                        self.clip_obs).astype(np.float32)
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, A) for raw observations (N, D)."""
-        action, _ = self.model.predict(self.normalize(np.asarray(obs, dtype=np.float32)), deterministic=deterministic)
-        return action
+        """Actions (N, A) for raw observations (N, D).
+
+        Deterministic actions are computed one row at a time: a batched matrix product rounds
+        differently with the batch's size (PyTorch's CPU kernels block by it; 2.4e-7 apart at N = 33
+        for a PPO policy), so a robot's action, and with it its whole closed-loop episode, would
+        depend on which other episodes share its vector env. Row by row, an episode of a batch is
+        the episode stepped alone, bit for bit. Sampled actions keep the batch."""
+        x = self.normalize(np.asarray(obs, dtype=np.float32))
+        if not deterministic or x.ndim != 2 or x.shape[0] <= 1:
+            action, _ = self.model.predict(x, deterministic=deterministic)
+            return action
+        return np.concatenate([self.model.predict(x[i:i + 1], deterministic=True)[0] for i in range(x.shape[0])])
 
 
 def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") -> TrainedPolicy:
@@ -86,6 +95,9 @@ def load_policy(path: str | Path, algo: str | None = None, device: str = "cpu") 
         raise ValueError(f"{meta_file}: unreadable run record ({type(exc).__name__})") from None
     if not isinstance(meta, dict):
         raise ValueError(f"{meta_file}: not a run record (a JSON {type(meta).__name__})")
+    if algo and meta.get("algo") in ("ppo", "sac") and algo != meta["algo"]:
+        raise ValueError(f"{path}: trained with {meta['algo'].upper()} ({meta_file}), not {algo.upper()}: "
+                         f"load it as {meta['algo']}:PATH")
     algo = algo or meta.get("algo")
     if algo not in ("ppo", "sac"):
         raise ValueError(f"{path}: unknown algorithm {algo!r} (give ppo:PATH or sac:PATH)")
