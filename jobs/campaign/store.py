@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -99,11 +100,34 @@ class TaskStore:
         os.replace(tmp, p)  # atomic: a reader sees the old file or the whole new one
 
     def clear(self) -> None:
-        """Remove every task record (a campaign started without resume)."""
+        """Remove the task records, traces and temporary files a store wrote (a campaign started
+        without resume): files named as a store names them (``<label>-<12 hex digits>.json`` or
+        ``.npz``, ``.<name>.<pid>.tmp``); a ``.json`` only if it is a task record of its own id.
+        Anything else in the folder is the user's and stays."""
         if self.folder.is_dir():
             for p in self.folder.iterdir():
-                if p.is_file() and (p.suffix in (".json", ".npz", ".tmp")):
+                if p.is_file() and _written_by_a_store(p):
                     p.unlink()
+
+
+_RECORD_NAME = re.compile(r"^.+-[0-9a-f]{12}\.(json|npz)$")
+_TMP_NAME = re.compile(r"^\..+\.\d+\.tmp$")
+
+
+def _written_by_a_store(p: Path) -> bool:
+    """Whether ``p`` is a file :class:`TaskStore` writes: a record (its JSON holds its own id), a
+    trace next to the records (``<task id>.npz``) or a temporary file of :meth:`TaskStore.save`."""
+    if _TMP_NAME.match(p.name):
+        return True
+    if not _RECORD_NAME.match(p.name):
+        return False
+    if p.suffix == ".npz":
+        return True
+    try:
+        rec = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(rec, dict) and rec.get("id") == p.stem and "fn" in rec and "key" in rec
 
 
 def _json_default(obj: Any):

@@ -37,7 +37,7 @@ from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
 from jobs.campaign.task import canonical, file_digest
 from jobs.eval.controllers import build_controller, check_controllers
-from jobs.eval.outputs import episode_label, output_layout
+from jobs.eval.outputs import episode_label, is_own_plot, output_layout
 from jobs.eval.plots import comparison_plots, write_plots
 from jobs.eval.report import SCENARIO_COLUMNS, SUMMARY_COLUMNS, limits_text, write_campaign_report
 from jobs.records import provenance
@@ -340,7 +340,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     geom, limits = env0.geometry, env0.limits
     if not args.resume and plot_dir.is_dir():
         for p in plot_dir.glob("*.png"):
-            p.unlink()
+            if is_own_plot(p.name):
+                p.unlink()
 
     export = getattr(args, "export", None)
 

@@ -7,7 +7,17 @@ import argparse
 import re
 from collections.abc import Sequence
 
-__all__ = ["episode_label", "output_layout"]
+__all__ = ["episode_label", "is_own_plot", "output_layout"]
+
+#: the endings of the PNG files :mod:`jobs.eval.plots` writes (one run's five, a track's two comparisons)
+PLOT_ENDINGS = ("_trajectory.png", "_beta_pairs.png", "_qua.png", "_icr_sphere.png", "_commands.png",
+                "_slip_force.png")
+
+
+def is_own_plot(name: str) -> bool:
+    """Whether a file in ``OUT/plots`` is named as :mod:`jobs.eval.plots` names its PNGs (a new run
+    without ``--resume`` removes those, and leaves any other file there)."""
+    return name.endswith(PLOT_ENDINGS)
 
 
 def episode_label(name: str, track: str, seed: int) -> str:
