@@ -165,7 +165,38 @@ def check_args(args: argparse.Namespace) -> None:
         raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3, paper imperfections) "
                          "only")
     args.controller_names = check_controllers(list(args.controllers), args.speed_scale)
+    _check_policy_robots(args)
     campaign.check_args(args)
+
+
+def _check_policy_robots(args: argparse.Namespace) -> None:
+    """``ValueError`` (one line) if a trained policy is evaluated on another robot than the one it
+    learned (its run's ``env_kwargs``: robot and imperfections; a policy acts on the geometry,
+    limits and imperfections it was trained with, and elsewhere it drives a robot it never saw
+    without a word)."""
+    from jobs.args import robot_env_kwargs
+    from jobs.eval.campaign import _robot_params
+    from jobs.eval.controllers import build_controller
+
+    def said(robot: str | None, imperfections: str | None) -> str:
+        imp = f"imperfections {imperfections}" if imperfections else "its own imperfections"
+        return f"{robot or 'azimut3'} ({imp})"
+
+    want = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None),
+                            getattr(args, "imperfections", None))
+    evaluated = None
+    for spec in args.controllers:
+        if not is_policy(spec):
+            continue
+        trained = dict(getattr(build_controller(spec, args.speed_scale), "env_kwargs", None) or {})
+        t_robot, t_imp = trained.get("robot"), trained.get("imperfections")
+        if (t_robot, t_imp) == (want.get("robot"), want.get("imperfections")):
+            continue
+        evaluated = evaluated if evaluated is not None else _robot_params(want.get("robot"), want.get("imperfections"))
+        if _robot_params(t_robot, t_imp) != evaluated:
+            raise ValueError(f"argument --controllers: {spec}: trained on the robot {said(t_robot, t_imp)}, not on "
+                             f"the evaluated {said(want.get('robot'), want.get('imperfections'))}; evaluate it with "
+                             "the --robot/--robot-file/--imperfections it learned")
 
 
 def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
