@@ -289,3 +289,24 @@ def test_auto_executor_is_processes_on_one_machine_and_ray_with_an_address():
     assert resolve_executor("auto", 2, None) == "process"  # faster than a local Ray instance here
     if ray_available():
         assert resolve_executor("auto", 2, "auto") == "ray"
+
+
+def test_a_new_eval_removes_only_what_eval_wrote(tmp_path):
+    """Without --resume, azimut eval clears its own records and plots from OUT, and leaves every
+    other file there (a user's figure.png and data.json were deleted)."""
+    out = tmp_path / "out"
+    (out / "plots").mkdir(parents=True)
+    (out / "episodes").mkdir()
+    mine = [out / "plots" / "figure.png", out / "episodes" / "data.json", out / "episodes" / "notes-0123456789ab.json"]
+    for p in mine:
+        p.write_text(json.dumps({"id": "not-this-file"}))
+    argv = ["eval", "--controllers", "twist", "--tracks", "crab", "--max-time", "0.3", "--out", str(out)]
+    assert main(argv) == 0
+    written = sorted(p.name for p in (out / "plots").glob("*.png") if p.name != "figure.png")
+    records = sorted(p.name for p in (out / "episodes").iterdir() if p not in mine)
+    assert written and records
+    stale = out / "plots" / "old_crab_trajectory.png"  # named as eval names its plots: a previous run's
+    stale.write_bytes(b"")
+    assert main(argv) == 0
+    assert all(p.is_file() for p in mine) and not stale.exists()
+    assert sorted(p.name for p in (out / "episodes").iterdir() if p not in mine) == records

@@ -100,3 +100,32 @@ def test_eval_resume_after_retraining_at_the_same_path_recomputes(tmp_path, caps
     PPO("MlpPolicy", make_sb3_env("raw", 1, "paper"), seed=123, device="cpu").save(str(model))  # "retrained"
     assert main(argv + ["--resume"]) == 0 and "[1/1]" in capsys.readouterr().out  # a new episode
     assert main(argv + ["--resume"]) == 0 and "[1/1]" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("robot_args", [["--robot", "swerve"], ["--imperfections", "ideal"]],
+                         ids=["another-preset", "other-imperfections"])
+def test_a_policy_on_another_robot_than_it_learned_is_refused(good_run, tmp_path, capsys, robot_args):
+    """The run learned the default robot (azimut3 with the paper's imperfections): evaluating it on
+    another is refused in one line, before any episode, and nothing is written."""
+    out = tmp_path / "eval"
+    code = main(["eval", "--controllers", f"ppo:{good_run}", "--tracks", "circle", "--max-time", "0.2", "--no-plots",
+                 "--out", str(out), *robot_args])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "trained on the robot azimut3" in err
+    assert not out.exists()
+
+
+def test_the_same_robot_named_another_way_is_accepted(good_run, tmp_path):
+    """``--robot azimut3``, ``--imperfections paper`` and the shipped azimut3.toml are the default robot."""
+    root = Path(__file__).resolve().parents[2]
+    for robot_args in (["--robot", "azimut3"], ["--imperfections", "paper"],
+                       ["--robot-file", str(root / "azimut_env" / "robots" / "azimut3.toml")]):
+        assert main(["eval", "--controllers", f"ppo:{good_run}", "--tracks", "circle", "--max-time", "0.1",
+                     "--no-plots", "--out", str(tmp_path / robot_args[0].strip("-")), *robot_args]) == 0
+
+
+def test_a_model_loaded_as_the_other_algorithm_is_refused_by_name(good_run, tmp_path, capsys):
+    code = main(["eval", "--controllers", f"sac:{good_run}", "--tracks", "circle", "--max-time", "0.1", "--no-plots",
+                 "--out", str(tmp_path / "eval")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "trained with PPO" in err and "ppo:PATH" in err
