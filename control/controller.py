@@ -128,8 +128,11 @@ def _import(target: str, spec: str) -> Any:
     try:
         mod = importlib.import_module(module)
     except Exception as exc:  # noqa: BLE001 (any import failure is the spec's: one line)
-        raise ControllerSpecError(f"controller {spec!r}: cannot import {module!r} ({type(exc).__name__}: {exc})") \
-            from None
+        hint = ("; the azimut command imports from the installed packages and PYTHONPATH, not from the current "
+                "folder: run it with PYTHONPATH=. or install your package") if isinstance(exc, ModuleNotFoundError) \
+            else ""
+        raise ControllerSpecError(f"controller {spec!r}: cannot import {module!r} "
+                                  f"({type(exc).__name__}: {exc}){hint}") from None
     try:
         return getattr(mod, attr)
     except AttributeError:

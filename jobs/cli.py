@@ -65,8 +65,12 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (_, help_) in commands.items():
         sub.add_parser(name, help=help_, add_help=False)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in commands:
-        if argv and argv[0] not in ("-h", "--help"):
+    if not argv:
+        print(f"azimut: error: a command is required (choose from {', '.join(commands)}; azimut --help)",
+              file=sys.stderr)
+        return 2
+    if argv[0] in ("-h", "--help") or argv[0] not in commands:
+        if argv[0] not in ("-h", "--help"):
             print(f"azimut: error: unknown command {argv[0]!r} (choose from {', '.join(commands)})", file=sys.stderr)
             return 2
         parser.print_help()

@@ -299,3 +299,12 @@ def test_controller_files_by_kind():
 
     assert controller_files("icr") == {} and controller_files("twist") == {}
     assert controller_files("json:dumps") == {"module": json_module.__file__}  # a user's module: its source
+
+
+def test_azimut_without_a_command_is_refused_in_one_line(capsys):
+    """``azimut`` alone exits 2 with one line naming the commands (it printed the help and exited 0)."""
+    from jobs.cli import main as cli_main
+
+    assert cli_main([]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a command is required" in err[0] and "eval" in err[0]
