@@ -58,6 +58,17 @@ def _available() -> dict[str, tuple[str, str]]:
     return out
 
 
+def _compile_notice(name: str) -> None:
+    """One line on stderr when the numba kernels of these sources are not compiled yet (a first
+    run after an install or an update): the first progress line comes a minute or two later. Only
+    on a terminal: a script's or a test's captured stderr keeps its one-line errors."""
+    from estimation.numba_cache import CACHE_DIR
+
+    if CACHE_DIR is not None and sys.stderr.isatty() and not any(CACHE_DIR.glob("*.nbi")):
+        print(f"azimut {name}: compiling the numba kernels (the first run of this version: a minute or two; "
+              f"cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     commands = _available()
@@ -89,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                 cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    _compile_notice(name)
     try:
         return int(module.run(args) or 0)
     except ConnectionError as exc:
