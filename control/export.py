@@ -23,6 +23,7 @@ simulator's estimates bit for bit.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,7 @@ from control.episode import EpisodeLog
 from estimation.geometry import RobotGeometry
 from estimation.hrep import twist_from_eta
 from estimation.logs import ArrayLog, GroundTruth, estimate_log
-from estimation.logs.ros import BagWriter
+from estimation.logs.ros import GEOMETRY_KEY, ROBOT_KEY, BagWriter
 
 __all__ = ["EXPORT_FORMATS", "export_episode", "robot_description", "episode_stamps"]
 
@@ -64,6 +65,12 @@ def _required(log: EpisodeLog) -> None:
             raise ValueError(f"EpisodeLog.{key} must hold one row per logged step ({T}) to export the episode")
 
 
+def geometry_record(geom: RobotGeometry) -> dict:
+    """The geometry an export records (``azimut.geometry``) and ``azimut estimate`` compares."""
+    return {"n": int(geom.n), "alpha": np.asarray(geom.alpha, float).tolist(), "l": np.asarray(geom.l, float).tolist(),
+            "b": np.broadcast_to(np.asarray(geom.b, float), (geom.n,)).tolist()}
+
+
 def export_episode(log: EpisodeLog, path, robot: str = "azimut3", storage: str = "mcap") -> Path:
     """Write ``log`` as a ROS 2 bag directory ``path`` (see the module docstring); ``robot``: the
     episode's robot, a preset's name or a robot file's path (its module names name the joints).
@@ -84,6 +91,8 @@ def export_episode(log: EpisodeLog, path, robot: str = "azimut3", storage: str =
                                 truth=GroundTruth(t_meas, np.asarray(log.pose, dtype=np.float64), "true pose")),
                        methods=("IT",))
     w = BagWriter(path, storage=storage)
+    w.set_custom_data(ROBOT_KEY, str(robot))  # azimut estimate checks its --robot against these
+    w.set_custom_data(GEOMETRY_KEY, json.dumps(geometry_record(geom)))
     w.add_joint_states("/joint_states", t_meas, [f"{m}_steer" for m in modules] + [f"{m}_drive" for m in modules],
                        np.hstack([log.beta_meas, nan]), np.hstack([nan, log.phidot_meas]), frame="base_link")
     w.add_vector3_stamped("/azimut/icr_estimate", t_est, log.lam_hat)

@@ -16,6 +16,7 @@ Tested with rosbags 0.11 (``Writer(path, version=9, storage_plugin=...)``; bare 
 from __future__ import annotations
 
 import heapq
+import json
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -409,6 +410,10 @@ class BagWriter:
             transform=tr(translation=self._vector((pose[i][0], pose[i][1], 0.0)),
                          rotation=self._quaternion(float(pose[i][2]))))]))
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """A string entry of the bag's ``metadata.yaml`` (rosbag2's ``custom_data``)."""
+        self._writer.set_custom_data(key, str(value))
+
     def close(self) -> None:
         """Write every queued series, merged in time order, and close the bag."""
         w = self._writer
@@ -426,3 +431,24 @@ def _stream(order: int, conn, msgtype: str, t_ns: np.ndarray, make) -> Iterator[
     """One series' messages as (time, series order, index, connection, type, maker), in its order."""
     for i, t in enumerate(t_ns.tolist()):
         yield t, order, i, conn, msgtype, make
+
+
+#: the ``custom_data`` keys of an ``azimut eval --export`` bag: the robot's name (a preset) or
+#: file path, and its geometry as JSON (n, alpha, l, b)
+ROBOT_KEY, GEOMETRY_KEY = "azimut.robot", "azimut.geometry"
+
+
+def recorded_robot(path) -> tuple[str, dict] | None:
+    """(robot, geometry) an ``azimut eval --export`` bag folder records in its ``metadata.yaml``,
+    or None (another bag, a bare storage file, no such entries)."""
+    meta = Path(path) / "metadata.yaml"
+    if not meta.is_file():
+        return None
+    try:
+        from ruamel.yaml import YAML
+
+        data = YAML(typ="safe").load(meta.read_text())
+        custom = data["rosbag2_bagfile_information"].get("custom_data") or {}
+        return str(custom[ROBOT_KEY]), json.loads(custom[GEOMETRY_KEY])
+    except (ImportError, OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None

@@ -107,6 +107,29 @@ def _reader_options(args: argparse.Namespace, fmt: str) -> dict:
     return options
 
 
+def _check_recorded_robot(args: argparse.Namespace, geom) -> None:
+    """``ValueError`` (one line) when a bag of ``azimut eval --export`` records another robot than
+    the one given (``--robot``/``--robot-file``, default azimut3): its steering angles read with
+    another geometry give a wrong ICR and odometry without a word."""
+    import numpy as np
+
+    from control.export import geometry_record
+    from estimation.logs.ros import recorded_robot
+
+    rec = recorded_robot(args.log)
+    if rec is None:
+        return
+    robot, recorded = rec
+    given = geometry_record(geom)
+    same = recorded.get("n") == given["n"] and all(
+        np.allclose(np.asarray(recorded.get(k, []), float), given[k], rtol=0.0, atol=1e-12)
+        for k in ("alpha", "l", "b"))
+    if not same:
+        flag = f"--robot-file {robot}" if robot.endswith(".toml") else f"--robot {robot}"
+        raise ValueError(f"{args.log}: exported from the robot {robot} (its metadata.yaml), whose geometry is not "
+                         f"the one given; pass {flag}")
+
+
 def check_args(args: argparse.Namespace) -> None:
     """Open the log (every check that needs no sample: format, topics, entries, columns, joint
     names) and keep it on ``args`` for :func:`run`; refuse flags that do not fit."""
@@ -120,6 +143,8 @@ def check_args(args: argparse.Namespace) -> None:
     geom, modules = robot_geometry(args)
     fmt = args.format or detect_format(args.log)
     options = _reader_options(args, fmt)
+    if fmt == "ros":
+        _check_recorded_robot(args, geom)
     args.source = open_log(args.log, geom, modules, fmt=fmt, **options)
 
 

@@ -103,3 +103,22 @@ def test_eval_export_then_estimate(tmp_path, capsys):
     log = run_episode("twist", "circle", seed=0, max_time=1.0)
     with np.load(tmp_path / "est" / "samples.npz") as z:
         assert np.array_equal(z["lam_IT"][:-1], log.lam_hat[1:]) and np.array_equal(z["mu_IT"][:-1], log.mu_hat[1:])
+
+
+def test_estimate_refuses_a_bag_of_another_robot(tmp_path, capsys):
+    """An export records its robot (metadata.yaml's custom_data); azimut estimate with another
+    robot's geometry is refused in one line naming the right flag (it read a swerve bag with
+    azimut3's geometry: 76% odometry drift, exit 0), and runs with it."""
+    from jobs.cli import main
+
+    out = tmp_path / "eval"
+    assert main(["eval", "--robot", "swerve", "--tracks", "circle", "--controllers", "icr", "--max-time", "0.5",
+                 "--no-plots", "--export", "mcap", "--out", str(out)]) == 0
+    bag = out / "exports" / "icr-circle-s0"
+    capsys.readouterr()
+    argv = ["estimate", str(bag), "--truth-topic", "/ground_truth/pose", "--no-plots", "--out", str(tmp_path / "est")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exported from the robot swerve" in err[0] and "--robot swerve" in err[0]
+    assert not (tmp_path / "est").exists()
+    assert main([*argv, "--robot", "swerve"]) == 0
