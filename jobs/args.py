@@ -12,7 +12,9 @@ numeric checks they share with the constructors are :mod:`azimut_env.validation`
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 
 from azimut_env.validation import check_range
@@ -23,6 +25,14 @@ __all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_
            "robot_env_kwargs", "robot_args_kwargs", "robot_label"]
 
 
+def _scientific_int(text) -> int | None:
+    """The integer a whole number in scientific notation spells (``1e6``, ``2.5E5``), else None."""
+    if not isinstance(text, str) or not re.fullmatch(r"[+-]?\d+(\.\d+)?[eE]\+?\d+", text.strip()):
+        return None
+    v = float(text)
+    return int(v) if math.isfinite(v) and v == int(v) and abs(v) < 2**53 else None
+
+
 def arg_int(min_value: int | None = None, max_value: int | None = None) -> Callable[[str], int]:
     """``type=`` for an integer flag in [min_value, max_value]."""
 
@@ -30,7 +40,9 @@ def arg_int(min_value: int | None = None, max_value: int | None = None) -> Calla
         try:
             v = int(text, 10)
         except (TypeError, ValueError):
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+            v = _scientific_int(text)
+            if v is None:
+                raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if min_value is not None and v < min_value:
             raise argparse.ArgumentTypeError(f"must be >= {min_value}, got {v}")
         if max_value is not None and v > max_value:

@@ -220,6 +220,8 @@ def policy_name(arg: str) -> tuple[str, Path]:
     """(name, path) of the ``ARG`` of ``ppo:ARG`` / ``sac:ARG``: ``NAME=PATH``, or ``PATH`` alone,
     named after its run folder (the folder holding ``run.json``, else the model file's folder)."""
     head, sep, tail = arg.partition("=")
+    if not arg.strip() or (sep and _NAME.match(head) and not tail.strip()):
+        raise ValueError(f"{arg!r}: no model path (give ppo:PATH, sac:PATH or ppo:NAME=PATH)")
     if sep and _NAME.match(head) and tail:
         return head, Path(tail)
     path = Path(arg)

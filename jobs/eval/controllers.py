@@ -45,7 +45,10 @@ def is_policy(spec: str) -> bool:
 
 def _check_policy_file(spec: str) -> None:
     """The model file of a policy spec exists and is a saved model (a zip archive)."""
-    _, path = policy_name(spec.split(":", 1)[1])
+    try:
+        _, path = policy_name(spec.split(":", 1)[1])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     model = model_file(path)
     if not model.is_file():
         raise argparse.ArgumentTypeError(f"{spec}: no model file {path}")
@@ -64,7 +67,10 @@ def arg_controllers(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
     from jobs.eval.agents import expand_seed_folders
 
-    items = expand_seed_folders(items)  # an azimut train --seeds folder: one policy per trained seed
+    try:
+        items = expand_seed_folders(items)  # an azimut train --seeds folder: one policy per trained seed
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     for item in items:
         if is_policy(item):
             _check_policy_file(item)

@@ -308,3 +308,23 @@ def test_azimut_without_a_command_is_refused_in_one_line(capsys):
     assert cli_main([]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "a command is required" in err[0] and "eval" in err[0]
+
+
+def test_integer_flags_take_whole_numbers_in_scientific_notation():
+    """``--steps 1e6`` is how step budgets are written; a fraction stays refused."""
+    from jobs.args import arg_int
+
+    convert = arg_int(1)
+    assert convert("1e6") == 1_000_000 and convert("2.5E5") == 250_000 and convert("300000") == 300_000
+    for bad in ("1.5e0", "1e400", "1e6x", "nan", "0.5"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            convert(bad)
+
+
+@pytest.mark.parametrize("spec", ["ppo:", "ppo:NAME=", "sac: "])
+def test_a_policy_without_a_path_is_refused_by_what_is_missing(spec, tmp_path, capsys):
+    from jobs.cli import main as cli_main
+
+    assert cli_main(["eval", "--controllers", spec, "--tracks", "circle", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no model path" in err[0]
