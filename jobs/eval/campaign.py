@@ -360,19 +360,24 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
             _save_trace(store.folder / f"{task.id}.npz", art["log"])
             rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(art["log"], plot_dir, geom, limits)]
 
+    width = max(len(n) for n in names.values()) if names else 6
+
     def progress(done: int, total: int, task: Task, rec: dict) -> None:
         k = task.key
         if rec["status"] == "ok":
             m = rec["result"]["metrics"]
+            qua = m.get("mean_qua_moving")
+            qua = f"{qua:.4f}" if qua is not None and math.isfinite(qua) else "- (no moving step)"
+            took = (f"batch of {rec['batch']}: {rec['elapsed_s']:.1f} s" if rec.get("batch")
+                    else f"{rec['elapsed_s']:.1f} s")
             msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
                    f"antagonism {m['mean_antagonism_N']:.2f} N, null-space force {m['mean_nullspace_force_N']:.2f} N, "
-                   f"qua moving {m.get('mean_qua_moving', math.nan):.4f}, "
-                   f"limit-exceeded steps {m['limit_violation_steps']}, stop+reconfig {m['reconfigure_events']}, "
-                   f"{rec['elapsed_s']:.1f} s" + (f" (a batch of {rec['batch']})" if rec.get("batch") else ""))
+                   f"qua moving {qua}, limit-exceeded steps {m['limit_violation_steps']}, "
+                   f"stop+reconfig {m['reconfigure_events']}, {took}")
         else:
             msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
         name = names.get(k["controller"], k["controller"])
-        print(f"[{done}/{total}] {name:>6} {k['track']:<8} seed {k['seed']:<3} {msg}",
+        print(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}",
               file=stream, flush=True)
 
     start = time.perf_counter()
