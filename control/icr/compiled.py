@@ -7,8 +7,14 @@ mode's commands of :mod:`control.icr.feasibility`, :mod:`control.icr.modes` and
 in :mod:`control.icr.kernels`), so that it returns the same commands, modes, events and state to
 the bit (``tests/control/test_icr_compiled.py`` checks it on recorded episodes). Two things
 differ in how, not in what: the time scaling tries κ from 1 down and stops at the first feasible
-one (the NumPy version evaluates the whole grid and takes the last feasible one: the same κ), and
-an arc check stops at its first blocked sample.
+one (the NumPy version evaluates the whole grid and takes the last feasible one: the same κ; see
+:mod:`control.icr.kernels_motion`), and an arc check stops at its first blocked sample.
+
+The kernel takes the robot's constants as one named struct (:func:`compiled_constants`), the
+state before and after the step as the fields of :class:`~control.icr.state.ICRBatchState` (two
+tuples), the step's inputs and its outputs (two tuples); each robot's row is copied into a work
+space (:class:`~control.icr.kernel_constants.WS`) and its results copied out, so that no row
+function allocates or takes a view.
 
 Input checks are the NumPy version's, with the same messages (the finiteness checks run inside
 the kernel, before anything is written). A step may cover a subset of the robots (``rows``): the
@@ -24,6 +30,7 @@ from numba import njit
 
 from control.commands import WheelCommand
 from control.icr.config import ICRControllerConfig
+from control.icr.kernel_constants import N_WS, WS, compiled_constants
 from control.icr.kernels import (
     ARC_AXIS,
     ARC_NONE,
@@ -46,28 +53,9 @@ from control.icr.kernels import (
     C_STOP_MU,
     C_STOP_TIMEOUT,
     C_ZERO_MU,
-    L_A_DT,
-    L_ACCEL_LAM,
     L_BRAKE_DT,
-    L_CO_C1,
     L_HEADROOM_WSM,
-    L_MU_ACCEL,
-    L_NEG_WSM_SLACK,
-    L_RC_A,
-    L_RC_BRAKE,
-    L_RC_C1,
-    L_RC_VMAX,
-    L_SAM,
-    L_SAT_C1,
-    L_SRM,
-    L_STEER_LO,
     L_UNLIMITED,
-    L_WA_DT,
-    L_WA_DT_SLACK,
-    L_WAM,
-    L_WSM,
-    L_WSM_SLACK,
-    N_LIM,
     arc_check_row,
     dot3,
     nearest1,
@@ -78,8 +66,7 @@ from control.icr.kernels import (
     steering_difference1,
     steering_row,
     stop_hold_row,
-    stop_normals,
-    unit3,
+    unit_xyz,
     wrap_half1,
 )
 from control.icr.kernels_motion import coordinated_row, reconfigure_row
@@ -95,41 +82,6 @@ _EV_NONE, _EV_KICK = 0, 1  # Event (STOP and AXIS are the arc reason + 1)
 _ERRORS = ("lam_hat contains NaN or inf", "lam_hat is the zero vector, not a point of Λ", "mu_hat contains NaN or inf",
            "beta_meas contains NaN or inf", "phidot_meas contains NaN or inf", "lam_d contains NaN or inf",
            "lam_d is the zero vector, not a point of Λ", "mu_d contains NaN or inf")
-
-
-def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(limit constants (N_LIM,), tuning (20,), κ grid) of the kernel: every constant the NumPy
-    version computes in Python floats, by the same expressions (so with the same bits)."""
-    sam, srm, wsm, wam = (float(limits.steer_accel_max), float(limits.steer_rate_max), float(limits.wheel_speed_max),
-                          float(limits.wheel_accel_max))
-    lim = np.zeros(N_LIM)
-
-    def stop_speed(at: int, accel: float) -> None:
-        lim[at], lim[at + 1], lim[at + 2] = -0.5 * accel * dt, (0.5 * accel * dt) ** 2, 2.0 * accel
-
-    lim[L_SAM], lim[L_SRM], lim[L_WSM], lim[L_WAM] = sam, srm, wsm, wam
-    lim[L_A_DT], lim[L_WA_DT], lim[L_STEER_LO] = sam * dt, wam * dt, geom.steer_min + 1e-9
-    stop_speed(L_SAT_C1, 0.95 * sam)
-    stop_speed(L_CO_C1, 0.8 * sam)
-    lim[L_ACCEL_LAM] = 0.8 * sam
-    a = sam * config.reconfig_accel_fraction
-    lim[L_RC_A], lim[L_RC_VMAX] = a, srm * config.reconfig_rate_fraction
-    stop_speed(L_RC_C1, 0.85 * a)
-    lim[L_RC_BRAKE] = float(np.maximum(a, 0.95 * sam))
-    lim[L_MU_ACCEL] = config.mu_accel_fraction * wam
-    slack = 1.0 - 1e-9
-    lim[L_WSM_SLACK], lim[L_WA_DT_SLACK], lim[L_NEG_WSM_SLACK] = wsm * slack, wam * dt * slack, -wsm * slack
-    lim[L_HEADROOM_WSM] = config.mu_headroom * wsm
-    lim[L_BRAKE_DT] = sam * dt
-    lim[L_UNLIMITED] = 1.0 if geom.unlimited_steering else 0.0
-    tune = np.array([config.zero_mu_tol, config.axis_margin, config.arc_step, np.sin(0.5 * config.axis_margin),
-                     config.stop_hysteresis, config.stop_hold_distance, config.kick_tol, config.stop_mu_tol,
-                     config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
-                     config.reconfig_still_tol, config.reconfig_timeout, config.k_lambda,
-                     float(config.coupling_from_measurement), float(config.mu_own_scale), config.stop_hold_speed,
-                     config.stop_hold_angle, config.stop_hold_margin], dtype=np.float64)
-    return lim, tune, np.linspace(0.0, 1.0, config.n_kappa)
 
 
 @njit(cache=True)
@@ -164,10 +116,11 @@ def _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d) -> int:
 
 
 @njit(cache=True)
-def _must_stop(lam, lam_d, E, P, steer_max, s_unit, tune, unlimited) -> bool:
+def _must_stop(c, ws, lam, lam_d) -> bool:
     """:func:`control.icr.feasibility.must_stop` of one arc."""
-    reason, free, theta = arc_check_row(lam, lam_d, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN], tune[C_ARC_STEP],
-                                        unlimited)
+    tune = c.tune
+    reason, free, theta = arc_check_row(lam, lam_d, c.E, c.P, c.steer_max, c.s_unit, tune[C_SIN_HALF_MARGIN],
+                                        tune[C_ARC_STEP], c.lim[L_UNLIMITED] != 0.0, ws[WS.ARC, :c.b.shape[0]])
     return reason == ARC_AXIS or (reason == ARC_STOP and theta - free >= tune[C_STOP_HYST])
 
 
@@ -183,56 +136,71 @@ def _differs(rlam, ld, md, speed) -> bool:
 
 
 @njit(cache=True)
-def _clamp_mu(lam_d, mu_d, E, P, b, r, steer_max, lim) -> float:
+def _clamp_mu(c, ws, lam_d, mu_d) -> float:
     """:func:`control.icr.feasibility.clamp_mu` of one target (with ``mu_headroom``)."""
-    n = E.shape[0]
-    c = np.empty(n)
-    speed_coefs_row(lam_d, c, False, E, P, b, steer_max, c, np.empty(3), np.empty(n))
+    r, lim = c.r, c.lim
+    n = r.shape[0]
+    coef = ws[WS.C_NOW, :n]
+    speed_coefs_row(lam_d, coef, False, c.E, c.P, c.b, c.steer_max, coef, ws[WS.SCRATCH, :3], ws[WS.BETA_WORK, :n])
     bound = np.inf
     for k in range(n):
-        ck = abs(c[k])
+        ck = abs(coef[k])
         bound = min(bound, lim[L_HEADROOM_WSM] * r[k] / (ck if ck > 0 else np.inf))
     return min(max(mu_d, -bound), bound)
 
 
 @njit(cache=True)
-def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0,
-                 bmeas0, has_bmeas0, held_miss0, mu_hat, beta_meas, lam_d_in, mu_d_in, E, P, b, r, steer_min,
-                 steer_max, s_unit, lim, tune, kappa, dt,
-                 mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1,
-                 has_bmeas1, held_miss1, beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap,
-                 event_out, kappa_out, saturated, held_out) -> None:
-    """The step of the robots ``rows`` (state arrays ``*0`` (N, …) in, ``*1`` out, already copies of
-    ``*0``; the inputs and the per-step outputs are (M, …), row m of them is robot rows[m])."""
+def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
+    """The step of the robots ``rows``: ``c`` the constants; ``state0`` and ``state1`` the fields of
+    the state before and after the step, in :class:`~control.icr.state.ICRBatchState`'s order
+    ((N, …) arrays, ``state1`` already a copy of ``state0``); ``inputs`` (λ̂, μ̂, β, φ̇, λ_d, μ_d)
+    and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c, λ_target, μ_target, axis_cap, event, κ,
+    saturated, held) are (M, …), row m of them is robot rows[m]. Returns 0, or (nothing written)
+    1 + the index of the first failed input check in :data:`_ERRORS`."""
+    (mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0, bmeas0, has_bmeas0,
+     held_miss0) = state0
+    (mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1, has_bmeas1,
+     held_miss1) = state1
+    lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in = inputs
+    beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event_out, kappa_out, saturated, \
+        held_out = outputs
+    code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in)
+    if code:
+        return code
+    E, P, s_unit, normals, lim, tune, dt = c.E, c.P, c.s_unit, c.normals, c.lim, c.tune, c.dt
+    steer_max = c.steer_max
     n = E.shape[0]
     unlimited = lim[L_UNLIMITED] != 0.0
-    ld = np.empty(3)
-    scratch = np.empty(3)
-    hp = np.empty(3)
-    cell = np.empty(3)
-    normals = np.empty((n, 3))
-    stop_normals(E, P, steer_max, normals)
-    bt = np.empty(n)
-    measured_rate = np.zeros(n)
+    ws = np.zeros((N_WS, max(n, 3)))
+    lam, ld, target, hp, cell = ws[WS.LAM, :3], ws[WS.LAM_D, :3], ws[WS.TARGET, :3], ws[WS.HOLD, :3], ws[WS.CELL, :3]
+    s_lam, s_lam_rate, rlam, scratch = ws[WS.S_LAM, :3], ws[WS.S_LAM_RATE, :3], ws[WS.RECONFIG_LAM, :3], \
+        ws[WS.SCRATCH, :3]
+    b0, r0, p0 = ws[WS.BETA0, :n], ws[WS.RATE0, :n], ws[WS.PHIDOT0, :n]
+    lam_o, lam_rate_o, b1, r1, p1 = ws[WS.LAM1, :3], ws[WS.LAM_RATE1, :3], ws[WS.BETA1, :n], ws[WS.RATE1, :n], \
+        ws[WS.PHIDOT1, :n]
+    bt, measured_rate, arc = ws[WS.BETA_TARGET, :n], ws[WS.MEASURED_RATE, :n], ws[WS.ARC, :n]
     for m in range(rows.shape[0]):
         i = rows[m]
-        lam = lam0[i]
+        for j in range(3):
+            lam[j], rlam[j], s_lam[j], s_lam_rate[j] = lam0[i, j], rlam0[i, j], lam0[i, j], lam_rate0[i, j]
+        for k in range(n):
+            b0[k], r0[k], p0[k] = beta0[i, k], rate0[i, k], phidot0[i, k]
         # ---- feasible target (control.icr.feasibility.feasible_target)
-        unit3(lam_d_in[m], scratch)
+        target[0], target[1], target[2] = unit_xyz(lam_d_in[m, 0], lam_d_in[m, 1], lam_d_in[m, 2])
         md = mu_d_in[m]
         zero = abs(md) < tune[C_ZERO_MU]
         if zero:
-            scratch[0], scratch[1], scratch[2] = lam[0], lam[1], lam[2]
+            target[0], target[1], target[2] = lam[0], lam[1], lam[2]
             md = 0.0
-        sign = -1.0 if dot3(lam, scratch) < 0 else 1.0
+        sign = -1.0 if dot3(lam, target) < 0 else 1.0
         for j in range(3):
-            scratch[j] = scratch[j] * sign
+            target[j] = target[j] * sign
         md = md * sign
-        axis_k = project_off_axes_row(scratch, lam, s_unit, tune[C_AXIS_MARGIN], ld)
+        axis_k = project_off_axes_row(target, lam, s_unit, tune[C_AXIS_MARGIN], ld)
         sign = -1.0 if dot3(lam, ld) < 0 else 1.0
         for j in range(3):
             ld[j] = ld[j] * sign
-        md = _clamp_mu(ld, md * sign, E, P, b, r, steer_max, lim)
+        md = _clamp_mu(c, ws, ld, md * sign)
         lam_target[m, 0], lam_target[m, 1], lam_target[m, 2] = ld[0], ld[1], ld[2]
         mu_target[m] = md
         axis_cap[m] = axis_k
@@ -241,21 +209,20 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         mode_time = mode_time0[i] + dt
         events = events0[i]
         has_rl = has_rl0[i]
-        rlam = rlam1[i]  # the copy of rlam0[i]: written below
-        s_lam = np.empty(3)
-        s_lam[0], s_lam[1], s_lam[2] = lam[0], lam[1], lam[2]
         s_mu = mu0[i]
-        s_lam_rate = lam_rate0[i].copy()
         held = False
         held_miss = 0.0
         kicked = False
         for k in range(n):
-            kicked = kicked or abs(wrap_half1(beta_meas[m, k] - beta0[i, k])) > tune[C_KICK]
+            kicked = kicked or abs(wrap_half1(beta_meas[m, k] - b0[k])) > tune[C_KICK]
         running = mode == _RUNNING
         blocked = ARC_NONE
         if running and not zero:
             reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
-                                                tune[C_ARC_STEP], unlimited)
+                                                tune[C_ARC_STEP], unlimited, arc)
+
+            reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
+                                                tune[C_ARC_STEP], unlimited, arc)
             hold = False
             if reason == ARC_STOP:
                 # the hold point: the nearest point of λ's cell, else the arc's last sample
@@ -264,7 +231,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
                 angle = stop_hold_row(lam, ld, normals, tune[C_HOLD_MARGIN], cell)
                 if angle >= 0.0:
                     ok, _, _ = arc_check_row(lam, cell, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
-                                             tune[C_ARC_STEP], unlimited)
+                                             tune[C_ARC_STEP], unlimited, arc)
                     if ok == ARC_NONE:
                         hp[0], hp[1], hp[2] = cell[0], cell[1], cell[2]
                         beyond = angle
@@ -285,7 +252,7 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
             events += 1
             mode = _STOPPING
             mode_time = 0.0
-        if mode == _STOPPING and mu0[i] == 0.0 and norm3(lam_rate0[i]) < 1e-9 and (
+        if mode == _STOPPING and mu0[i] == 0.0 and norm3(s_lam_rate) < 1e-9 and (
                 abs(mu_hat[m]) < tune[C_STOP_MU] or mode_time > tune[C_STOP_TIMEOUT]):
             mode = _RECONFIGURING
             mode_time = 0.0
@@ -297,20 +264,19 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
             bt[k] = 0.0
         if recon:
             if not zero:
-                steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
+                steering_row(rlam, E, P, steer_max, b0, True, bt, scratch)
                 far = 0.0
                 for k in range(n):
-                    far = max(far, abs(steering_difference1(beta0[i, k], bt[k], unlimited)))
-                if far > tune[C_FREEZE] and _must_stop(rlam, ld, E, P, steer_max, s_unit, tune, unlimited) and \
-                        _differs(rlam, ld, md, tune[C_HOLD_SPEED]):
+                    far = max(far, abs(steering_difference1(b0[k], bt[k], unlimited)))
+                if far > tune[C_FREEZE] and _must_stop(c, ws, rlam, ld) and _differs(rlam, ld, md, tune[C_HOLD_SPEED]):
                     rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
-            steering_row(rlam, E, P, steer_max, beta0[i], True, bt, scratch)
+            steering_row(rlam, E, P, steer_max, b0, True, bt, scratch)
             for k in range(n):  # unlimited steering: the nearer angle of each axis
-                bt[k] = nearest1(bt[k], beta0[i, k], unlimited)
+                bt[k] = nearest1(bt[k], b0[k], unlimited)
             settled_cmd = True
             settled_meas = True
             for k in range(n):
-                settled_cmd = settled_cmd and abs(beta0[i, k] - bt[k]) < 1e-6 and abs(rate0[i, k]) < 1e-9
+                settled_cmd = settled_cmd and abs(b0[k] - bt[k]) < 1e-6 and abs(r0[k]) < 1e-9
                 err = abs(wrap_half1(beta_meas[m, k] - bt[k]))
                 still = has_bmeas0[i] and abs(wrap_half1(beta_meas[m, k] - bmeas0[i, k])) < tune[C_STILL_TOL]
                 settled_meas = settled_meas and (err < tune[C_RECONFIG_TOL] or (err < tune[C_HOLD_TOL] and still))
@@ -333,49 +299,49 @@ def _step_kernel(rows, mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_
         if mode == _RECONFIGURING:
             if zero:
                 for k in range(n):
-                    br = rate0[i, k]
-                    bt[k] = beta0[i, k] + np.sign(br) * max(abs(br) - lim[L_BRAKE_DT], 0.0) * dt
+                    br = r0[k]
+                    bt[k] = b0[k] + np.sign(br) * max(abs(br) - lim[L_BRAKE_DT], 0.0) * dt
             use_meas = False
             if tune[C_COUPLING_MEAS] != 0.0:
                 use_meas = has_bmeas0[i]
                 for k in range(n):
                     measured_rate[k] = wrap_half1(beta_meas[m, k] - bmeas0[i, k]) / dt
-            reconfigure_row(beta0[i], rate0[i], phidot0[i], bt, zero, measured_rate, use_meas, b, r, steer_min,
-                            steer_max, lim, dt, beta1[i], rate1[i], phidot1[i])
-            lam1[i, 0], lam1[i, 1], lam1[i, 2] = s_lam[0], s_lam[1], s_lam[2]
-            lam_rate1[i, :] = 0.0
+            reconfigure_row(c, ws, b0, r0, p0, bt, zero, measured_rate, use_meas, b1, r1, p1)
+            lam_o[0], lam_o[1], lam_o[2] = s_lam[0], s_lam[1], s_lam[2]
+            lam_rate_o[:] = 0.0
         else:
             stopping = mode == _STOPPING
             tgt = s_lam if stopping else ld
-            mn, kap, sat = coordinated_row(s_lam, s_mu, s_lam_rate, beta0[i], rate0[i], phidot0[i], tgt,
-                                           0.0 if stopping else md, stopping, E, P, b, r, steer_min, steer_max, lim,
-                                           tune, kappa, dt, lam1[i], lam_rate1[i], beta1[i], rate1[i], phidot1[i])
+            mn, kap, sat = coordinated_row(c, ws, s_lam, s_mu, s_lam_rate, b0, r0, p0, tgt, 0.0 if stopping else md,
+                                           stopping, lam_o, lam_rate_o, b1, r1, p1)
             if stopping and abs(mn) < 1e-9:
                 mn = 0.0
-            if stopping and abs(mn) < 1e-6 * max(1.0, abs(s_mu)) and norm3(lam_rate1[i]) < 1e-6:
+            if stopping and abs(mn) < 1e-6 * max(1.0, abs(s_mu)) and norm3(lam_rate_o) < 1e-6:
                 mn = 0.0
-                lam_rate1[i, :] = 0.0
+                lam_rate_o[:] = 0.0
             mu_new = mn
         mu1[i] = mu_new
+        for j in range(3):
+            lam1[i, j], lam_rate1[i, j], rlam1[i, j] = lam_o[j], lam_rate_o[j], rlam[j] if has_rl else 0.0
         for k in range(n):
-            beta_c[m, k] = beta1[i, k]
-            rate_c[m, k] = rate1[i, k]
-            phidot_c[m, k] = phidot1[i, k]
-            accel[m, k] = (rate1[i, k] - rate0[i, k]) / dt
-            phiddot[m, k] = (phidot1[i, k] - phidot0[i, k]) / dt
+            beta1[i, k], rate1[i, k], phidot1[i, k] = b1[k], r1[k], p1[k]
+            beta_c[m, k] = b1[k]
+            rate_c[m, k] = r1[k]
+            phidot_c[m, k] = p1[k]
+            accel[m, k] = (r1[k] - r0[k]) / dt
+            phiddot[m, k] = (p1[k] - p0[k]) / dt
             bmeas1[i, k] = beta_meas[m, k]
         mode1[i] = mode
         mode_time1[i] = mode_time
         events1[i] = events
         has_rl1[i] = has_rl
-        if not has_rl:
-            rlam[:] = 0.0
         has_bmeas1[i] = True
         held_miss1[i] = held_miss
         event_out[m] = event
         kappa_out[m] = kap
         saturated[m] = sat
         held_out[m] = held
+    return 0
 
 
 def _rows_array(rows, num: int) -> np.ndarray:
@@ -411,7 +377,7 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
         raise ValueError(f"dt must be finite and > 0, got {dt!r}")
     idx = _rows_array(rows, state.num)
     M, n = idx.shape[0], geom.n
-    lam_hat = np.asarray(lam_hat, dtype=np.float64)
+    lam_hat = np.ascontiguousarray(lam_hat, dtype=np.float64)
     if lam_hat.ndim != 2 or lam_hat.shape[1] != 3:
         raise ValueError(f"lam_hat must have shape (N, 3), got {lam_hat.shape}")
     if lam_hat.shape[0] != M:
@@ -425,29 +391,19 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     if lam_d.shape[0] != M:
         raise ValueError(f"lam_d must have shape ({M}, 3)")
     mu_d = _float_rows(mu_d, "mu_d", (M,))
-    code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d)
+    c = constants if constants is not None else compiled_constants(geom, limits, config, dt)
+    fields = state.__dataclass_fields__
+    state0 = tuple(getattr(state, name) for name in fields)
+    state1 = tuple(arr.copy() for arr in state0)
+    outputs = (np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)),
+               np.empty((M, 3)), np.empty(M), np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64), np.empty(M),
+               np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_))
+    code = _step_kernel(idx, c, state0, state1, (lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d), outputs)
     if code:
         raise ValueError(_ERRORS[code - 1])
-    lim, tune, kappa = constants if constants is not None else compiled_constants(geom, limits, config, dt)
-    s = state
-    new = ICRBatchState(mode=s.mode.copy(), lam=s.lam.copy(), mu=s.mu.copy(), lam_rate=s.lam_rate.copy(),
-                        beta=s.beta.copy(), beta_rate=s.beta_rate.copy(), phidot=s.phidot.copy(),
-                        mode_time=s.mode_time.copy(), reconfig_lam=s.reconfig_lam.copy(),
-                        has_reconfig_lam=s.has_reconfig_lam.copy(), events=s.events.copy(),
-                        beta_meas=s.beta_meas.copy(), has_beta_meas=s.has_beta_meas.copy(),
-                        held_miss=s.held_miss.copy())
-    out = [np.empty((M, n)) for _ in range(5)]
-    lam_target, mu_target = np.empty((M, 3)), np.empty(M)
-    axis_cap, event = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)
-    kap, saturated, held = np.empty(M), np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_)
-    _step_kernel(idx, s.mode, s.lam, s.mu, s.lam_rate, s.beta, s.beta_rate, s.phidot, s.mode_time, s.reconfig_lam,
-                 s.has_reconfig_lam, s.events, s.beta_meas, s.has_beta_meas, s.held_miss, mu_hat, beta_meas, lam_d,
-                 mu_d, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_min), float(geom.steer_max),
-                 geom.s_unit, lim, tune, kappa, float(dt),
-                 new.mode, new.lam, new.mu, new.lam_rate, new.beta, new.beta_rate, new.phidot, new.mode_time,
-                 new.reconfig_lam, new.has_reconfig_lam, new.events, new.beta_meas, new.has_beta_meas, new.held_miss,
-                 *out, lam_target, mu_target, axis_cap, event, kap, saturated, held)
+    new = ICRBatchState(*state1)
+    beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event, kap, saturated, held = outputs
     info = {"lam_target": lam_target, "mu_target": mu_target, "axis_cap": axis_cap, "mode": new.mode[idx],
             "events": new.events[idx], "kappa": kap, "saturated": saturated, "event": event, "held_at_stop": held}
-    return new, WheelCommand(beta=out[0], phidot=out[2], beta_rate=out[1], beta_accel=out[3], phiddot=out[4],
+    return new, WheelCommand(beta=beta_c, phidot=phidot_c, beta_rate=rate_c, beta_accel=accel, phiddot=phiddot,
                              info=info)

@@ -23,9 +23,10 @@ from numba import njit
 
 from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _grad_wheel, _speed_coef
 
-__all__ = ["norm3", "unit3", "dot3", "nearest1", "steering_difference1", "sphere_angle3", "slerp3", "wrap_half1",
-           "steering_row", "speed_coefs_row", "arc_check_row", "project_off_axes_row", "safe_stop_speed1", "stop_room1",
-           "saturate_row", "stop_normals", "stop_hold_row", "ARC_NONE", "ARC_STOP", "ARC_AXIS"]
+__all__ = ["norm3", "unit_xyz", "unit3", "dot3", "angle_xyz", "nearest1", "steering_difference1", "sphere_angle3",
+           "slerp3", "wrap_half1", "steering_row", "speed_coefs_row", "arc_check_row", "project_off_axes_row",
+           "safe_stop_speed1", "stop_room1", "saturate_row", "stop_normals", "stop_hold_row", "ARC_NONE", "ARC_STOP",
+           "ARC_AXIS"]
 
 # indices into the limit constants ``lim`` (control.icr.compiled.compiled_constants)
 L_SAM, L_SRM, L_WSM, L_WAM, L_A_DT, L_WA_DT, L_STEER_LO = 0, 1, 2, 3, 4, 5, 6
@@ -62,17 +63,21 @@ def norm3(a) -> float:
 
 
 @njit(cache=True, inline="always")
-def unit3(a, out) -> None:
-    """a/‖a‖ of one row into ``out`` (may be ``a``): :func:`estimation.hrep.unit_and_norm` (the
-    row scaled by the power of two that brings its largest component into [0.5, 1) first), which
-    is bit for bit ``a / np.linalg.norm(a)`` (``control.checks.check_unit_batch``) wherever that
-    neither overflows nor underflows."""
-    _, e = math.frexp(max(abs(a[0]), abs(a[1]), abs(a[2])))
-    s0, s1, s2 = math.ldexp(a[0], -e), math.ldexp(a[1], -e), math.ldexp(a[2], -e)
+def unit_xyz(a0: float, a1: float, a2: float) -> tuple[float, float, float]:
+    """(a₀, a₁, a₂)/‖a‖: :func:`estimation.hrep.unit_and_norm` (the row scaled by the power of two
+    that brings its largest component into [0.5, 1) first), which is bit for bit ``a /
+    np.linalg.norm(a)`` (``control.checks.check_unit_batch``) wherever that neither overflows nor
+    underflows."""
+    _, e = math.frexp(max(abs(a0), abs(a1), abs(a2)))
+    s0, s1, s2 = math.ldexp(a0, -e), math.ldexp(a1, -e), math.ldexp(a2, -e)
     nrm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    out[0] = s0 / nrm
-    out[1] = s1 / nrm
-    out[2] = s2 / nrm
+    return s0 / nrm, s1 / nrm, s2 / nrm
+
+
+@njit(cache=True, inline="always")
+def unit3(a, out) -> None:
+    """a/‖a‖ of one row into ``out`` (may be ``a``): :func:`unit_xyz`."""
+    out[0], out[1], out[2] = unit_xyz(a[0], a[1], a[2])
 
 
 @njit(cache=True, inline="always")
@@ -83,13 +88,19 @@ def cross3(a, b, out) -> None:
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
+@njit(cache=True, inline="always")
+def angle_xyz(a0, a1, a2, b0, b1, b2) -> float:
+    """:func:`estimation.hrep.sphere_angle` of one pair: atan2(‖a × b‖, a·b)."""
+    c0 = a1 * b2 - a2 * b1
+    c1 = a2 * b0 - a0 * b2
+    c2 = a0 * b1 - a1 * b0
+    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a0 * b0 + a1 * b1 + a2 * b2)
+
+
 @njit(cache=True)
 def sphere_angle3(a, b) -> float:
-    """:func:`estimation.hrep.sphere_angle` of one pair: atan2(‖a × b‖, a·b)."""
-    c0 = a[1] * b[2] - a[2] * b[1]
-    c1 = a[2] * b[0] - a[0] * b[2]
-    c2 = a[0] * b[1] - a[1] * b[0]
-    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot3(a, b))
+    """:func:`angle_xyz` of two rows."""
+    return angle_xyz(a[0], a[1], a[2], b[0], b[1], b[2])
 
 
 @njit(cache=True)
@@ -156,18 +167,17 @@ def speed_coefs_row(lam, beta, have_beta, E, P, b, steer_max, out, scratch, beta
         for k in range(E.shape[0]):
             out[k] = _speed_coef(scratch, E, P, b, k, beta[k])
         return
-    lam_u = np.empty(3)
-    steering_row(scratch, E, P, steer_max, beta_work, False, beta_work, lam_u)
+    u0, u1, u2 = unit_xyz(scratch[0], scratch[1], scratch[2])  # steering_row normalises again
     for k in range(E.shape[0]):
+        beta_k, r2 = _beta_wheel(u0, u1, u2, E, P, k, steer_max)
+        beta_work[k] = 0.0 if r2 < SINGULAR_TOL * SINGULAR_TOL else beta_k
         out[k] = _speed_coef(scratch, E, P, b, k, beta_work[k])
 
 
 @njit(cache=True)
-def gradient_norm_max(lam, E, P) -> float:
+def gradient_norm_max(lam, E, P, u, g) -> float:
     """max_k ‖∂F_k/∂λ‖ at λ (normalised first): ``np.max(np.linalg.norm(steering_gradient(λ),
-    axis=-1), axis=-1)`` of one row."""
-    u = np.empty(3)
-    g = np.empty(3)
+    axis=-1), axis=-1)`` of one row. ``u``, ``g``: (3,) work space."""
     unit3(lam, u)
     best = -np.inf
     for k in range(E.shape[0]):
@@ -177,46 +187,57 @@ def gradient_norm_max(lam, E, P) -> float:
 
 
 @njit(cache=True)
-def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step, unlimited):
+def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step, unlimited, beta_prev):
     """:func:`control.icr.feasibility.arc_check_batch` of one arc: (reason code, free [rad],
     theta [rad]). The arc is sampled at m = max(2, ⌈θ/step⌉ + 1) points (the NumPy version pads
     the rows of a batch to the longest; the padding never counts). ``unlimited``: no stop, only
-    the axes block."""
+    the axes block. ``beta_prev``: (n,) work space.
+
+    Each sample is :func:`slerp3` of (λ, λ_d) (its tangent, which every sample shares, computed
+    once), checked against the axes (‖p × ŝ_k‖ < sin(margin/2), interior samples) and steered
+    (:func:`steering_row` of p, a singular wheel at 0)."""
     n = E.shape[0]
-    lam = np.empty(3)
-    lam_d = np.empty(3)
-    unit3(lam_in, lam)
-    unit3(lam_d_in, lam_d)
-    theta = sphere_angle3(lam, lam_d)
+    l0, l1, l2 = unit_xyz(lam_in[0], lam_in[1], lam_in[2])
+    d0, d1, d2 = unit_xyz(lam_d_in[0], lam_d_in[1], lam_d_in[2])
+    theta = angle_xyz(l0, l1, l2, d0, d1, d2)
     m = max(2, np.int64(math.ceil(theta / step)) + 1)
     delta = theta / (m - 1)
-    pt = np.empty(3)
-    cr = np.empty(3)
-    scratch = np.empty(3)
-    beta_prev = np.empty(n)
-    beta_now = np.empty(n)
+    dd = l0 * d0 + l1 * d1 + l2 * d2  # slerp3's tangent
+    t0 = d0 - dd * l0
+    t1 = d1 - dd * l1
+    t2 = d2 - dd * l2
+    tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
     first_axis = m
     first_wrap = m
     for j in range(m):
         angle = theta if j >= m - 1 else j * delta
-        slerp3(lam, lam_d, angle, pt)
+        if tn < 1e-15:
+            p0, p1, p2 = l0, l1, l2
+        else:
+            c, s = math.cos(angle), math.sin(angle)
+            p0 = c * l0 + s * (t0 / tn)
+            p1 = c * l1 + s * (t1 / tn)
+            p2 = c * l2 + s * (t2 / tn)
         if 1 <= j < m - 1:
             for k in range(n):
-                cross3(pt, s_unit[k], cr)
-                if norm3(cr) < sin_half_margin:
+                s0, s1, s2 = s_unit[k, 0], s_unit[k, 1], s_unit[k, 2]
+                c0 = p1 * s2 - p2 * s1
+                c1 = p2 * s0 - p0 * s2
+                c2 = p0 * s1 - p1 * s0
+                if math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) < sin_half_margin:
                     first_axis = j
                     break
-        steering_row(pt, E, P, steer_max, beta_now, False, beta_now, scratch)
-        if j >= 1 and not unlimited:
-            for k in range(n):
-                if abs(beta_now[k] - beta_prev[k]) > np.pi / 2:
-                    first_wrap = j
-                    break
+        u0, u1, u2 = unit_xyz(p0, p1, p2)
+        for k in range(n):
+            beta, r2 = _beta_wheel(u0, u1, u2, E, P, k, steer_max)
+            if r2 < SINGULAR_TOL * SINGULAR_TOL:
+                beta = 0.0
+            if j >= 1 and not unlimited and first_wrap == m and abs(beta - beta_prev[k]) > np.pi / 2:
+                first_wrap = j
+            beta_prev[k] = beta
         # the first blocked sample decides (an axis at j beats a wrap after j; a wrap at j beats an axis at j)
         if first_axis < m or first_wrap < m:
             break
-        for k in range(n):
-            beta_prev[k] = beta_now[k]
     if first_axis == m and first_wrap == m:
         return ARC_NONE, theta, theta
     if first_axis <= first_wrap - 1:
@@ -230,36 +251,41 @@ def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, st
 def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
     """:func:`control.icr.feasibility.project_off_axes_batch` of one target: the projected λ_d
     into ``out``; returns the wheel whose cap held it, or −1."""
-    lam_d = np.empty(3)
-    lam = np.empty(3)
-    unit3(lam_d_in, lam_d)
-    unit3(lam_in, lam)
-    out[0], out[1], out[2] = lam_d[0], lam_d[1], lam_d[2]
-    sk = np.empty(3)
-    through = np.empty(3)
+    d0, d1, d2 = unit_xyz(lam_d_in[0], lam_d_in[1], lam_d_in[2])
+    l0, l1, l2 = unit_xyz(lam_in[0], lam_in[1], lam_in[2])
+    out[0], out[1], out[2] = d0, d1, d2
     for k in range(s_unit.shape[0]):
-        s = s_unit[k]
-        sign = 1.0 if dot3(s, lam_d) >= 0 else -1.0
-        sk[0], sk[1], sk[2] = s[0] * sign, s[1] * sign, s[2] * sign
-        ang = sphere_angle3(sk, lam_d)
+        sign = 1.0 if s_unit[k, 0] * d0 + s_unit[k, 1] * d1 + s_unit[k, 2] * d2 >= 0 else -1.0
+        k0, k1, k2 = s_unit[k, 0] * sign, s_unit[k, 1] * sign, s_unit[k, 2] * sign
+        ang = angle_xyz(k0, k1, k2, d0, d1, d2)
         if ang < margin:
             if ang > 1e-9:
-                through[0], through[1], through[2] = lam_d[0], lam_d[1], lam_d[2]
+                h0, h1, h2 = d0, d1, d2
             else:
-                sg = 1.0 if dot3(lam, sk) >= 0 else -1.0
-                through[0], through[1], through[2] = lam[0] * sg, lam[1] * sg, lam[2] * sg
-            if sphere_angle3(sk, through) < 1e-9:
+                sg = 1.0 if l0 * k0 + l1 * k1 + l2 * k2 >= 0 else -1.0
+                h0, h1, h2 = l0 * sg, l1 * sg, l2 * sg
+            if angle_xyz(k0, k1, k2, h0, h1, h2) < 1e-9:
                 # λ on the axis too (NumPy's 1-d norm may sum in another order here: a measure-zero case)
-                if abs(sk[2]) < 0.9:
-                    t0, t1, t2 = sk[1] * 1.0 - sk[2] * 0.0, sk[2] * 0.0 - sk[0] * 1.0, sk[0] * 0.0 - sk[1] * 0.0
+                if abs(k2) < 0.9:
+                    t0, t1, t2 = k1 * 1.0 - k2 * 0.0, k2 * 0.0 - k0 * 1.0, k0 * 0.0 - k1 * 0.0
                 else:
-                    t0, t1, t2 = sk[1] * 0.0 - sk[2] * 0.0, sk[2] * 1.0 - sk[0] * 0.0, sk[0] * 0.0 - sk[1] * 1.0
+                    t0, t1, t2 = k1 * 0.0 - k2 * 0.0, k2 * 1.0 - k0 * 0.0, k0 * 0.0 - k1 * 1.0
                 tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
                 c1, s1 = math.cos(1.0), math.sin(1.0)
-                through[0] = sk[0] * c1 + t0 / tn * s1
-                through[1] = sk[1] * c1 + t1 / tn * s1
-                through[2] = sk[2] * c1 + t2 / tn * s1
-            slerp3(sk, through, margin, out)
+                h0 = k0 * c1 + t0 / tn * s1
+                h1 = k1 * c1 + t1 / tn * s1
+                h2 = k2 * c1 + t2 / tn * s1
+            # slerp3(sk, through, margin, out)
+            dd = k0 * h0 + k1 * h1 + k2 * h2
+            t0, t1, t2 = h0 - dd * k0, h1 - dd * k1, h2 - dd * k2
+            tn = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            if tn < 1e-15:
+                out[0], out[1], out[2] = k0, k1, k2
+            else:
+                c, s = math.cos(margin), math.sin(margin)
+                out[0] = c * k0 + s * (t0 / tn)
+                out[1] = c * k1 + s * (t1 / tn)
+                out[2] = c * k2 + s * (t2 / tn)
             return k
     return -1
 

@@ -1,13 +1,17 @@
 """The ICR controller's motion primitives compiled, one robot at a time: the numba twins of
 :func:`control.icr.motion.coordinated_step` (with :func:`~control.icr.motion.mu_own_step`) and
 :func:`control.icr.motion.reconfigure_step`, with the same operations in the same order (see
-:mod:`control.icr.kernels`). The step that calls them is :mod:`control.icr.compiled`.
+:mod:`control.icr.kernels`). The step that calls them is :mod:`control.icr.compiled`; the
+constants and the work space ``ws`` they read are :mod:`control.icr.kernel_constants`'.
 
-One difference in how, not in what: the time scaling tries κ from 1 down and stops at the first
-feasible one, the largest (the NumPy version evaluates the whole grid and takes the last feasible
-one: the same κ); when none is, it takes the smallest limit ratio, the lowest κ among equals
-(NumPy's ``argmin``), and a candidate stops being computed once its wheels so far exceed both
-the feasibility bound and the best ratio found (:func:`kappa_ratio`); the chosen candidate is then
+The time scaling differs in how, not in what. The NumPy version evaluates every κ of the grid
+and takes the last feasible one, or, when none is, the smallest limit ratio (the lowest κ among
+equals, NumPy's ``argmin``). Here :func:`kappa_search` tries κ from 1 down and stops at the first
+feasible one, the largest; each candidate stops at its first limit term above the bound (the
+ratio, a maximum of terms, is above the bound exactly when one term is), starting with the
+wheel that ruled out the previous candidate and with the steering terms, which need no
+cos/sin. Only when no κ is feasible does :func:`kappa_fallback` compute the ratios, a candidate
+stopping once its wheels so far exceed the best ratio found. The chosen candidate is then
 computed in full (:func:`kappa_candidate`).
 """
 
@@ -18,6 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
+from control.icr.kernel_constants import WS
 from control.icr.kernels import (
     C_K_LAMBDA,
     C_MU_OWN,
@@ -44,26 +49,30 @@ from control.icr.kernels import (
     dot3,
     gradient_norm_max,
     nearest1,
-    norm3,
     safe_stop_speed1,
     saturate_row,
     speed_coefs_row,
     sphere_angle3,
     steering_row,
     stop_room1,
-    unit3,
+    unit_xyz,
 )
 from estimation.kinematics import SINGULAR_TOL, _beta_wheel, _speed_coef
 
-__all__ = ["coordinated_row", "reconfigure_row", "kappa_candidate", "kappa_ratio", "mu_own_row"]
+__all__ = ["coordinated_row", "reconfigure_row", "kappa_candidate", "kappa_search", "kappa_fallback", "mu_own_row"]
+
+#: a candidate is feasible when its limit ratio is at most this
+FEASIBLE = 1.0 - 1e-9
 
 
 @njit(cache=True)
-def reconfigure_row(beta0, rate0, phidot0, target, exact, measured_rate, use_measured, b, r, steer_min, steer_max, lim,
-                 dt, beta_out, rate_out, phidot_out) -> None:
-    """:func:`control.icr.motion.reconfigure_step` of one robot."""
+def reconfigure_row(c, ws, beta0, rate0, phidot0, target, exact, measured_rate, use_measured, beta_out, rate_out,
+                    phidot_out) -> None:
+    """:func:`control.icr.motion.reconfigure_step` of one robot (``c``: the constants, ``ws``: the
+    work space)."""
     n = beta0.shape[0]
-    want_phidot = np.empty(n)
+    b, r, lim, dt, steer_max = c.b, c.r, c.lim, c.dt, c.steer_max
+    want_phidot = ws[WS.WANT_PHIDOT, :n]
     for k in range(n):
         err = target[k] - beta0[k]
         vstop = lim[L_RC_C1] + math.sqrt(lim[L_RC_C2] + lim[L_RC_C3] * abs(err))
@@ -80,35 +89,141 @@ def reconfigure_row(beta0, rate0, phidot0, target, exact, measured_rate, use_mea
         beta_out[k] = beta
         rate_out[k] = rate
         want_phidot[k] = -b[k] * (measured_rate[k] if use_measured else rate) / r[k]
-    sat_beta, sat_rate = np.empty(n), np.empty(n)
-    saturate_row(beta0, rate0, phidot0, beta_out, want_phidot, steer_min, steer_max, lim, dt, sat_beta, sat_rate,
-                 phidot_out)
+    saturate_row(beta0, rate0, phidot0, beta_out, want_phidot, c.steer_min, steer_max, lim, dt, ws[WS.SAT_BETA, :n],
+                 ws[WS.SAT_RATE, :n], phidot_out)
+
+
+@njit(cache=True, inline="always")
+def candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt):
+    """The λ of candidate κ = ``kq`` (normalised once) and its λ̇ (the tangent v = v_prev + κ
+    (v_des − v_prev), ``p*`` and ``d*``): λ turned by v·dt (:func:`estimation.hrep.exp_map`)."""
+    v0 = p0 + kq * (d0 - p0)
+    v1 = p1 + kq * (d1 - p1)
+    v2 = p2 + kq * (d2 - p2)
+    w0, w1, w2 = v0 * dt, v1 * dt, v2 * dt
+    nv = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    safe = nv if nv > 0 else 1.0
+    cn, sn = math.cos(nv), math.sin(nv)
+    u0, u1, u2 = unit_xyz(cn * l0 + sn * w0 / safe, cn * l1 + sn * w1 / safe, cn * l2 + sn * w2 / safe)
+    return u0, u1, u2, v0, v1, v2
 
 
 @njit(cache=True)
-def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate, phidot, E, P, b, r,
-                     steer_min, steer_max, lim, dt, lam_new, v, beta_new, b_rate, phid, c) -> tuple[float, float, bool]:
+def kappa_search(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot) -> int:
+    """The largest q whose candidate (:func:`kappa_candidate`) is feasible, or −1 (see the module
+    docstring: the same verdicts as the candidates' ratios, in another order)."""
+    E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
+    steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
+    u = ws[WS.U, :3]
+    unlimited = lim[L_UNLIMITED] != 0.0
+    n = beta.shape[0]
+    l0, l1, l2 = lam[0], lam[1], lam[2]
+    p0, p1, p2 = v_prev[0], v_prev[1], v_prev[2]
+    d0, d1, d2 = v_des[0], v_des[1], v_des[2]
+    first = 0  # the wheel that ruled out the previous candidate
+    for q in range(kappa.shape[0] - 1, -1, -1):
+        kq = kappa[q]
+        u0, u1, u2, _, _, _ = candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt)
+        u[0], u[1], u[2] = unit_xyz(u0, u1, u2)  # normalised again, as steering_from_lambda does
+        mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
+        bad = -1
+        for j in range(n):
+            k = first + j
+            if k >= n:
+                k -= n
+            bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
+            if r2 < SINGULAR_TOL * SINGULAR_TOL:
+                bk = beta[k]
+            bk = nearest1(bk, beta[k], unlimited)
+            db = bk - beta[k]
+            if abs(db) > np.pi / 2:
+                bad = k
+                break
+            br = db / dt
+            ba = (br - beta_rate[k]) / dt
+            if abs(ba) / lim[L_SAM] > FEASIBLE or abs(br) / lim[L_SRM] > FEASIBLE:
+                bad = k
+                break
+            room = stop_room1(bk, br, steer_min, steer_max, unlimited)
+            v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
+            if abs(br) / max(v_stop, 1e-12) > FEASIBLE:
+                bad = k
+                break
+            ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
+            phdd = (ph - phidot[k]) / dt
+            if abs(phdd) / lim[L_WAM] > FEASIBLE or abs(ph) / lim[L_WSM] > FEASIBLE:
+                bad = k
+                break
+        if bad < 0:
+            return q
+        first = bad
+    return -1
+
+
+@njit(cache=True)
+def kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot) -> int:
+    """The candidate with the smallest limit ratio (inf where a wheel flips), the lowest κ among
+    equals, when none is feasible. A candidate stops being computed once its wheels so far put it
+    above the best ratio found (it cannot be chosen)."""
+    E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
+    steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
+    u = ws[WS.U, :3]
+    unlimited = lim[L_UNLIMITED] != 0.0
+    n = beta.shape[0]
+    l0, l1, l2 = lam[0], lam[1], lam[2]
+    p0, p1, p2 = v_prev[0], v_prev[1], v_prev[2]
+    d0, d1, d2 = v_des[0], v_des[1], v_des[2]
+    best_q, best_ratio = -1, np.inf
+    for q in range(kappa.shape[0] - 1, -1, -1):
+        threshold = np.inf if best_q < 0 else best_ratio
+        kq = kappa[q]
+        u0, u1, u2, _, _, _ = candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt)
+        u[0], u[1], u[2] = unit_xyz(u0, u1, u2)  # normalised again, as steering_from_lambda does
+        mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
+        ratio = 0.0
+        for k in range(n):
+            bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
+            if r2 < SINGULAR_TOL * SINGULAR_TOL:
+                bk = beta[k]
+            bk = nearest1(bk, beta[k], unlimited)
+            db = bk - beta[k]
+            if abs(db) > np.pi / 2:
+                ratio = np.inf
+                break
+            br = db / dt
+            ba = (br - beta_rate[k]) / dt
+            ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
+            phdd = (ph - phidot[k]) / dt
+            room = stop_room1(bk, br, steer_min, steer_max, unlimited)
+            v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
+            ratio = max(ratio, abs(br) / lim[L_SRM], abs(ba) / lim[L_SAM], abs(ph) / lim[L_WSM],
+                        abs(phdd) / lim[L_WAM], abs(br) / max(v_stop, 1e-12))
+            if ratio > threshold:
+                break
+        if best_q < 0 or ratio <= best_ratio:
+            best_q, best_ratio = q, ratio
+    return best_q
+
+
+@njit(cache=True)
+def kappa_candidate(c, ws, q, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate, phidot, lam_new, v,
+                    beta_new, b_rate, phid, coef) -> tuple[float, float, bool]:
     """One κ of :func:`control.icr.motion.coordinated_step`: the candidate (λ, λ̇, β, β̇, φ̇, c
     written into the arrays) and (μ, its limit ratio, flipped)."""
+    E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
+    steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
+    scratch = ws[WS.SCRATCH, :3]
     n = beta.shape[0]
     kq = kappa[q]
-    vd = np.empty(3)
-    for j in range(3):
-        v[j] = v_prev[j] + kq * (v_des[j] - v_prev[j])
-        vd[j] = v[j] * dt
-    nv = norm3(vd)
-    safe = nv if nv > 0 else 1.0
-    cn, sn = math.cos(nv), math.sin(nv)
-    for j in range(3):
-        lam_new[j] = cn * lam[j] + sn * vd[j] / safe
-    unit3(lam_new, lam_new)
+    lam_new[0], lam_new[1], lam_new[2], v[0], v[1], v[2] = candidate_lambda(
+        kq, lam[0], lam[1], lam[2], v_prev[0], v_prev[1], v_prev[2], v_des[0], v_des[1], v_des[2], dt)
     mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
-    steering_row(lam_new, E, P, steer_max, beta, True, beta_new, vd)
+    steering_row(lam_new, E, P, steer_max, beta, True, beta_new, scratch)
     unlimited = lim[L_UNLIMITED] != 0.0
     if unlimited:  # each wheel's axis at the angle nearest its command: never a flip
         for k in range(n):
             beta_new[k] = nearest1(beta_new[k], beta[k], True)
-    speed_coefs_row(lam_new, beta_new, True, E, P, b, steer_max, c, vd, c)
+    speed_coefs_row(lam_new, beta_new, True, E, P, b, steer_max, coef, scratch, coef)
     flipped = False
     ratio = 0.0
     for k in range(n):
@@ -117,7 +232,7 @@ def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
         br = db / dt
         b_rate[k] = br
         ba = (br - beta_rate[k]) / dt
-        ph = (mu_new * c[k] - b[k] * br) / r[k]
+        ph = (mu_new * coef[k] - b[k] * br) / r[k]
         phid[k] = ph
         phdd = (ph - phidot[k]) / dt
         room = stop_room1(beta_new[k], br, steer_min, steer_max, unlimited)
@@ -128,105 +243,50 @@ def kappa_candidate(q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
 
 
 @njit(cache=True)
-def kappa_ratio(q, kappa, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot, E, P, b, r, steer_min,
-                steer_max, lim, dt, threshold, u) -> float:
-    """The limit ratio of :func:`kappa_candidate`'s candidate q (inf where a wheel flips), or,
-    as soon as the wheels seen so far put it above ``threshold``, that partial maximum (a lower
-    bound above the threshold: the candidate is neither feasible nor a better fallback, and the
-    other wheels need not be computed). The same arithmetic as :func:`kappa_candidate`."""
-    kq = kappa[q]
-    vd = np.empty(3)
-    for j in range(3):
-        vd[j] = (v_prev[j] + kq * (v_des[j] - v_prev[j])) * dt
-    nv = norm3(vd)
-    safe = nv if nv > 0 else 1.0
-    cn, sn = math.cos(nv), math.sin(nv)
-    for j in range(3):
-        u[j] = cn * lam[j] + sn * vd[j] / safe
-    unit3(u, u)  # λ of the candidate
-    unit3(u, u)  # normalised again, as steering_from_lambda and wheel_speed_coefficients do
-    mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
-    unlimited = lim[L_UNLIMITED] != 0.0
-    ratio = 0.0
-    for k in range(beta.shape[0]):
-        bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
-        if r2 < SINGULAR_TOL * SINGULAR_TOL:
-            bk = beta[k]
-        bk = nearest1(bk, beta[k], unlimited)
-        db = bk - beta[k]
-        if abs(db) > np.pi / 2:
-            return np.inf
-        br = db / dt
-        ba = (br - beta_rate[k]) / dt
-        ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
-        phdd = (ph - phidot[k]) / dt
-        room = stop_room1(bk, br, steer_min, steer_max, unlimited)
-        v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
-        ratio = max(ratio, abs(br) / lim[L_SRM], abs(ba) / lim[L_SAM], abs(ph) / lim[L_WSM], abs(phdd) / lim[L_WAM],
-                    abs(br) / max(v_stop, 1e-12))
-        if ratio > threshold:
-            return ratio
-    return ratio
-
-
-@njit(cache=True)
-def coordinated_row(lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_first, E, P, b, r, steer_min, steer_max,
-                 lim, tune, kappa, dt, lam_out, lam_rate_out, beta_out, rate_out, phidot_out):
-    """:func:`control.icr.motion.coordinated_step` of one robot: writes λ, λ̇, β_c, β̇_c, φ̇_c;
-    returns (μ, κ, saturated)."""
+def coordinated_row(c, ws, lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_first, lam_out, lam_rate_out,
+                    beta_out, rate_out, phidot_out):
+    """:func:`control.icr.motion.coordinated_step` of one robot (``c``: the constants, ``ws``: the
+    work space): writes λ, λ̇, β_c, β̇_c, φ̇_c; returns (μ, κ, saturated)."""
+    E, P, b, r, lim, tune, kappa, dt = c.E, c.P, c.b, c.r, c.lim, c.tune, c.kappa, c.dt
     n = beta.shape[0]
     theta = sphere_angle3(lam, lam_d)
-    gmax = gradient_norm_max(lam, E, P)
+    gmax = gradient_norm_max(lam, E, P, ws[WS.U, :3], ws[WS.G, :3])
     accel_lam = lim[L_ACCEL_LAM] / max(gmax, 1e-6)
     speed = min(min(tune[C_K_LAMBDA] * theta, math.sqrt(2.0 * accel_lam * theta)), theta / dt)
     d = dot3(lam, lam_d)
-    v_des = np.empty(3)
+    v_des = ws[WS.V_DES, :3]
     for j in range(3):
         v_des[j] = lam_d[j] - d * lam[j]
-    tn = norm3(v_des)
+    tn = math.sqrt(v_des[0] * v_des[0] + v_des[1] * v_des[1] + v_des[2] * v_des[2])
     for j in range(3):
         v_des[j] = v_des[j] / tn * speed if tn > 1e-15 else 0.0
     dv = dot3(lam_rate, lam)
-    v_prev = np.empty(3)
+    v_prev = ws[WS.V_PREV, :3]
     for j in range(3):
         v_prev[j] = lam_rate[j] - dv * lam[j]
-    c_now = np.empty(n)
-    speed_coefs_row(lam, c_now, False, E, P, b, steer_max, c_now, np.empty(3), np.empty(n))
+    c_now = ws[WS.C_NOW, :n]
+    speed_coefs_row(lam, c_now, False, E, P, b, c.steer_max, c_now, ws[WS.SCRATCH, :3], ws[WS.BETA_WORK, :n])
     inv = np.inf
     for k in range(n):
         ck = abs(c_now[k])
         inv = min(inv, r[k] / (ck if ck > 0 else np.inf))
     accel_mu = lim[L_MU_ACCEL] * inv
     mu_des = mu + min(max(mu_d - mu, -accel_mu * dt), accel_mu * dt)
-    # κ from 1 down: the first feasible one is the largest (NumPy: the last feasible of the grid);
-    # none feasible: the smallest ratio, the lowest κ among equals (NumPy's argmin)
-    nk = kappa.shape[0]
-    lam_new, v, beta_new, b_rate, phid, c = np.empty(3), np.empty(3), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    best_q, best_ratio, found = -1, np.inf, False
-    u = np.empty(3)
-    for q in range(nk - 1, -1, -1):
-        # a candidate above both the feasibility bound and the best fallback so far cannot be chosen
-        threshold = np.inf if best_q < 0 else max(1.0 - 1e-9, best_ratio)
-        ratio = kappa_ratio(q, kappa, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot, E, P, b, r,
-                            steer_min, steer_max, lim, dt, threshold, u)
-        if ratio <= 1.0 - 1e-9:
-            best_q, found = q, True
-            break
-        if best_q < 0 or ratio <= best_ratio:
-            best_q, best_ratio = q, ratio
-    mu_c, ratio, flipped = kappa_candidate(best_q, kappa, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate,
-                                            phidot, E, P, b, r, steer_min, steer_max, lim, dt, lam_new, v, beta_new,
-                                            b_rate, phid, c)
-    for j in range(3):
-        lam_out[j] = lam_new[j]
-        lam_rate_out[j] = v[j]
-    for k in range(n):
-        beta_out[k], rate_out[k], phidot_out[k] = beta_new[k], b_rate[k], phid[k]
-    if tune[C_MU_OWN] != 0.0:
-        mu_c = mu_own_row(mu_c, mu_des, c, rate_out, phidot, found and not mu_first, b, r, lim, phidot_out)
+    best_q = kappa_search(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot)
+    found = best_q >= 0
     if not found:
-        want = beta if flipped else beta_out.copy()
-        saturate_row(beta, beta_rate, phidot, want, phidot_out.copy(), steer_min, steer_max, lim, dt, beta_out,
+        best_q = kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot)
+    coef = ws[WS.C, :n]
+    mu_c, ratio, flipped = kappa_candidate(c, ws, best_q, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate,
+                                           phidot, lam_out, lam_rate_out, beta_out, rate_out, phidot_out, coef)
+    if tune[C_MU_OWN] != 0.0:
+        mu_c = mu_own_row(mu_c, mu_des, coef, rate_out, phidot, found and not mu_first, b, r, lim, phidot_out)
+    if not found:
+        want, want_phidot = ws[WS.WANT_BETA, :n], ws[WS.WANT_PHIDOT, :n]
+        for k in range(n):
+            want[k] = beta[k] if flipped else beta_out[k]
+            want_phidot[k] = phidot_out[k]
+        saturate_row(beta, beta_rate, phidot, want, want_phidot, c.steer_min, c.steer_max, lim, dt, beta_out,
                      rate_out, phidot_out)
     return mu_c, kappa[best_q], not found
 
