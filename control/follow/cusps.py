@@ -59,7 +59,14 @@ def cusp_table(track: Track) -> np.ndarray:
     pts = np.stack([xy[:, 0], xy[:, 1], track.progress_radius * track.heading], axis=1)
     m = pts.shape[0]
     rows = []
-    for i in range(1, m - 1):
+    # only samples that may be cusps go through the exact test below: a neighbour closer than twice
+    # the bridging step, or a turn not clearly under 90° (a superset of the test's hits, so the
+    # table is the loop's over every sample; a reset of a random track ran ~1,200 norms before)
+    da_all, db_all = xy[1:-1] - xy[:-2], xy[2:] - xy[1:-1]
+    na, nb = np.hypot(da_all[:, 0], da_all[:, 1]), np.hypot(db_all[:, 0], db_all[:, 1])
+    dots = da_all[:, 0] * db_all[:, 0] + da_all[:, 1] * db_all[:, 1]
+    maybe = (na < 2 * CUSP_MIN_STEP) | (nb < 2 * CUSP_MIN_STEP) | (dots <= 1e-9 * na * nb)
+    for i in (np.flatnonzero(maybe) + 1).tolist():
         j = i - 1
         while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
             j -= 1

@@ -149,3 +149,45 @@ def test_icr_controller_finishes_the_scenarios_it_stalled_on(robot, tracks):
         assert log.completed, log.track.name
         assert not np.any(log.violations)
         assert log.events <= 11, (log.track.name, log.events)
+
+
+def _cusps_every_sample(track):
+    """:func:`control.follow.cusps.cusp_table`'s test run at every interior sample (its definition)."""
+    from control.follow.cusps import CUSP_MIN_STEP
+
+    xy = track.xy
+    pts = np.stack([xy[:, 0], xy[:, 1], track.progress_radius * track.heading], axis=1)
+    rows = []
+    for i in range(1, len(xy) - 1):
+        j, k = i - 1, i + 1
+        while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
+            j -= 1
+        while k < len(xy) - 1 and np.linalg.norm(xy[k] - xy[i]) < CUSP_MIN_STEP:
+            k += 1
+        da, db = xy[i] - xy[j], xy[k] - xy[i]
+        if min(np.linalg.norm(da), np.linalg.norm(db)) < CUSP_MIN_STEP or float(da @ db) >= 0.0:
+            continue
+        a, b = pts[i] - pts[j], pts[k] - pts[i]
+        rows.append([float(i), float(track.s[i] - track.s[j]), float(track.s[k] - track.s[i]),
+                     *(a / np.linalg.norm(a)), *(b / np.linalg.norm(b))])
+    return np.array(rows, dtype=np.float64).reshape(-1, 9)
+
+
+def test_the_cusp_table_is_the_test_at_every_sample():
+    """The table examines only the samples its vectorised pre-filter keeps; it equals the test run
+    at every sample on the built-in tracks, every scenario of every preset and random tracks."""
+    from azimut_env.params import RobotParams
+    from azimut_env.tracks import make_track
+    from azimut_env.tracks.scenarios import SCENARIO_NAMES, scenario_track
+    from control.follow.cusps import cusp_table
+
+    tracks = [make_track(n) for n in ("paper", "circle", "figure8", "square", "crab")]
+    tracks += [make_track("random", rng=np.random.default_rng(s)) for s in range(10)]
+    tracks += [scenario_track(n, RobotParams.preset(p)) for p in ("azimut3", "swerve", "tri", "hex")
+               for n in SCENARIO_NAMES]
+    found = 0
+    for track in tracks:
+        table = cusp_table(track)
+        assert np.array_equal(table, _cusps_every_sample(track))
+        found += len(table)
+    assert found > 0
