@@ -147,3 +147,40 @@ def test_polygons_that_are_not_simple_are_refused(vertices, match):
     env.reset(seed=1)
     with pytest.raises(ValueError, match="obstacles"):
         env.reset(options={"obstacles": [vertices]})
+
+
+#: simple polygons on which pymunk's convex decomposition (Chipmunk, C) crashed the process
+CRASHED_PYMUNK = [
+    [(-0.28891080050347995, 3), (-1, 2.0), (-0.6702968446597817, 2.0), (-2, -2.861487582129209),
+     (-1.2456805406537976, 3.0), (-1, 2.3925741437791155)],
+    [(2.5272828658178117, -0.6577404539074374), (0, 1.0681781928406346), (1.540886530541604, 1e-10),
+     (-5e-324, -0.29913870336074755), (-5e-324, 2.0), (3, 1.924981365932668)],
+    [(0.0, -2.6903782705055166), (0.0, -3.0), (1e-300, 5e-324), (2, -3), (2.0309769145280994, 1.0756497583284554),
+     (-1, 2), (-1, 1.4239151422302774), (-0.0, 2.2250738585072014e-308)],
+]
+
+
+def test_polygons_that_crashed_the_convex_decomposition_split_or_are_refused():
+    """Each is split into convex counter-clockwise parts covering its area, or refused with a
+    ValueError, in a child process (a regression would be a segmentation fault, not a failure)."""
+    import json
+    import subprocess
+    import sys
+
+    code = (
+        "import json, sys, numpy as np\n"
+        "from azimut_env.physics.polygons import convex_parts, signed_area\n"
+        "for poly in json.loads(sys.argv[1]):\n"
+        "    try:\n"
+        "        parts = convex_parts(poly)\n"
+        "    except ValueError as exc:\n"
+        "        print('refused', exc); continue\n"
+        "    area = abs(signed_area(np.array(poly, dtype=float)))\n"
+        "    assert all(signed_area(np.array(p)) > 0 for p in parts)\n"
+        "    assert abs(sum(signed_area(np.array(p)) for p in parts) - area) <= 1e-9 * area\n"
+        "    print('split', len(parts))\n")
+    out = subprocess.run([sys.executable, "-c", code, json.dumps(CRASHED_PYMUNK)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert len(out.stdout.splitlines()) == len(CRASHED_PYMUNK)
+    assert out.stdout.count("split") >= 1
