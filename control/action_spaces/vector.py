@@ -164,23 +164,31 @@ class VectorControllerAction(gym.vector.VectorWrapper):
         a = np.clip(a, -1.0, 1.0)
         base = self.env.unwrapped
         base.check_can_step()  # what the env would refuse, before any controller or target state moves
-        beta = base.measured_beta
-        N, n = beta.shape
-        beta_c, phidot_c = beta.copy(), np.zeros((N, n))  # autoreset this step: the action is ignored
-        modes = np.full(N, -1, dtype=np.int64)
-        exceeded = np.zeros(N, dtype=np.bool_)
-        held = np.zeros(N, dtype=np.bool_)
-        lag = np.zeros(N)
+        N = self.num_envs
         active = np.flatnonzero(~self._pending)
-        if active.size:
-            cmd = self.controller.command(base, a[active], active)
-            beta_c[active], phidot_c[active] = cmd.beta, cmd.phidot
-            modes[active] = cmd.info["controller_mode"]
-            exceeded[active] = cmd.info["limit_exceeded"]
-            held[active] = cmd.info["target_held"]
-            lag[active] = cmd.info["mu_lag"]
+        if active.size == N:  # every robot commanded (no autoreset pending): the command's arrays as they are
+            cmd = self.controller.command(base, a, active)
+            beta_c, phidot_c = cmd.beta, cmd.phidot
+            modes, exceeded = cmd.info["controller_mode"], cmd.info["limit_exceeded"]
+            held, lag = cmd.info["target_held"], cmd.info["mu_lag"]
             if self.controller.icr is not None:
                 self.last_command = cmd
+        else:
+            beta = base.measured_beta
+            beta_c, phidot_c = beta.copy(), np.zeros(beta.shape)  # autoreset this step: the action is ignored
+            modes = np.full(N, -1, dtype=np.int64)
+            exceeded = np.zeros(N, dtype=np.bool_)
+            held = np.zeros(N, dtype=np.bool_)
+            lag = np.zeros(N)
+            if active.size:
+                cmd = self.controller.command(base, a[active], active)
+                beta_c[active], phidot_c[active] = cmd.beta, cmd.phidot
+                modes[active] = cmd.info["controller_mode"]
+                exceeded[active] = cmd.info["limit_exceeded"]
+                held[active] = cmd.info["target_held"]
+                lag[active] = cmd.info["mu_lag"]
+                if self.controller.icr is not None:
+                    self.last_command = cmd
         obs, reward, terminated, truncated, info = self.env.step(base.action_from_setpoints(beta_c, phidot_c))
         if self.correction_cost:
             cost = np.zeros(N)

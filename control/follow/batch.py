@@ -394,19 +394,29 @@ class BatchFollower:
         st[FS.PROGRESS], st[FS.HAS_PROGRESS] = (0.0, 0.0) if progress is None else (progress, 1.0)
         st[FS.HOLD_NEXT] = hold_next
 
-    def step_all(self, poses: np.ndarray, rows: np.ndarray | None = None) -> FollowerBatchOutput:
-        """Every output of the robots ``rows`` (default all) at ``poses`` (N, 3) [m, m, rad]."""
+    def _run(self, poses: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+        """The kernel's (len(rows), len(FO)) outputs of the robots ``rows`` (default all)."""
         rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.int64)
         out = np.empty((rows.size, len(FO)))
         follow_kernel(self._packs, self._stops, self._holds, self._cusps, self.tracks, self.cfg, self.state,
                       np.ascontiguousarray(poses, dtype=np.float64), rows, self.dt, out)
+        return out
+
+    def step_all(self, poses: np.ndarray, rows: np.ndarray | None = None) -> FollowerBatchOutput:
+        """Every output of the robots ``rows`` (default all) at ``poses`` (N, 3) [m, m, rad]."""
+        return self.outputs(self._run(poses, rows))
+
+    @staticmethod
+    def outputs(out: np.ndarray) -> FollowerBatchOutput:
+        """The named outputs of the kernel's (M, len(FO)) array."""
         return FollowerBatchOutput(out[:, FO.TWIST_X:FO.TWIST_W + 1].copy(), out[:, FO.LAM_U:FO.LAM_W + 1].copy(),
                                    out[:, FO.MU].copy(), out[:, FO.PROGRESS].copy(), out[:, FO.FINISHED] != 0,
                                    out[:, FO.HOLDING] != 0)
 
     def step(self, poses: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Chassis-frame twist targets (len(rows), 3) for the robots ``rows`` at ``poses`` (N, 3)."""
-        return self.step_all(poses, rows).twist
+        """Chassis-frame twist targets (len(rows), 3) for the robots ``rows`` at ``poses`` (N, 3)
+        (:meth:`step_all`'s ``twist``, without building its other outputs)."""
+        return self._run(poses, rows)[:, FO.TWIST_X:FO.TWIST_W + 1].copy()
 
     @property
     def progress(self) -> np.ndarray:

@@ -54,18 +54,19 @@ class _Recorder:
     def __init__(self, monkeypatch):
         self.calls: list = []
         rec = self
-        step_all, reset = BatchFollower.step_all, BatchFollower.reset
+        run, reset = BatchFollower._run, BatchFollower.reset
 
-        def recording_step(batch, poses, rows=None):
-            out = step_all(batch, poses, rows)
-            rec.calls.append(("step", batch, np.array(poses), None if rows is None else np.array(rows), out))
+        def recording_step(batch, poses, rows=None):  # every step (step_all and step) runs the kernel here
+            out = run(batch, poses, rows)
+            rec.calls.append(("step", batch, np.array(poses), None if rows is None else np.array(rows),
+                              BatchFollower.outputs(out.copy())))
             return out
 
         def recording_reset(batch, i, track, progress, config=None):
             rec.calls.append(("reset", batch, i, track, progress, config or batch.config))
             return reset(batch, i, track, progress, config)
 
-        monkeypatch.setattr(BatchFollower, "step_all", recording_step)
+        monkeypatch.setattr(BatchFollower, "_run", recording_step)
         monkeypatch.setattr(BatchFollower, "reset", recording_reset)
 
     def check(self) -> int:
