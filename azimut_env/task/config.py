@@ -52,7 +52,7 @@ class TaskConfig:
             of the env's own (``max_episode_steps`` of the vector env, or a ``TimeLimit``, still apply).
         max_lateral_error: lateral error that ends the episode [m].
         lookahead_count: K reference points in the observation. lookahead_spacing: their spacing
-            [m of progress]. start_noise: uniform start pose noise [m, rad].
+            [m of progress]. start_noise: uniform start pose noise [m, rad], 0 to 10.
         action_latency: command latency k [control periods] (default 0): the set-points of the
             action given at step t drive the motors during step t + k (a per-robot FIFO, emptied
             at each reset; for the first k steps of an episode the motors hold the reset
@@ -96,7 +96,9 @@ class TaskConfig:
                                            max_value=10_000))
         fix("domain_randomization", check_range("domain_randomization", self.domain_randomization, 0.0, 0.5))
         fix("reward_weights", check_reward_weights(self.reward_weights))
-        for name in ("start_noise", "stall_time", "time_limit_factor"):
+        # a start within 10 m and rad of the track's pose (a larger one drew from an overflowing range)
+        fix("start_noise", check_range("start_noise", self.start_noise, 0.0, 10.0) + 0.0)  # -0.0 as 0.0
+        for name in ("stall_time", "time_limit_factor"):
             fix(name, check_nonnegative(name, getattr(self, name)))
         for name in ("lateral_scale", "heading_scale", "antagonism_cap", "stall_distance"):
             fix(name, check_positive(name, getattr(self, name)))

@@ -184,3 +184,17 @@ def test_polygons_that_crashed_the_convex_decomposition_split_or_are_refused():
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(out.stdout.splitlines()) == len(CRASHED_PYMUNK)
     assert out.stdout.count("split") >= 1
+
+
+@pytest.mark.parametrize("value, ok", [(8.98846567431158e307, False), (10.5, False), (-1.0, False), (-0.0, True),
+                                       (10.0, True)])
+def test_start_noise_is_refused_beyond_its_range_and_minus_zero_starts(value, ok):
+    """The start noise drew from ±start_noise: 9e307 overflowed numpy's range (OverflowError at
+    reset) and -0.0 was an empty range (ValueError at reset); both found by the fuzz tests."""
+    if not ok:
+        with pytest.raises(ValueError, match="start_noise"):
+            AzimutEnv(start_noise=value)
+        return
+    env = AzimutEnv(start_noise=value)
+    env.reset(seed=0)
+    assert env.config.start_noise == abs(value)
