@@ -25,7 +25,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["PACKAGES", "CACHE_DIR", "source_digest", "cache_dir", "configure"]
+__all__ = ["PACKAGES", "CACHE_DIR", "source_digest", "cache_dir", "configure", "structref_constructor"]
 
 #: the packages whose sources key the cache: those that define compiled kernels (the layers below
 #: ``train`` and ``jobs`` in ARCHITECTURE.md's order)
@@ -89,6 +89,23 @@ def configure() -> Path | None:
     os.environ["_AZIMUT_NUMBA_CACHE_BASE"] = str(base)
     config.CACHE_DIR = str(path)
     return path
+
+
+def structref_constructor(struct_type, names, filename: str, module: str):
+    """The cached compiled constructor of a numba ``StructRef`` type, ``new(*fields)`` with the
+    fields ``names`` in order: its source is generated from the field table and compiled as if in
+    ``filename`` (the caller's module ``module``), under a name that hashes the source, so that
+    numba's disk cache keys it by its fields (a kernel's struct and its table stay one concept)."""
+    from numba import njit
+    from numba.experimental import structref
+
+    names = list(names)
+    src = (f"def _new({', '.join(names)}):\n    st = structref.new(_TYPE)\n"
+           + "".join(f"    st.{name} = {name}\n" for name in names) + "    return st\n")
+    name = "_new_" + hashlib.sha256(src.encode()).hexdigest()[:16]
+    namespace = {"structref": structref, "_TYPE": struct_type, "__name__": module}
+    exec(compile(src.replace("def _new(", f"def {name}("), filename, "exec"), namespace)
+    return njit(cache=True)(namespace[name])
 
 
 CACHE_DIR = configure()

@@ -39,6 +39,7 @@ from azimut_env.task.sensors import _measure_kernel
 from azimut_env.task.termination import check_track_limits
 from azimut_env.tracks import TQ, query_batch_kernel
 from estimation.estimate import IT_PAPER, _eta_it_rows
+from estimation.numba_cache import structref_constructor
 from estimation.quality import QUALITY_F
 
 __all__ = ["TaskArrays", "FIELDS", "task_arrays", "observe_kernel", "sense", "estimate", "track",
@@ -150,18 +151,8 @@ _TYPE = TaskArraysType([(name, typ) for name, typ, _ in FIELDS])
 _NAMES = [name for name, _, _ in FIELDS]
 
 
-def _constructor():
-    """The cached compiled constructor, ``new(*fields)`` in :data:`FIELDS` order (its source is
-    generated from the table; numba caches it under a name that hashes it)."""
-    src = (f"def _new({', '.join(_NAMES)}):\n    st = structref.new(_TYPE)\n"
-           + "".join(f"    st.{name} = {name}\n" for name in _NAMES) + "    return st\n")
-    name = "_new_" + hashlib.sha256(src.encode()).hexdigest()[:16]
-    namespace = {"structref": structref, "_TYPE": _TYPE, "__name__": __name__}
-    exec(compile(src.replace("def _new(", f"def {name}("), __file__, "exec"), namespace)
-    return njit(cache=True)(namespace[name])
-
-
-_NEW = _constructor()
+#: the cached compiled constructor, ``new(*fields)`` in :data:`FIELDS` order
+_NEW = structref_constructor(_TYPE, _NAMES, __file__, __name__)
 
 # plain-int columns (numba folds them; the IntEnums stay the names)
 _WS_BETA, _MS_THETA, _MS_PHI, _MS_PHIDOT = int(WS.BETA), int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)

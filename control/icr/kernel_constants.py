@@ -15,11 +15,10 @@ step: its rows are named (:class:`WS`), a function reads the rows it needs.
 
 from __future__ import annotations
 
-import hashlib
 from enum import IntEnum
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.experimental import structref
 
 from control.icr.config import ICRControllerConfig
@@ -50,6 +49,7 @@ from control.icr.kernels import (
 )
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
+from estimation.numba_cache import structref_constructor
 
 __all__ = ["ICRConstants", "compiled_constants", "WS", "N_WS"]
 
@@ -90,18 +90,8 @@ _TYPE = ICRConstantsType([(name, typ) for name, typ, _ in FIELDS])
 _NAMES = [name for name, _, _ in FIELDS]
 
 
-def _constructor():
-    """The cached compiled constructor, ``new(*fields)`` in :data:`FIELDS` order (its source is
-    generated from the table; numba caches it under a name that hashes it)."""
-    src = (f"def _new({', '.join(_NAMES)}):\n    st = structref.new(_TYPE)\n"
-           + "".join(f"    st.{name} = {name}\n" for name in _NAMES) + "    return st\n")
-    name = "_new_" + hashlib.sha256(src.encode()).hexdigest()[:16]
-    namespace = {"structref": structref, "_TYPE": _TYPE, "__name__": __name__}
-    exec(compile(src.replace("def _new(", f"def {name}("), __file__, "exec"), namespace)
-    return njit(cache=True)(namespace[name])
-
-
-_NEW = _constructor()
+#: the cached compiled constructor, ``new(*fields)`` in :data:`FIELDS` order
+_NEW = structref_constructor(_TYPE, _NAMES, __file__, __name__)
 
 
 def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig,
