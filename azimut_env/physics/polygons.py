@@ -42,7 +42,7 @@ def _is_convex(v: np.ndarray) -> bool:
 def _segments_cross(p1, p2, q1, q2) -> bool:
     """True if the closed segments p1p2 and q1q2 share a point."""
     def orient(a, b, c):
-        v = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        v = _cross(a, b, c)
         return (v > 0) - (v < 0)
 
     def on(a, b, c):  # c on segment ab, given collinear

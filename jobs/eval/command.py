@@ -174,29 +174,29 @@ def _check_policy_robots(args: argparse.Namespace) -> None:
     learned (its run's ``env_kwargs``: robot and imperfections; a policy acts on the geometry,
     limits and imperfections it was trained with, and elsewhere it drives a robot it never saw
     without a word)."""
+    policies = [spec for spec in args.controllers if is_policy(spec)]
+    if not policies:
+        return
+    from azimut_env.task.config import resolve_params
     from jobs.args import robot_env_kwargs
-    from jobs.eval.campaign import _robot_params
     from jobs.eval.controllers import build_controller
 
-    def said(robot: str | None, imperfections: str | None) -> str:
-        imp = f"imperfections {imperfections}" if imperfections else "its own imperfections"
-        return f"{robot or 'azimut3'} ({imp})"
+    def params(kw: dict):  # the resolved robot, so that a preset, its file and its default compare equal
+        return resolve_params(None, None, 1.0, kw.get("robot"), kw.get("imperfections"))
+
+    def said(kw: dict) -> str:
+        imp = kw.get("imperfections")
+        return f"{kw.get('robot') or 'azimut3'} ({f'imperfections {imp}' if imp else 'its own imperfections'})"
 
     want = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None),
                             getattr(args, "imperfections", None))
-    evaluated = None
-    for spec in args.controllers:
-        if not is_policy(spec):
-            continue
+    evaluated = params(want)
+    for spec in policies:
         trained = dict(getattr(build_controller(spec, args.speed_scale), "env_kwargs", None) or {})
-        t_robot, t_imp = trained.get("robot"), trained.get("imperfections")
-        if (t_robot, t_imp) == (want.get("robot"), want.get("imperfections")):
-            continue
-        evaluated = evaluated if evaluated is not None else _robot_params(want.get("robot"), want.get("imperfections"))
-        if _robot_params(t_robot, t_imp) != evaluated:
-            raise ValueError(f"argument --controllers: {spec}: trained on the robot {said(t_robot, t_imp)}, not on "
-                             f"the evaluated {said(want.get('robot'), want.get('imperfections'))}; evaluate it with "
-                             "the --robot/--robot-file/--imperfections it learned")
+        if params(trained) != evaluated:
+            raise ValueError(f"argument --controllers: {spec}: trained on the robot {said(trained)}, not on the "
+                             f"evaluated {said(want)}; evaluate it with the --robot/--robot-file/--imperfections "
+                             "it learned")
 
 
 def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
