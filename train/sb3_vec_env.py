@@ -80,8 +80,8 @@ class AzimutSB3VecEnv(VecEnv):
         dones = terminated | truncated
         infos = self._split_info(info.get("final_info", info) if dones.any() else info)
         timeout = truncated & ~terminated
-        for i in range(self.num_envs):
-            infos[i]["TimeLimit.truncated"] = bool(timeout[i])
+        for sub, flag in zip(infos, timeout.tolist()):
+            sub["TimeLimit.truncated"] = flag
         if dones.any():
             final_obs = info["final_obs"]
             for i in np.flatnonzero(dones):
@@ -94,9 +94,9 @@ class AzimutSB3VecEnv(VecEnv):
         for key in ("progress", "lateral_error", "heading_error", "slip_power", "antagonism", "nullspace_force",
                     "off_track", "finished", "stalled", "controller_mode"):
             values = info.get(key)
-            if values is not None:
-                for i in range(self.num_envs):
-                    out[i][key] = values[i].item()
+            if values is not None:  # tolist: Python scalars, as .item() of each element, in one call
+                for sub, value in zip(out, np.asarray(values).tolist()):
+                    sub[key] = value
         if "error" in info:
             for i in np.flatnonzero(info["_error"]):
                 out[i]["error"] = info["error"][i]

@@ -38,6 +38,15 @@ def latest_checkpoint(out: Path) -> Path | None:
     return ckpts[-1] if ckpts else None
 
 
+def _fused_adam(hp: dict) -> dict:
+    """``hp`` with Adam's fused kernel asked for (unless ``policy_kwargs.optimizer_kwargs`` says
+    otherwise): the same update as the per-parameter loop PyTorch runs on CPU by default, in one
+    call per step; an implementation choice, not a hyperparameter (``run.json`` records ``hp``)."""
+    kw = dict(hp.get("policy_kwargs") or {})
+    kw["optimizer_kwargs"] = {"fused": True, **(kw.get("optimizer_kwargs") or {})}
+    return {**hp, "policy_kwargs": kw}
+
+
 def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
           eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
           resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
@@ -87,7 +96,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
         print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
     else:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
-        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **hp)
+        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **_fused_adam(hp))
     formats = ["csv"] + ([] if quiet else ["stdout"])
     try:
         import tensorboard  # noqa: F401

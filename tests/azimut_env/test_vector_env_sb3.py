@@ -36,6 +36,23 @@ def test_sb3_semantics_terminal_observation_and_time_limit():
         AzimutSB3VecEnv(venv=AzimutVectorEnv(num_envs=2))
 
 
+def test_split_infos_are_python_scalars_equal_to_each_element():
+    env = AzimutSB3VecEnv(num_envs=3)
+    env.seed(2)
+    env.reset()
+    _, _, _, infos = env.step(np.full((3, 8), 0.3, dtype=np.float32))
+    for key in ("progress", "lateral_error", "slip_power", "antagonism", "nullspace_force", "off_track", "stalled"):
+        for i in range(3):
+            value = infos[i][key]
+            assert type(value) in (float, bool, int), (key, type(value))
+    assert infos[0]["TimeLimit.truncated"] is False
+    info = {"progress": np.array([0.5, 1.0, 2.0]), "finished": np.array([True, False, True])}
+    split = env._split_info(info)
+    for i in range(3):
+        assert split[i] == {"progress": info["progress"][i].item(), "finished": info["finished"][i].item()}
+        assert type(split[i]["finished"]) is bool and type(split[i]["progress"]) is float
+
+
 def test_sb3_ppo_learns_a_few_hundred_steps():
     env = VecMonitor(AzimutSB3VecEnv(num_envs=4, max_episode_steps=40))
     model = PPO("MlpPolicy", env, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")

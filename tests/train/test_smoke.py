@@ -45,6 +45,12 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
     assert np.isfinite(row["return"]) and log.t.size > 0
     evals = json.loads((out / "evaluations.json").read_text())
     assert evals[-1]["final"] and evals[-1]["rows"][0]["track"] == "crab"
+    # Adam's fused kernel is asked for, and run.json's hyperparameters stay the ones given
+    from stable_baselines3 import PPO, SAC
+    model = (PPO if algo == "ppo" else SAC).load(str(out / "model.zip"), device="cpu")
+    optimizers = [model.policy.optimizer] if algo == "ppo" else [model.actor.optimizer, model.critic.optimizer]
+    assert all(opt.defaults["fused"] for opt in optimizers)
+    assert "optimizer_kwargs" not in json.loads((out / "run.json").read_text())["hyperparams"].get("policy_kwargs", {})
 
 
 def test_resume_continues_from_the_checkpoint(tmp_path):
