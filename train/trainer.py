@@ -4,11 +4,12 @@
 campaign (:mod:`jobs.training.seeds`) run; both import it from here. The run folder ``out``
 gets ``model.zip`` + ``vecnormalize.pkl`` (the final policy and its observation/reward
 normalisation), ``best_model.zip`` + ``best_vecnormalize.pkl`` (highest mean return on the
-evaluation tracks), ``checkpoints/``, ``evaluations.json`` (the periodic evaluations, with the
-``azimut eval`` metrics), ``progress.csv`` and TensorBoard logs (``tb/``, if ``tensorboard`` is
-installed) and ``run.json`` (arguments, hyperparameters and their file version, wall time and
-steps/s inside ``learn``). Defaults come from the versioned hyperparameter files
-(``train/hyperparams/{ppo,sac}.json``, one entry per action space). Needs the ``rl`` extra.
+evaluation tracks), ``checkpoints/`` (every ``checkpoint_every`` steps; absent if none was due),
+``evaluations.json`` (the periodic evaluations, with the ``azimut eval`` metrics),
+``progress.csv`` and TensorBoard logs (``tb/``, if ``tensorboard`` is installed) and ``run.json``
+(arguments, hyperparameters and their file version, wall time and steps/s inside ``learn``).
+Defaults come from the versioned hyperparameter files (``train/hyperparams/{ppo,sac}.json``, one
+entry per action space). Needs the ``rl`` extra.
 """
 
 from __future__ import annotations
@@ -119,6 +120,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     model.learn(total_timesteps=steps, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
                 progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
     learn_s = time.perf_counter() - t0
+    ckpt_dir = out / "checkpoints"
+    if ckpt_dir.is_dir() and not any(ckpt_dir.iterdir()):
+        ckpt_dir.rmdir()  # a run shorter than checkpoint_every: no empty folder left behind
     done_steps = model.num_timesteps - start_steps
     model.save(str(out / "model.zip"))
     venv.save(str(out / "vecnormalize.pkl"))

@@ -53,6 +53,16 @@ def test_train_save_load_evaluate(tmp_path, algo, action):
     assert "optimizer_kwargs" not in json.loads((out / "run.json").read_text())["hyperparams"].get("policy_kwargs", {})
 
 
+def test_a_run_shorter_than_checkpoint_every_leaves_no_empty_checkpoints_folder(tmp_path):
+    from train.trainer import train
+
+    out = tmp_path / "short"
+    train("ppo", "raw", "random", seed=0, steps=64, out=out, num_robots=2, eval_tracks=("crab",),
+          eval_every=0, checkpoint_every=10_000, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1},
+          quiet=True, env_kwargs=SHORT, eval_max_time=0.5)
+    assert (out / "model.zip").is_file() and not (out / "checkpoints").exists()
+
+
 def test_resume_continues_from_the_checkpoint(tmp_path):
     from train.trainer import train
 
