@@ -7,11 +7,13 @@ import argparse
 import re
 from collections.abc import Sequence
 
-__all__ = ["episode_label", "is_own_plot", "output_layout"]
+__all__ = ["PLOT_ENDING", "episode_label", "is_own_plot", "output_layout"]
 
-#: the endings of the PNG files :mod:`jobs.eval.plots` writes (one run's five, a track's two comparisons)
-PLOT_ENDINGS = ("_trajectory.png", "_beta_pairs.png", "_qua.png", "_icr_sphere.png", "_commands.png",
-                "_slip_force.png")
+#: the ending of each PNG file :mod:`jobs.eval.plots` writes, by plot (one run's five, a track's two
+#: comparisons: ``compare_<track>`` + the trajectory's or the slip force's ending)
+PLOT_ENDING = {"trajectory": "_trajectory.png", "beta_pairs": "_beta_pairs.png", "qua": "_qua.png",
+               "icr_sphere": "_icr_sphere.png", "commands": "_commands.png", "slip_force": "_slip_force.png"}
+PLOT_ENDINGS = tuple(PLOT_ENDING.values())
 
 
 def is_own_plot(name: str) -> bool:

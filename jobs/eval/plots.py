@@ -13,6 +13,7 @@ import numpy as np
 
 from control.episode import EpisodeLog
 from control.icr.config import Mode
+from jobs.eval.outputs import PLOT_ENDING
 
 __all__ = ["write_plots", "comparison_plots"]
 
@@ -78,7 +79,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
             ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"trajectory: {what}")
-    _save(fig, out, f"{stem}_trajectory.png", files, 110)
+    _save(fig, out, stem + PLOT_ENDING["trajectory"], files, 110)
     # 2. pairwise β projections against the constraining surface (Fig. 10)
     surf = _surface_samples(geom)
     pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
@@ -94,7 +95,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     axes[0, 0].legend(fontsize=7, markerscale=5)
     fig.suptitle(f"measured steering angles against the constraining surface S(λ): {what}")
     fig.tight_layout()
-    _save(fig, out, f"{stem}_beta_pairs.png", files, 110)
+    _save(fig, out, stem + PLOT_ENDING["beta_pairs"], files, 110)
     # 3. qua over time (Fig. 11), the stops shaded
     fig, ax = plt.subplots(figsize=(8, 3))
     _shade_stops(ax, log)
@@ -104,7 +105,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
     ax.legend(fontsize=7, loc="lower left")
     ax.set_title(f"quality of the measured steering configuration: {what}")
-    _save(fig, out, f"{stem}_qua.png", files, 110)
+    _save(fig, out, stem + PLOT_ENDING["qua"], files, 110)
     # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
     fig, ax = plt.subplots(figsize=(5, 5))
     th = np.linspace(0, 2 * np.pi, 200)
@@ -120,7 +121,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     ax.set_ylabel("v (second component of λ̂)")
     ax.legend(fontsize=6, loc="lower left")
     ax.set_title(f"estimated ICR λ̂ = (u, v, w), unit sphere seen from above (w ≥ 0):\n{what}", fontsize=9)
-    _save(fig, out, f"{stem}_icr_sphere.png", files, 110)
+    _save(fig, out, stem + PLOT_ENDING["icr_sphere"], files, 110)
     # 5. wheel commands against their limits
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
     for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "steering rate β̇_c [rad/s]"),
@@ -138,7 +139,7 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     axes[0].legend(fontsize=7, loc="upper right", ncol=5)
     axes[-1].set_xlabel("t [s]")
     axes[0].set_title(f"wheel commands and their limits: {what}")
-    _save(fig, out, f"{stem}_commands.png", files, 110)
+    _save(fig, out, stem + PLOT_ENDING["commands"], files, 110)
     return files
 
 
@@ -156,7 +157,7 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
             ax.plot(tr["pose"][:, 0], tr["pose"][:, 1], color=f"C{i}", lw=1.2, label=controller)
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"trajectories on {track}")
-    _save(fig, out, f"compare_{track}_trajectory.png", files, 100)
+    _save(fig, out, f"compare_{track}" + PLOT_ENDING["trajectory"], files, 100)
 
     series = (("slip_power", "slip power Σ|F·v_slip| [W]"), ("antagonism", "antagonism [N]"),
               ("nullspace_force", "null-space force [N]"))
@@ -171,7 +172,7 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
     axes[0].legend(fontsize=8, loc="upper right")
     axes[0].set_title(f"slip, antagonism and null-space force over time on {track}")
     fig.tight_layout()
-    _save(fig, out, f"compare_{track}_slip_force.png", files, 100)
+    _save(fig, out, f"compare_{track}" + PLOT_ENDING["slip_force"], files, 100)
     return files
 
 
