@@ -114,15 +114,17 @@ class HeldOutEvalCallback(BaseCallback):
 
 
 class WallClockLimit(BaseCallback):
-    """Stop ``learn`` after ``seconds`` of wall time (the budget of a training run)."""
+    """Stop ``learn`` after ``seconds`` of wall time (a guard; ``fired`` says it stopped it)."""
 
     def __init__(self, seconds: float) -> None:
         super().__init__()
         self.seconds = float(seconds)
         self._start = 0.0
+        self.fired = False
 
     def _on_training_start(self) -> None:
         self._start = time.perf_counter()
 
     def _on_step(self) -> bool:
-        return time.perf_counter() - self._start < self.seconds
+        self.fired = time.perf_counter() - self._start >= self.seconds
+        return not self.fired

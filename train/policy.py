@@ -222,6 +222,8 @@ def policy_name(arg: str) -> tuple[str, Path]:
     head, sep, tail = arg.partition("=")
     if not arg.strip() or (sep and _NAME.match(head) and not tail.strip()):
         raise ValueError(f"{arg!r}: no model path (give ppo:PATH, sac:PATH or ppo:NAME=PATH)")
+    if sep and not head.strip():
+        raise ValueError(f"{arg!r}: no name before '=' (give ppo:NAME=PATH, or ppo:PATH)")
     if sep and _NAME.match(head) and tail:
         return head, Path(tail)
     path = Path(arg)

@@ -26,10 +26,13 @@ from typing import Any
 from azimut_env import ENV_ID
 from train.envs import action_key
 
-__all__ = ["EVAL_TRACKS", "latest_checkpoint", "train"]
+__all__ = ["EVAL_TRACKS", "RUN_ARGS", "check_resume", "checkpoint_steps", "latest_checkpoint", "train"]
 
 #: the built-in tracks a run can be evaluated on, the default two first
 EVAL_TRACKS = ("circle", "figure8", "square", "crab", "paper")
+
+#: the file a new run writes in its folder before learning: what ``--resume`` must match
+RUN_ARGS = "train_args.json"
 
 
 def latest_checkpoint(out: Path) -> Path | None:
@@ -37,6 +40,70 @@ def latest_checkpoint(out: Path) -> Path | None:
     ckpts = sorted((Path(out) / "checkpoints").glob("model_*_steps.zip"),
                    key=lambda p: int(p.stem.split("_")[1]) if p.stem.split("_")[1].isdigit() else -1)
     return ckpts[-1] if ckpts else None
+
+
+def checkpoint_steps(ckpt: Path) -> int:
+    """The environment steps of a checkpoint ``model_<steps>_steps.zip`` (SB3's
+    ``CheckpointCallback`` name)."""
+    return int(Path(ckpt).stem.split("_")[1])
+
+
+def _trained_with(out: Path, ckpt: Path) -> dict:
+    """What the run in ``out`` was trained with: its :data:`RUN_ARGS` file, else its ``run.json``
+    (runs of earlier versions), else what the checkpoint's own ``data`` says (the algorithm from its
+    policy class; the action space only as raw (8 actions) or not (3))."""
+    import zipfile
+
+    for name in (RUN_ARGS, "run.json"):
+        try:
+            rec = json.loads((out / name).read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(rec, dict) and {"algo", "action"} <= set(rec):
+            return {"algo": rec["algo"], "action": action_key(rec["action"]), "env_kwargs": rec.get("env_kwargs") or {}}
+    data = json.loads(zipfile.ZipFile(ckpt).read("data"))
+    algo = "sac" if ".sac." in str(data.get("policy_class", {}).get("__module__", "")) else "ppo"
+    shape = list(data.get("action_space", {}).get("_shape") or [])
+    return {"algo": algo, "action": "raw" if shape == [8] else None, "env_kwargs": None}
+
+
+def _robot(env_kwargs: dict):
+    """The robot an env's keyword arguments resolve to (a preset, its file and the default compare
+    equal)."""
+    from azimut_env.task.config import resolve_params
+
+    return resolve_params(None, None, 1.0, env_kwargs.get("robot"), env_kwargs.get("imperfections"))
+
+
+def check_resume(out: Path, algo: str, action: str, env_kwargs: dict | None, steps: int | None = None) -> Path:
+    """The checkpoint ``train(..., resume=True)`` continues from, checked before any work
+    (``ValueError``, one line starting ``--resume:``): there is one and it is readable, and the run
+    was trained with the same algorithm, action space and robot (``env_kwargs``: ``--robot``,
+    ``--imperfections``). With ``steps`` (a single run that has its final model): refused when the
+    checkpoint already reached the budget (``steps`` is the run's total, not steps to add)."""
+    from train.saved_files import check_checkpoint
+
+    out = Path(out)
+    ckpt = latest_checkpoint(out)
+    if ckpt is None:
+        raise ValueError(f"--resume: no checkpoint in {out}/checkpoints")
+    check_checkpoint(ckpt)
+    rec = _trained_with(out, ckpt)
+    if rec["algo"] != algo:
+        raise ValueError(f"--resume: {out} was trained with --algo {rec['algo']}, not {algo}")
+    if rec["action"] is not None and rec["action"] != action_key(action):
+        raise ValueError(f"--resume: {out} was trained with --action {rec['action'].replace('_', '-')}, not {action}")
+    if rec["env_kwargs"] is not None and _robot(rec["env_kwargs"]) != _robot(env_kwargs or {}):
+        def said(kw: dict) -> str:
+            imp = kw.get("imperfections")
+            return f"{kw.get('robot') or 'azimut3'} ({f'imperfections {imp}' if imp else 'its own imperfections'})"
+
+        raise ValueError(f"--resume: {out} was trained with the robot {said(rec['env_kwargs'])}, not "
+                         f"{said(env_kwargs or {})} (--robot, --robot-file, --imperfections)")
+    if steps is not None and (out / "model.zip").exists() and checkpoint_steps(ckpt) >= int(steps):
+        raise ValueError(f"--resume: the newest checkpoint of {out} has {checkpoint_steps(ckpt)} steps already, "
+                         f"--steps {steps} is the run's total (give a larger one to train on)")
+    return ckpt
 
 
 def _fused_adam(hp: dict) -> dict:
@@ -60,15 +127,18 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     The budget is ``steps`` environment steps (all robots together; PPO rounds up to whole
     rollouts). ``time_limit_min`` > 0 is a safety guard only: learning stops after that many
     minutes of wall time and the record says ``"complete": false`` (a run that did not reach its
-    step budget, which reports leave out). ``correction_cost`` is the residual action space's cost
-    on the correction's size (:class:`~control.action_spaces.vector.VectorControllerAction`).
+    step budget, which reports leave out) and ``"stopped": "time_limit"``. ``correction_cost`` is
+    the residual action space's cost on the correction's size
+    (:class:`~control.action_spaces.vector.VectorControllerAction`).
     ``on_evaluation(entry)`` is called after each periodic evaluation (its ``evaluations.json``
     entry); returning False stops learning there (``azimut tune``'s pruner): the record then says
     ``"stopped": "on_evaluation"`` and ``"complete": false``.
 
     ``track`` is the training track (``random``: a new track per episode); ``eval_tracks`` the
     tracks of the periodic deterministic evaluations (every ``eval_every`` steps, and at the end);
-    ``resume`` continues from :func:`latest_checkpoint` (SAC starts a new replay buffer)."""
+    ``resume`` continues from :func:`latest_checkpoint` (SAC starts a new replay buffer) up to
+    ``steps`` in all, the checkpoint's included; the run must have been trained with the same
+    ``algo``, ``action`` and ``env_kwargs`` (:func:`check_resume`, ``ValueError``)."""
     import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
@@ -79,15 +149,15 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     from train.envs import make_sb3_env
     from train.hyperparams import load_hyperparams
 
+    env_kwargs = dict(env_kwargs or {})
+    ckpt = check_resume(out, algo, action, env_kwargs) if resume and latest_checkpoint(out) is not None else None
     out.mkdir(parents=True, exist_ok=True)
     key = action_key(action)
     hp, hp_version = load_hyperparams(algo, key)
     hp.update(overrides or {})
-    env_kwargs = dict(env_kwargs or {})
     cls = PPO if algo == "ppo" else SAC
     venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs, correction_cost))
     venv.seed(seed)
-    ckpt = latest_checkpoint(out) if resume else None
     gamma = float(hp.get("gamma", 0.99))
     if ckpt is not None:
         from train.policy import vecnormalize_path
@@ -98,6 +168,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     else:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
         model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **_fused_adam(hp))
+        (out / RUN_ARGS).write_text(json.dumps(
+            {"algo": algo, "action": action, "track": track, "seed": seed, "steps": steps, "num_robots": num_robots,
+             "env_kwargs": env_kwargs, "correction_cost": float(correction_cost)}, indent=1, default=str))
     formats = ["csv"] + ([] if quiet else ["stdout"])
     try:
         import tensorboard  # noqa: F401
@@ -108,7 +181,8 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
     callbacks = [InfoStatsCallback()]
     if time_limit_min > 0:
-        callbacks.append(WallClockLimit(60.0 * time_limit_min))
+        guard = WallClockLimit(60.0 * time_limit_min)
+        callbacks.append(guard)
     evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
                                     env_kwargs, seed=seed, max_time=eval_max_time, on_evaluation=on_evaluation)
     callbacks.append(evaluator)
@@ -117,7 +191,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
                                             name_prefix="model", save_vecnormalize=True))
     start_steps = model.num_timesteps
     t0 = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
+    # SB3 adds the steps a resumed model has done to total_timesteps: give it what is left
+    todo = max(int(steps) - start_steps, 0) if ckpt is not None else steps
+    model.learn(total_timesteps=todo, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
                 progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
     learn_s = time.perf_counter() - t0
     ckpt_dir = out / "checkpoints"
@@ -131,7 +207,8 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
     complete = int(model.num_timesteps) >= int(steps) and not evaluator.stopped
-    record = {"complete": complete, "stopped": "on_evaluation" if evaluator.stopped else None,
+    stopped = "on_evaluation" if evaluator.stopped else "time_limit" if time_limit_min > 0 and guard.fired else None
+    record = {"complete": complete, "stopped": stopped,
               "time_limit_min": time_limit_min, "algo": algo, "action": action,
               "track": track, "seed": seed,
               "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,

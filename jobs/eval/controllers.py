@@ -51,7 +51,8 @@ def _check_policy_file(spec: str) -> None:
         raise argparse.ArgumentTypeError(str(exc)) from None
     model = model_file(path)
     if not model.is_file():
-        raise argparse.ArgumentTypeError(f"{spec}: no model file {path}")
+        where = f"no model.zip in {path}" if path.is_dir() else f"no model file {path}"
+        raise argparse.ArgumentTypeError(f"{spec}: {where}")
     if not zipfile.is_zipfile(model):  # SB3 saves zip archives
         raise argparse.ArgumentTypeError(f"{spec}: {model} is not a saved model (not a zip archive)")
 

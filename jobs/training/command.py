@@ -27,7 +27,7 @@ from pathlib import Path
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
 from train.envs import ACTIONS
-from train.trainer import EVAL_TRACKS, latest_checkpoint
+from train.trainer import EVAL_TRACKS, RUN_ARGS
 
 __all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides", "ENGINES"]
 
@@ -107,7 +107,8 @@ def check_args(args: argparse.Namespace) -> None:
     if args.hyperparams is not None:
         p = Path(args.hyperparams)
         if not p.is_file():
-            raise ValueError(f"--hyperparams {args.hyperparams}: no such file")
+            what = "a folder, not a file" if p.is_dir() else "no such file"
+            raise ValueError(f"--hyperparams {args.hyperparams}: {what}")
         try:
             data = json.loads(p.read_text())
         except (OSError, json.JSONDecodeError) as exc:
@@ -130,12 +131,10 @@ def check_args(args: argparse.Namespace) -> None:
                  if value != default]
         if given:
             raise ValueError(f"{', '.join(given)} only apply with --seeds (one agent trains in this process)")
-        if args.resume and latest_checkpoint(Path(args.out)) is None:
-            raise ValueError(f"--resume: no checkpoint in {args.out}/checkpoints")
         if args.resume:
-            from train.saved_files import check_checkpoint
+            from train.trainer import check_resume
 
-            check_checkpoint(latest_checkpoint(Path(args.out)))
+            check_resume(Path(args.out), args.algo, args.action, _robot_kwargs(args), steps=args.steps)
         if not args.resume and (Path(args.out) / "model.zip").exists():
             raise ValueError(f"--out {args.out} already holds a trained model (use --resume or another folder)")
     else:
@@ -181,7 +180,7 @@ def output_layout(args: argparse.Namespace) -> tuple[list[str], dict[str, tuple[
     curve; checkpoints/ and the logger's tb/ or logs/), or with ``--seeds`` one run folder per
     seed plus the campaign's records (seeds/), seeds.json, report.md and learning_curves.png."""
     run_files = ["model.zip", "vecnormalize.pkl", "best_model.zip", "best_vecnormalize.pkl", "run.json",
-                 "evaluations.json", "learning_curve.png"]
+                 RUN_ARGS, "evaluations.json", "learning_curve.png"]
     run_dirs = {"checkpoints": (".zip", ".pkl"), "tb": (), "logs": (".csv",)}
     if getattr(args, "seeds", None) is None:
         return run_files, run_dirs

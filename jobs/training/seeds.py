@@ -147,15 +147,14 @@ def check_seed_args(args: argparse.Namespace) -> None:
     if args.seed not in (None, 0) and args.seeds != [args.seed]:
         raise ValueError("give --seed or --seeds, not both")
     check_executor_args(args)
-    if args.resume:  # the seeds that will resume from a checkpoint: read it now, not in the task
-        from train.saved_files import check_checkpoint
-        from train.trainer import latest_checkpoint
+    if args.resume:  # the seeds that will resume from a checkpoint: read and match it now, not in the task
+        from jobs.args import robot_args_kwargs
+        from train.trainer import check_resume, latest_checkpoint
 
         for seed in args.seeds:
             folder = Path(args.out) / f"seed_{seed}"
-            ckpt = latest_checkpoint(folder)
-            if ckpt is not None and not (folder / "model.zip").exists():
-                check_checkpoint(ckpt)
+            if latest_checkpoint(folder) is not None and not (folder / "model.zip").exists():
+                check_resume(folder, args.algo, args.action, robot_args_kwargs(args))
     if not args.resume:
         for seed in args.seeds:
             if (Path(args.out) / f"seed_{seed}" / "model.zip").exists():

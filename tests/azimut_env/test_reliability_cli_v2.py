@@ -328,3 +328,30 @@ def test_a_policy_without_a_path_is_refused_by_what_is_missing(spec, tmp_path, c
     assert cli_main(["eval", "--controllers", spec, "--tracks", "circle", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no model path" in err[0]
+
+
+@pytest.mark.parametrize("spec,said", [("ppo:=/tmp/x", "no name before '='"), ("ppo:{empty}", "no model.zip in"),
+                                       ("sac:{empty}/model.zip", "no model file")])
+def test_a_policy_spec_names_what_is_wrong(spec, said, tmp_path, capsys):
+    from jobs.cli import main as cli_main
+
+    (tmp_path / "empty").mkdir()
+    spec = spec.format(empty=tmp_path / "empty")
+    assert cli_main(["eval", "--controllers", spec, "--tracks", "circle", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said in err[0], err
+
+
+def test_an_incomplete_single_run_is_evaluated_with_a_note(tmp_path):
+    import io
+    import json
+
+    from jobs.eval.agents import expand_seed_folders
+
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "model.zip").write_text("x")
+    (tmp_path / "run" / "run.json").write_text(json.dumps({"complete": False, "stopped": "time_limit"}))
+    stream = io.StringIO()
+    spec = f"ppo:{tmp_path / 'run'}"
+    assert expand_seed_folders([spec, "icr"], stream=stream) == [spec, "icr"]
+    assert "incomplete run (stopped by time_limit" in stream.getvalue()

@@ -41,6 +41,18 @@ def test_train_refuses_to_overwrite_a_trained_seed(tmp_path, capsys):
     assert "seed_1" in capsys.readouterr().err
 
 
+def test_resuming_a_seed_with_another_action_is_refused(tmp_path, capsys):
+    from train.trainer import train
+
+    train("ppo", "raw", "crab", seed=1, steps=64, out=tmp_path / "o" / "seed_1", num_robots=2,
+          eval_tracks=("crab",), eval_every=0, checkpoint_every=64, quiet=True, eval_max_time=0.5,
+          overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1})
+    (tmp_path / "o" / "seed_1" / "model.zip").unlink()  # interrupted after its checkpoint
+    assert main(["train", "--out", str(tmp_path / "o"), "--seeds", "0,1", "--resume", "--action", "icr-rate"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "seed_1 was trained with --action raw, not icr-rate" in err[0]
+
+
 @pytest.mark.slow
 def test_two_seeds_on_two_workers_equal_the_serial_runs(tmp_path):
     """Two tiny PPO runs per executor (about a minute on a quiet machine): the same final metrics

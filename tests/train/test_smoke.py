@@ -76,6 +76,60 @@ def test_resume_continues_from_the_checkpoint(tmp_path):
     assert rec["resumed_from"] and rec["num_timesteps"] >= 256
 
 
+def _short_run(out, algo="ppo", action="raw", steps=128, **kw):
+    from train.trainer import train
+
+    hp = {"n_steps": 32, "batch_size": 64, "n_epochs": 1} if algo == "ppo" else \
+        {"learning_starts": 32, "batch_size": 32, "gradient_steps": 1, "buffer_size": 1000}
+    return train(algo, action, "crab", seed=0, steps=steps, out=out, num_robots=2, eval_tracks=("crab",),
+                 eval_every=0, checkpoint_every=64, overrides=hp, quiet=True, env_kwargs=SHORT, eval_max_time=0.5,
+                 **kw)
+
+
+def test_resume_steps_are_the_total_and_a_stopped_run_says_why(tmp_path):
+    out = tmp_path / "run"
+    first = _short_run(out)
+    assert (out / "train_args.json").is_file() and first["num_timesteps"] == 128
+    (out / "model.zip").unlink()  # interrupted after its checkpoint at 128 steps
+    rec = _short_run(out, steps=256, resume=True)
+    assert rec["resumed_from"].endswith("model_128_steps.zip")
+    assert rec["num_timesteps"] == 256 and rec["complete"]  # 128 more, not 256 more
+    limited = _short_run(tmp_path / "limited", steps=100_000, time_limit_min=1e-6)
+    assert limited["stopped"] == "time_limit" and not limited["complete"]
+    assert first["stopped"] is None
+
+
+@pytest.mark.parametrize("flags,match", [(["--action", "residual"], "trained with --action raw, not residual"),
+                                         (["--algo", "sac"], "trained with --algo ppo, not sac"),
+                                         (["--imperfections", "ideal"],
+                                          "robot azimut3 (its own imperfections), not azimut3 (imperfections ideal)"),
+                                         (["--steps", "128"], "128 steps already, --steps 128 is the run's total")])
+def test_resume_with_other_flags_is_refused_in_one_line(tmp_path, flags, match, capsys):
+    from jobs.cli import main
+
+    out = tmp_path / "run"
+    _short_run(out)
+    argv = ["train", "--out", str(out), "--resume", "--quiet", "--eval-every", "0", "--steps", "256",
+            "--num-robots", "2"]
+    rc = main(argv + flags)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and match in err[0], err
+
+
+def test_resume_without_a_record_matches_the_checkpoints_own_data(tmp_path):
+    from train.trainer import check_resume
+
+    out = tmp_path / "run"
+    _short_run(out)
+    for name in ("train_args.json", "run.json"):  # a run of an earlier version, interrupted
+        (out / name).unlink()
+    with pytest.raises(ValueError, match="trained with --algo ppo, not sac"):
+        check_resume(out, "sac", "raw", {})
+    with pytest.raises(ValueError, match="trained with --action raw, not icr-rate"):
+        check_resume(out, "ppo", "icr-rate", {})
+    assert check_resume(out, "ppo", "raw", {"robot": "swerve"}).name == "model_128_steps.zip"  # robot: unknown
+
+
 @pytest.mark.parametrize("argv", [["--algo", "dqn"], ["--action", "joystick"], ["--steps", "0"],
                                   ["--num-robots", "x"], ["--track", "moon"], ["--time-limit", "nan"],
                                   ["--resume"], ["--hyperparams", "/nonexistent.json"]])
