@@ -303,10 +303,9 @@ def robot_args_kwargs(args: argparse.Namespace) -> dict:
 def robot_params(args: argparse.Namespace):
     """The ``RobotParams`` the envs make of ``--robot``/``--robot-file`` and ``--imperfections``;
     the default robot when none is given."""
-    from azimut_env.task.config import resolve_params
+    from azimut_env.task.config import robot_of
 
-    kwargs = robot_args_kwargs(args)
-    return resolve_params(None, None, 1.0, kwargs.get("robot"), kwargs.get("imperfections"))
+    return robot_of(robot_args_kwargs(args))
 
 
 def robot_env_kwargs(robot: str | None = None, robot_file: str | None = None,

@@ -353,10 +353,10 @@ def check_args(args: argparse.Namespace) -> None:
         check_baseline(args.baseline)
     if not args.convergence:
         from azimut_env.physics.stability import check_substeps
-        from azimut_env.task.config import resolve_params
+        from azimut_env.task.config import robot_of
 
         for kw in (_robot_kwargs(args, name) for name in args.imperfections or [None]):
-            check_substeps(args.substeps, resolve_params(None, None, 1.0, kw.get("robot"), kw.get("imperfections")))
+            check_substeps(args.substeps, robot_of(kw))
     if args.reference:
         import gymnasium as gym
 

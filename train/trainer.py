@@ -67,12 +67,19 @@ def _trained_with(out: Path, ckpt: Path) -> dict:
     return {"algo": algo, "action": "raw" if shape == [8] else None, "env_kwargs": None}
 
 
-def _robot(env_kwargs: dict):
-    """The robot an env's keyword arguments resolve to (a preset, its file and the default compare
-    equal)."""
-    from azimut_env.task.config import resolve_params
+def _check_trained_with(out: Path, ckpt: Path, algo: str, action: str, env_kwargs: dict | None) -> None:
+    """``ValueError`` (one line) unless the run in ``out`` was trained with this ``algo``,
+    ``action`` and robot (what :func:`_trained_with` knows of them)."""
+    from azimut_env.task.config import robot_label, robot_of
 
-    return resolve_params(None, None, 1.0, env_kwargs.get("robot"), env_kwargs.get("imperfections"))
+    rec = _trained_with(out, ckpt)
+    if rec["algo"] != algo:
+        raise ValueError(f"--resume: {out} was trained with --algo {rec['algo']}, not {algo}")
+    if rec["action"] is not None and rec["action"] != action_key(action):
+        raise ValueError(f"--resume: {out} was trained with --action {rec['action'].replace('_', '-')}, not {action}")
+    if rec["env_kwargs"] is not None and robot_of(rec["env_kwargs"]) != robot_of(env_kwargs or {}):
+        raise ValueError(f"--resume: {out} was trained with the robot {robot_label(rec['env_kwargs'])}, not "
+                         f"{robot_label(env_kwargs or {})} (--robot, --robot-file, --imperfections)")
 
 
 def check_resume(out: Path, algo: str, action: str, env_kwargs: dict | None, steps: int | None = None) -> Path:
@@ -88,18 +95,7 @@ def check_resume(out: Path, algo: str, action: str, env_kwargs: dict | None, ste
     if ckpt is None:
         raise ValueError(f"--resume: no checkpoint in {out}/checkpoints")
     check_checkpoint(ckpt)
-    rec = _trained_with(out, ckpt)
-    if rec["algo"] != algo:
-        raise ValueError(f"--resume: {out} was trained with --algo {rec['algo']}, not {algo}")
-    if rec["action"] is not None and rec["action"] != action_key(action):
-        raise ValueError(f"--resume: {out} was trained with --action {rec['action'].replace('_', '-')}, not {action}")
-    if rec["env_kwargs"] is not None and _robot(rec["env_kwargs"]) != _robot(env_kwargs or {}):
-        def said(kw: dict) -> str:
-            imp = kw.get("imperfections")
-            return f"{kw.get('robot') or 'azimut3'} ({f'imperfections {imp}' if imp else 'its own imperfections'})"
-
-        raise ValueError(f"--resume: {out} was trained with the robot {said(rec['env_kwargs'])}, not "
-                         f"{said(env_kwargs or {})} (--robot, --robot-file, --imperfections)")
+    _check_trained_with(out, ckpt, algo, action, env_kwargs)
     if steps is not None and (out / "model.zip").exists() and checkpoint_steps(ckpt) >= int(steps):
         raise ValueError(f"--resume: the newest checkpoint of {out} has {checkpoint_steps(ckpt)} steps already, "
                          f"--steps {steps} is the run's total (give a larger one to train on)")
@@ -150,7 +146,9 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     from train.hyperparams import load_hyperparams
 
     env_kwargs = dict(env_kwargs or {})
-    ckpt = check_resume(out, algo, action, env_kwargs) if resume and latest_checkpoint(out) is not None else None
+    ckpt = latest_checkpoint(out) if resume else None
+    if ckpt is not None:  # the files themselves: check_resume, before (the CLI), or SB3 while loading
+        _check_trained_with(out, ckpt, algo, action, env_kwargs)
     out.mkdir(parents=True, exist_ok=True)
     key = action_key(action)
     hp, hp_version = load_hyperparams(algo, key)

@@ -23,8 +23,8 @@ from azimut_env.task.localisation import LocalisationParams, check_pose_source
 from azimut_env.task.reward import OFF_TRACK, RENAMED_TERMS, check_reward_weights, default_reward_weights
 from azimut_env.validation import check_fields, check_int, check_nonnegative, check_positive, check_range
 
-__all__ = ["TaskConfig", "resolve_params", "task_settings", "front_signature", "TASK_CONFIG_FIELDS",
-           "LEGACY_WEIGHT_KEYWORDS", "V1_REWARD_WEIGHTS", "v1_kwargs"]
+__all__ = ["TaskConfig", "resolve_params", "robot_label", "robot_of", "task_settings", "front_signature",
+           "TASK_CONFIG_FIELDS", "LEGACY_WEIGHT_KEYWORDS", "V1_REWARD_WEIGHTS", "v1_kwargs"]
 
 
 @dataclass(frozen=True)
@@ -159,6 +159,20 @@ def resolve_params(params: RobotParams | None, sensors: SensorParams | str | Non
 
 #: the keyword arguments of the envs that are :class:`TaskConfig` fields
 TASK_CONFIG_FIELDS = tuple(f.name for f in fields(TaskConfig))
+
+
+def robot_of(env_kwargs) -> RobotParams:
+    """The robot an env's keyword arguments ``robot`` and ``imperfections`` make (its other keys
+    are not read): :func:`resolve_params` of those two, so that a preset, its file and the default
+    compare equal."""
+    return resolve_params(None, None, 1.0, env_kwargs.get("robot"), env_kwargs.get("imperfections"))
+
+
+def robot_label(env_kwargs) -> str:
+    """How messages name the robot of an env's keyword arguments: ``"<robot> (imperfections
+    <preset>)"``, or ``"(its own imperfections)"`` without that key; the default is ``azimut3``."""
+    imp = env_kwargs.get("imperfections")
+    return f"{env_kwargs.get('robot') or 'azimut3'} ({f'imperfections {imp}' if imp else 'its own imperfections'})"
 
 
 def task_settings(params: RobotParams | None = None, sensors: SensorParams | str | None = None,

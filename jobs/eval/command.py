@@ -177,26 +177,19 @@ def _check_policy_robots(args: argparse.Namespace) -> None:
     policies = [spec for spec in args.controllers if is_policy(spec)]
     if not policies:
         return
-    from azimut_env.task.config import resolve_params
+    from azimut_env.task.config import robot_label, robot_of
     from jobs.args import robot_env_kwargs
     from jobs.eval.controllers import build_controller
 
-    def params(kw: dict):  # the resolved robot, so that a preset, its file and its default compare equal
-        return resolve_params(None, None, 1.0, kw.get("robot"), kw.get("imperfections"))
-
-    def said(kw: dict) -> str:
-        imp = kw.get("imperfections")
-        return f"{kw.get('robot') or 'azimut3'} ({f'imperfections {imp}' if imp else 'its own imperfections'})"
-
     want = robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None),
                             getattr(args, "imperfections", None))
-    evaluated = params(want)
+    evaluated = robot_of(want)
     for spec in policies:
         trained = dict(getattr(build_controller(spec, args.speed_scale), "env_kwargs", None) or {})
-        if params(trained) != evaluated:
-            raise ValueError(f"argument --controllers: {spec}: trained on the robot {said(trained)}, not on the "
-                             f"evaluated {said(want)}; evaluate it with the --robot/--robot-file/--imperfections "
-                             "it learned")
+        if robot_of(trained) != evaluated:
+            raise ValueError(f"argument --controllers: {spec}: trained on the robot {robot_label(trained)}, not on "
+                             f"the evaluated {robot_label(want)}; evaluate it with the "
+                             "--robot/--robot-file/--imperfections it learned")
 
 
 def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
