@@ -37,7 +37,7 @@ from numba import njit
 
 from azimut_env.tracks import Track, wrap_pi
 
-__all__ = ["CUSP_MIN_STEP", "cusp_table", "cusp_progress", "cusp_feed_forward"]
+__all__ = ["CUSP_MIN_STEP", "cusp_row", "cusp_table", "cusp_progress", "cusp_feed_forward"]
 
 #: [m] steps of the path shorter than this are bridged when the legs of a cusp are found (the
 #: ``reverse`` scenario joins its legs through a 1 µm step along their bisector)
@@ -57,31 +57,35 @@ def cusp_table(track: Track) -> np.ndarray:
         return cached
     xy = track.xy
     pts = np.stack([xy[:, 0], xy[:, 1], track.progress_radius * track.heading], axis=1)
-    m = pts.shape[0]
-    rows = []
-    # only samples that may be cusps go through the exact test below: a neighbour closer than twice
+    # only samples that may be cusps go through the exact test (cusp_row): a neighbour closer than twice
     # the bridging step, or a turn not clearly under 90° (a superset of the test's hits, so the
     # table is the loop's over every sample; a reset of a random track ran ~1,200 norms before)
     da_all, db_all = xy[1:-1] - xy[:-2], xy[2:] - xy[1:-1]
     na, nb = np.hypot(da_all[:, 0], da_all[:, 1]), np.hypot(db_all[:, 0], db_all[:, 1])
     dots = da_all[:, 0] * db_all[:, 0] + da_all[:, 1] * db_all[:, 1]
     maybe = (na < 2 * CUSP_MIN_STEP) | (nb < 2 * CUSP_MIN_STEP) | (dots <= 1e-9 * na * nb)
-    for i in (np.flatnonzero(maybe) + 1).tolist():
-        j = i - 1
-        while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
-            j -= 1
-        k = i + 1
-        while k < m - 1 and np.linalg.norm(xy[k] - xy[i]) < CUSP_MIN_STEP:
-            k += 1
-        da, db = xy[i] - xy[j], xy[k] - xy[i]
-        if min(np.linalg.norm(da), np.linalg.norm(db)) < CUSP_MIN_STEP or float(da @ db) >= 0.0:
-            continue
-        a, b = pts[i] - pts[j], pts[k] - pts[i]
-        rows.append([float(i), float(track.s[i] - track.s[j]), float(track.s[k] - track.s[i]),
-                     *(a / np.linalg.norm(a)), *(b / np.linalg.norm(b))])
+    rows = [row for i in (np.flatnonzero(maybe) + 1).tolist() if (row := cusp_row(track, pts, i)) is not None]
     table = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(-1, 9))
     object.__setattr__(track, "_cusp_table", table)
     return table
+
+
+def cusp_row(track: Track, pts: np.ndarray, i: int) -> list[float] | None:
+    """The exact test of :func:`cusp_table` at interior sample ``i`` (``pts``: the samples' (x, y,
+    ρθ)): its row if the sample is a cusp, else None."""
+    xy, m = pts[:, :2], pts.shape[0]
+    j = i - 1
+    while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
+        j -= 1
+    k = i + 1
+    while k < m - 1 and np.linalg.norm(xy[k] - xy[i]) < CUSP_MIN_STEP:
+        k += 1
+    da, db = xy[i] - xy[j], xy[k] - xy[i]
+    if min(np.linalg.norm(da), np.linalg.norm(db)) < CUSP_MIN_STEP or float(da @ db) >= 0.0:
+        return None
+    a, b = pts[i] - pts[j], pts[k] - pts[i]
+    return [float(i), float(track.s[i] - track.s[j]), float(track.s[k] - track.s[i]),
+            *(a / np.linalg.norm(a)), *(b / np.linalg.norm(b))]
 
 
 @njit(cache=True)

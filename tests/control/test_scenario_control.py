@@ -152,24 +152,13 @@ def test_icr_controller_finishes_the_scenarios_it_stalled_on(robot, tracks):
 
 
 def _cusps_every_sample(track):
-    """:func:`control.follow.cusps.cusp_table`'s test run at every interior sample (its definition)."""
-    from control.follow.cusps import CUSP_MIN_STEP
+    """:func:`control.follow.cusps.cusp_table`'s exact test (:func:`~control.follow.cusps.cusp_row`)
+    run at every interior sample, without the pre-filter (the table's definition)."""
+    from control.follow.cusps import cusp_row
 
     xy = track.xy
     pts = np.stack([xy[:, 0], xy[:, 1], track.progress_radius * track.heading], axis=1)
-    rows = []
-    for i in range(1, len(xy) - 1):
-        j, k = i - 1, i + 1
-        while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
-            j -= 1
-        while k < len(xy) - 1 and np.linalg.norm(xy[k] - xy[i]) < CUSP_MIN_STEP:
-            k += 1
-        da, db = xy[i] - xy[j], xy[k] - xy[i]
-        if min(np.linalg.norm(da), np.linalg.norm(db)) < CUSP_MIN_STEP or float(da @ db) >= 0.0:
-            continue
-        a, b = pts[i] - pts[j], pts[k] - pts[i]
-        rows.append([float(i), float(track.s[i] - track.s[j]), float(track.s[k] - track.s[i]),
-                     *(a / np.linalg.norm(a)), *(b / np.linalg.norm(b))])
+    rows = [row for i in range(1, len(xy) - 1) if (row := cusp_row(track, pts, i)) is not None]
     return np.array(rows, dtype=np.float64).reshape(-1, 9)
 
 
