@@ -108,12 +108,41 @@ def candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt):
     return u0, u1, u2, v0, v1, v2
 
 
+@njit(cache=True, inline="always")
+def _candidate_steer(c, u, k, beta, beta_rate, unlimited) -> tuple[bool, float, float, float]:
+    """Wheel k's steering for the candidate's axis ``u``: (flipped: its angle would turn by more
+    than π/2, β, β̇, β̈); β stays where the axis is singular for the wheel, and the rates are 0
+    when it flips."""
+    bk, r2 = _beta_wheel(u[0], u[1], u[2], c.E, c.P, k, c.steer_max)
+    if r2 < SINGULAR_TOL * SINGULAR_TOL:
+        bk = beta[k]
+    bk = nearest1(bk, beta[k], unlimited)
+    db = bk - beta[k]
+    if abs(db) > np.pi / 2:
+        return True, bk, 0.0, 0.0
+    br = db / c.dt
+    return False, bk, br, (br - beta_rate[k]) / c.dt
+
+
+@njit(cache=True, inline="always")
+def _candidate_stop_speed(c, bk, br, unlimited) -> float:
+    """The steering speed wheel k (at β, β̇ of the candidate) can still stop from before its stop."""
+    room = stop_room1(bk, br, c.steer_min, c.steer_max, unlimited)
+    return safe_stop_speed1(room, c.lim[L_CO_C1], c.lim[L_CO_C2], c.lim[L_CO_C3])
+
+
+@njit(cache=True, inline="always")
+def _candidate_drive(c, u, k, bk, br, mu_new, phidot) -> tuple[float, float]:
+    """Wheel k's drive for the candidate (axis ``u``, its β and β̇, μ): (φ̇, φ̈)."""
+    ph = (mu_new * _speed_coef(u, c.E, c.P, c.b, k, bk) - c.b[k] * br) / c.r[k]
+    return ph, (ph - phidot[k]) / c.dt
+
+
 @njit(cache=True)
 def kappa_search(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot) -> int:
     """The largest q whose candidate (:func:`kappa_candidate`) is feasible, or −1 (see the module
     docstring: the same verdicts as the candidates' ratios, in another order)."""
-    E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
-    steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
+    lim, kappa, dt = c.lim, c.kappa, c.dt
     u = ws[WS.U, :3]
     unlimited = lim[L_UNLIMITED] != 0.0
     n = beta.shape[0]
@@ -131,26 +160,14 @@ def kappa_search(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rat
             k = first + j
             if k >= n:
                 k -= n
-            bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
-            if r2 < SINGULAR_TOL * SINGULAR_TOL:
-                bk = beta[k]
-            bk = nearest1(bk, beta[k], unlimited)
-            db = bk - beta[k]
-            if abs(db) > np.pi / 2:
+            flipped, bk, br, ba = _candidate_steer(c, u, k, beta, beta_rate, unlimited)
+            if flipped or abs(ba) / lim[L_SAM] > FEASIBLE or abs(br) / lim[L_SRM] > FEASIBLE:
                 bad = k
                 break
-            br = db / dt
-            ba = (br - beta_rate[k]) / dt
-            if abs(ba) / lim[L_SAM] > FEASIBLE or abs(br) / lim[L_SRM] > FEASIBLE:
+            if abs(br) / max(_candidate_stop_speed(c, bk, br, unlimited), 1e-12) > FEASIBLE:
                 bad = k
                 break
-            room = stop_room1(bk, br, steer_min, steer_max, unlimited)
-            v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
-            if abs(br) / max(v_stop, 1e-12) > FEASIBLE:
-                bad = k
-                break
-            ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
-            phdd = (ph - phidot[k]) / dt
+            ph, phdd = _candidate_drive(c, u, k, bk, br, mu_new, phidot)
             if abs(phdd) / lim[L_WAM] > FEASIBLE or abs(ph) / lim[L_WSM] > FEASIBLE:
                 bad = k
                 break
@@ -165,8 +182,7 @@ def kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_r
     """The candidate with the smallest limit ratio (inf where a wheel flips), the lowest κ among
     equals, when none is feasible. A candidate stops being computed once its wheels so far put it
     above the best ratio found (it cannot be chosen)."""
-    E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
-    steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
+    lim, kappa, dt = c.lim, c.kappa, c.dt
     u = ws[WS.U, :3]
     unlimited = lim[L_UNLIMITED] != 0.0
     n = beta.shape[0]
@@ -182,20 +198,12 @@ def kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_r
         mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
         ratio = 0.0
         for k in range(n):
-            bk, r2 = _beta_wheel(u[0], u[1], u[2], E, P, k, steer_max)
-            if r2 < SINGULAR_TOL * SINGULAR_TOL:
-                bk = beta[k]
-            bk = nearest1(bk, beta[k], unlimited)
-            db = bk - beta[k]
-            if abs(db) > np.pi / 2:
+            flipped, bk, br, ba = _candidate_steer(c, u, k, beta, beta_rate, unlimited)
+            if flipped:
                 ratio = np.inf
                 break
-            br = db / dt
-            ba = (br - beta_rate[k]) / dt
-            ph = (mu_new * _speed_coef(u, E, P, b, k, bk) - b[k] * br) / r[k]
-            phdd = (ph - phidot[k]) / dt
-            room = stop_room1(bk, br, steer_min, steer_max, unlimited)
-            v_stop = safe_stop_speed1(room, lim[L_CO_C1], lim[L_CO_C2], lim[L_CO_C3])
+            ph, phdd = _candidate_drive(c, u, k, bk, br, mu_new, phidot)
+            v_stop = _candidate_stop_speed(c, bk, br, unlimited)
             ratio = max(ratio, abs(br) / lim[L_SRM], abs(ba) / lim[L_SAM], abs(ph) / lim[L_WSM],
                         abs(phdd) / lim[L_WAM], abs(br) / max(v_stop, 1e-12))
             if ratio > threshold:
