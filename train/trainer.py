@@ -37,15 +37,15 @@ RUN_ARGS = "train_args.json"
 
 def latest_checkpoint(out: Path) -> Path | None:
     """The newest ``checkpoints/model_<steps>_steps.zip`` of a run folder, None if there is none."""
-    ckpts = sorted((Path(out) / "checkpoints").glob("model_*_steps.zip"),
-                   key=lambda p: int(p.stem.split("_")[1]) if p.stem.split("_")[1].isdigit() else -1)
+    ckpts = sorted((Path(out) / "checkpoints").glob("model_*_steps.zip"), key=checkpoint_steps)
     return ckpts[-1] if ckpts else None
 
 
 def checkpoint_steps(ckpt: Path) -> int:
     """The environment steps of a checkpoint ``model_<steps>_steps.zip`` (SB3's
-    ``CheckpointCallback`` name)."""
-    return int(Path(ckpt).stem.split("_")[1])
+    ``CheckpointCallback`` name); −1 if the name holds no number there."""
+    steps = Path(ckpt).stem.split("_")[1]
+    return int(steps) if steps.isdigit() else -1
 
 
 def _trained_with(out: Path, ckpt: Path) -> dict:

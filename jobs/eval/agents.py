@@ -68,10 +68,11 @@ def expand_seed_folders(items: Sequence[str], stream=None) -> list[str]:
         name, path = (head, Path(tail)) if eq and tail else (None, Path(arg))
         if not path.is_dir() or (path / "model.zip").is_file() or not _seed_folders(path):
             run = next((p / "run.json" for p in (path, path.parent) if (p / "run.json").is_file()), None)
-            if run is not None and json.loads(run.read_text()).get("complete", True) is False:
+            record = json.loads(run.read_text()) if run is not None else {}
+            if record.get("complete", True) is False:
                 print(f"azimut eval: note: {run.parent} is an incomplete run (stopped by "
-                      f"{json.loads(run.read_text()).get('stopped') or 'its guard'} before its step budget); "
-                      "evaluated as it is", file=stream)
+                      f"{record.get('stopped') or 'its guard'} before its step budget); evaluated as it is",
+                      file=stream)
             out.append(item)
             continue
         name = name or path.resolve().name
