@@ -27,6 +27,7 @@ from estimation.logs.source import (
                                     LogError,
                                     LogSource,
                                     SampleChunk,
+                                    YawTrack,
                                     beta_from_heading,
                                     default_module_names,
                                     fold_coaxial,
@@ -34,7 +35,7 @@ from estimation.logs.source import (
 
 __all__ = ["FORMATS", "detect_format", "open_log", "DEFAULT_METHODS", "LogEstimate", "estimate_log",
            "compare_estimators", "compose_increments", "odometry_drift", "BAD_REASONS", "STEER_CONVENTIONS",
-           "ArrayLog", "GroundTruth", "LogError", "LogSource", "SampleChunk", "beta_from_heading",
+           "ArrayLog", "GroundTruth", "LogError", "LogSource", "SampleChunk", "YawTrack", "beta_from_heading",
            "default_module_names", "fold_coaxial"]
 
 #: the formats :func:`open_log` reads

@@ -18,8 +18,8 @@ import numpy as np
 
 from estimation.geometry import RobotGeometry
 
-__all__ = ["LogError", "SampleChunk", "GroundTruth", "LogSource", "ArrayLog", "BAD_REASONS", "BAD_NONFINITE",
-           "BAD_MISSING_JOINT", "BAD_NO_VELOCITY", "BAD_WRONG_SIZE", "STEER_CONVENTIONS",
+__all__ = ["LogError", "SampleChunk", "GroundTruth", "YawTrack", "LogSource", "ArrayLog", "BAD_REASONS",
+           "BAD_NONFINITE", "BAD_MISSING_JOINT", "BAD_NO_VELOCITY", "BAD_WRONG_SIZE", "BAD_STALE", "STEER_CONVENTIONS",
            "beta_from_heading", "fold_coaxial", "default_module_names", "check_module_names"]
 
 
@@ -34,11 +34,14 @@ BAD_NONFINITE = 1
 BAD_MISSING_JOINT = 2
 BAD_NO_VELOCITY = 3
 BAD_WRONG_SIZE = 4
+BAD_STALE = 5
 BAD_REASONS = {
     BAD_NONFINITE: "a steering angle or wheel speed is NaN or infinite",
     BAD_MISSING_JOINT: "a module's steering or drive joint is missing from the message",
     BAD_NO_VELOCITY: "the message has no wheel velocities",
     BAD_WRONG_SIZE: "the record does not hold one value per module",
+    BAD_STALE: "a module's steering angle or wheel speed is older than the maximum age (a signal logged on change "
+               "that stopped, or a gap)",
 }
 
 #: how a log gives steering angles: ``beta``, the paper's β_k (the propulsion axis at α_k + β_k
@@ -133,6 +136,17 @@ class GroundTruth:
     source: str
 
 
+@dataclass
+class YawTrack:
+    """The robot's heading over time from a gyro (or a pose's rotation): ``t_ns`` (M,) int64 [ns]
+    on the samples' clock, strictly increasing; ``yaw`` (M,) [rad], counter-clockwise, unwrapped
+    (continuous across ±π); ``source`` says where it comes from (an entry, a topic)."""
+
+    t_ns: np.ndarray
+    yaw: np.ndarray
+    source: str
+
+
 class LogSource:
     """A log opened for estimation. Subclasses read one format; opening checks everything that
     can be checked without reading the samples (the file, its topics, entries or columns, the
@@ -160,6 +174,10 @@ class LogSource:
         """The reference pose, if the log has one (and the reader was told where)."""
         return None
 
+    def yaw(self) -> YawTrack | None:
+        """The gyro's heading, if the log has one (and the reader was told where)."""
+        return None
+
     def describe(self) -> dict:
         """What was read, for the report: the format and the topics, entries or columns used."""
         return {"format": self.format, "path": self.path}
@@ -171,11 +189,13 @@ class LogSource:
 
 class ArrayLog(LogSource):
     """Samples already in memory as a log: ``t_ns`` (N,) int64 [ns], ``beta`` and ``phidot`` (N, n)
-    (the paper's β [rad], φ̇ [rad/s]), an optional reference ``truth`` (:class:`GroundTruth`)."""
+    (the paper's β [rad], φ̇ [rad/s]), an optional reference ``truth`` (:class:`GroundTruth`) and gyro
+    ``yaw`` (:class:`YawTrack`)."""
 
     format = "arrays"
 
-    def __init__(self, t_ns, beta, phidot, geom: RobotGeometry, modules=None, truth: GroundTruth | None = None) -> None:
+    def __init__(self, t_ns, beta, phidot, geom: RobotGeometry, modules=None, truth: GroundTruth | None = None,
+                 yaw: YawTrack | None = None) -> None:
         super().__init__("<arrays>", geom, default_module_names(geom.n) if modules is None else modules)
         self._t = np.asarray(t_ns, dtype=np.int64)
         self._beta = np.asarray(beta, dtype=np.float64)
@@ -184,6 +204,7 @@ class ArrayLog(LogSource):
             raise ValueError(f"t_ns (N,), beta and phidot (N, {geom.n}) expected, got {self._t.shape}, "
                              f"{self._beta.shape}, {self._phidot.shape}")
         self._truth = truth
+        self._yaw = yaw
         self.n_samples = int(self._t.size)
 
     def chunks(self, size: int) -> Iterator[SampleChunk]:
@@ -193,3 +214,6 @@ class ArrayLog(LogSource):
 
     def ground_truth(self) -> GroundTruth | None:
         return self._truth
+
+    def yaw(self) -> YawTrack | None:
+        return self._yaw
