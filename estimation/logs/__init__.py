@@ -80,7 +80,9 @@ def open_log(path, geom, modules=None, fmt: str | None = None, **options) -> Log
             column suffixes and the ROS joint names' ``{module}``.
         fmt: one of :data:`FORMATS` (default: :func:`detect_format`).
         options: the reader's own (:class:`~estimation.logs.csv_log.CsvLog`,
-            :class:`~estimation.logs.ros.RosLog`, :class:`~estimation.logs.wpilog.WpiLog`).
+            :class:`~estimation.logs.ros.RosLog`, :class:`~estimation.logs.wpilog.WpiLog`); a wpilog
+            with ``steer_entry`` and ``wheel_entry`` (per-module entries) is read by
+            :class:`~estimation.logs.wpilog_modules.WpiModuleLog`.
 
     Raises :class:`LogError` for a log that cannot be used, ``ValueError`` for a bad option.
     """
@@ -96,6 +98,17 @@ def open_log(path, geom, modules=None, fmt: str | None = None, **options) -> Log
         from estimation.logs.ros import RosLog
 
         return RosLog(path, geom, modules, **options)
+    if "steer_entry" in options or "wheel_entry" in options:
+        if "steer_entry" not in options or "wheel_entry" not in options:
+            raise ValueError("per-module entries need both steer_entry and wheel_entry (--steer-entry and "
+                             "--wheel-entry)")
+        if options.get("states_entry") is not None:
+            raise ValueError("states_entry (--states-entry) does not apply to per-module entries (--steer-entry, "
+                             "--wheel-entry)")
+        options.pop("states_entry", None)
+        from estimation.logs.wpilog_modules import WpiModuleLog
+
+        return WpiModuleLog(path, geom, modules, **options)
     from estimation.logs.wpilog import WpiLog
 
     return WpiLog(path, geom, modules, **options)

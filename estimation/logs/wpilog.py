@@ -23,9 +23,15 @@ What is read (``docs/logs.md``):
   module's heading ``angle`` [rad]; or the older ``double[]`` layout ``[angle_0, speed_0, angle_1,
   ...]`` (AdvantageKit 2023, YAGSL), whose angle unit the caller must give. The heading becomes the
   paper's β (:func:`~estimation.logs.source.beta_from_heading`) and φ̇ = speed / r_k;
-* an optional reference pose: ``struct:Pose2d`` or ``double[3]`` (x [m], y [m], θ [rad]).
+* an optional reference pose: ``struct:Pose2d`` or ``double[3]`` (x [m], y [m], θ [rad]);
+* an optional gyro heading (:meth:`WpiLogFile.yaw`): a number (``double``, ``float``, ``int64``) in
+  degrees or radians, a ``struct:Rotation2d``, a ``struct:Pose2d``'s rotation or a ``double[3]``
+  pose's θ.
 
-Timestamps are the robot's clock in µs.
+:class:`WpiLogFile` opens the file and reads what every layout shares (the struct schemas, the
+reference pose, the gyro); :class:`WpiLog` adds the module-state arrays, and
+:class:`~estimation.logs.wpilog_modules.WpiModuleLog` the per-module entries. Timestamps are the
+robot's clock in µs.
 """
 
 from __future__ import annotations
@@ -44,17 +50,37 @@ from estimation.logs.source import (
                                     GroundTruth,
                                     LogSource,
                                     SampleChunk,
+                                    YawTrack,
                                     beta_from_heading,
                                     fold_coaxial,
 )
 from estimation.logs.wpistruct import StructRegistry
 
-__all__ = ["WpiLog", "read_wpilog_index", "STATE_TYPES", "ANGLE_UNITS"]
+__all__ = ["WpiLogFile", "WpiLog", "read_wpilog_index", "STATE_TYPES", "ANGLE_UNITS", "NUMBER_TYPES", "YAW_TYPES",
+           "YAW_UNITS", "angle_to_rad"]
 
 #: entry types that hold swerve module states
 STATE_TYPES = ("struct:SwerveModuleState[]", "struct:SwerveModuleVelocity[]", "double[]")
-#: units of the angles of a ``double[]`` module-state entry
-ANGLE_UNITS = ("rad", "deg")
+#: units of angles logged as plain numbers (a ``double[]`` module-state entry, per-module entries)
+ANGLE_UNITS = ("rad", "deg", "rot")
+#: entry types of one number per record, and their payloads (``int``: NetworkTables 3's name of int64)
+NUMBER_TYPES = ("double", "float", "int64", "int")
+_NUMBER_DTYPES = {"double": "<f8", "float": "<f4", "int64": "<i8", "int": "<i8"}
+#: entry types a gyro heading is read from (``double[]``: an [x, y, θ] pose)
+YAW_TYPES = NUMBER_TYPES + ("struct:Rotation2d", "struct:Pose2d", "double[]")
+#: units of a gyro heading logged as a number
+YAW_UNITS = ("deg", "rad")
+_SCHEMA_PREFIXES = ("/.schema/struct:", "NT:/.schema/struct:")  # DataLog's own, and NetworkTables' recorded
+
+
+def angle_to_rad(values: np.ndarray, unit: str) -> np.ndarray:
+    """Angles in ``unit`` (one of :data:`ANGLE_UNITS`) in radians."""
+    values = np.asarray(values, dtype=np.float64)
+    if unit == "deg":
+        return np.deg2rad(values)
+    if unit == "rot":
+        return values * (2.0 * np.pi)
+    return values
 
 _MAGIC = b"WPILOG"
 
@@ -188,16 +214,21 @@ def _gather(buf: np.ndarray, index: _Index, rec: np.ndarray, width: int) -> tupl
     return np.ascontiguousarray(data), ok
 
 
-class WpiLog(LogSource):
-    """A ``.wpilog``'s swerve module states as wheel samples (see the module docstring)."""
+class WpiLogFile(LogSource):
+    """A ``.wpilog`` opened: its record index, its struct schemas (``/.schema/struct:T`` and the
+    ``NT:/.schema/struct:T`` entries NetworkTables recording writes), and what every layout of
+    module data shares: the reference pose (``truth_entry``) and the gyro heading (``yaw_entry``, a
+    number in ``yaw_unit`` deg or rad, a ``struct:Rotation2d``, a ``struct:Pose2d`` or a ``double[3]``
+    pose). Subclasses read the module data (:class:`WpiLog`,
+    :class:`~estimation.logs.wpilog_modules.WpiModuleLog`)."""
 
     format = "WPILib data log"
 
-    def __init__(self, path, geom: RobotGeometry, modules, states_entry: str | None = None,
-                 truth_entry: str | None = None, angle_unit: str | None = None) -> None:
+    def __init__(self, path, geom: RobotGeometry, modules, truth_entry: str | None = None,
+                 yaw_entry: str | None = None, yaw_unit: str | None = None) -> None:
         super().__init__(path, geom, modules)
-        if angle_unit is not None and angle_unit not in ANGLE_UNITS:
-            raise ValueError(f"angle_unit must be one of {ANGLE_UNITS}, got {angle_unit!r}")
+        if yaw_unit is not None and yaw_unit not in YAW_UNITS:
+            raise ValueError(f"yaw_unit must be one of {YAW_UNITS}, got {yaw_unit!r}")
         p = Path(path)
         if not p.is_file():
             raise self.error("no such file" if not p.exists() else "not a file")
@@ -205,15 +236,120 @@ class WpiLog(LogSource):
             self._buf, self._index, self.extra_header = read_wpilog_index(p)
         except ValueError as exc:
             raise self.error(str(exc)) from None
-        types = self._index.types()
+        self.types = self._index.types()
         self.structs = StructRegistry()
-        for name, typ in types.items():
-            if typ == "structschema" and name.startswith("/.schema/struct:"):
-                got = self._index.records(name)
-                if got is not None and got[1].size:
-                    i = got[1][-1]
-                    text = bytes(self._buf[self._index.off[i]:self._index.off[i] + self._index.size[i]])
-                    self.structs.add(name.removeprefix("/.schema/struct:"), text.decode("utf-8", "replace"))
+        for prefix in _SCHEMA_PREFIXES:  # the DataLog's own schemas last: they win
+            for name, typ in self.types.items():
+                if typ == "structschema" and name.startswith(prefix):
+                    got = self._index.records(name)
+                    if got is not None and got[1].size:
+                        i = got[1][-1]
+                        text = bytes(self._buf[self._index.off[i]:self._index.off[i] + self._index.size[i]])
+                        self.structs.add(name.removeprefix(prefix), text.decode("utf-8", "replace"))
+        self.truth_entry = truth_entry
+        if truth_entry is not None:
+            if truth_entry not in self.types:
+                raise self.error(f"no entry {truth_entry!r} (reference pose); pose entries: "
+                                 + (", ".join(n for n, t in self.types.items() if t in ("struct:Pose2d", "double[]"))
+                                    or "none"))
+            if self.types[truth_entry] not in ("struct:Pose2d", "double[]"):
+                raise self.error(f"entry {truth_entry!r} is {self.types[truth_entry]}, not struct:Pose2d or double[]")
+        self.yaw_entry, self.yaw_unit = yaw_entry, yaw_unit
+        if yaw_entry is None:
+            if yaw_unit is not None:
+                raise ValueError("yaw_unit without yaw_entry")
+        else:
+            self._check_yaw_entry()
+
+    def _check_yaw_entry(self) -> None:
+        name, unit = self.yaw_entry, self.yaw_unit
+        if name not in self.types:
+            raise self.error(f"no entry {name!r} (gyro heading); entries of a heading's types: "
+                             + (", ".join(n for n, t in self.types.items() if t in YAW_TYPES[4:]) or "none"))
+        typ = self.types[name]
+        if typ not in YAW_TYPES:
+            raise self.error(f"entry {name!r} (gyro heading) is {typ}, not one of {', '.join(YAW_TYPES)}")
+        if typ in NUMBER_TYPES and unit is None:
+            raise self.error(f"entry {name!r} (gyro heading) is a {typ}, whose unit the log does not say: give it "
+                             "(--yaw-unit deg or rad)")
+        if typ not in NUMBER_TYPES and unit is not None:
+            raise self.error(f"entry {name!r} (gyro heading) is a {typ}, in radians: a yaw unit does not apply")
+
+    def numbers(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t [ns], values as float64) of number entry ``name`` (one of :data:`NUMBER_TYPES`); records of
+        another size are dropped."""
+        typ, rec = self._index.records(name)
+        dt = np.dtype(_NUMBER_DTYPES[typ])
+        data, ok = _gather(self._buf, self._index, rec, dt.itemsize)
+        return self._index.ts[rec[ok]] * 1000, data.view(dt).reshape(-1).astype(np.float64)
+
+    def struct_values(self, name: str, type_name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t [ns], structured values) of a ``struct:type_name`` entry; records of another size dropped."""
+        try:
+            dt = self.structs.dtype(type_name)
+        except (KeyError, ValueError, NotImplementedError) as exc:
+            raise self.error(f"struct {type_name}: {exc}") from None
+        _, rec = self._index.records(name)
+        data, ok = _gather(self._buf, self._index, rec, dt.itemsize)
+        return self._index.ts[rec[ok]] * 1000, data.view(dt).reshape(-1)
+
+    def rotations(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t [ns], angle [rad]) of a ``struct:Rotation2d`` entry."""
+        t, v = self.struct_values(name, "Rotation2d")
+        return t, np.asarray(v["value"], dtype=np.float64)
+
+    def ground_truth(self) -> GroundTruth | None:
+        if self.truth_entry is None:
+            return None
+        typ, rec = self._index.records(self.truth_entry)
+        if typ == "double[]":
+            data, ok = _gather(self._buf, self._index, rec, 24)
+            t, pose = self._index.ts[rec[ok]] * 1000, data.view("<f8").reshape(-1, 3)
+        else:
+            t, p = self.struct_values(self.truth_entry, "Pose2d")
+            pose = np.column_stack([p["translation"]["x"], p["translation"]["y"], p["rotation"]["value"]])
+        return GroundTruth(t, np.asarray(pose, dtype=np.float64), f"entry {self.truth_entry}")
+
+    def yaw(self) -> YawTrack | None:
+        """The gyro heading of ``yaw_entry`` [rad, CCW, unwrapped]: NaN values dropped, and of records
+        with the same timestamp the last kept."""
+        if self.yaw_entry is None:
+            return None
+        name = self.yaw_entry
+        typ, rec = self._index.records(name)
+        if typ in NUMBER_TYPES:
+            t, yaw = self.numbers(name)
+            yaw = angle_to_rad(yaw, self.yaw_unit)
+        elif typ == "struct:Rotation2d":
+            t, yaw = self.rotations(name)
+        elif typ == "struct:Pose2d":
+            t, p = self.struct_values(name, "Pose2d")
+            yaw = np.asarray(p["rotation"]["value"], dtype=np.float64)
+        else:
+            data, ok = _gather(self._buf, self._index, rec, 24)
+            t, yaw = self._index.ts[rec[ok]] * 1000, data.view("<f8").reshape(-1, 3)[:, 2].astype(np.float64)
+        keep = np.isfinite(yaw)
+        t, yaw = t[keep], yaw[keep]
+        if np.any(np.diff(t) < 0):
+            raise self.error(f"entry {name!r} (gyro heading): timestamps decrease")
+        last = np.append(t[1:] != t[:-1], True) if t.size else np.zeros(0, bool)
+        return YawTrack(t[last], np.unwrap(yaw[last]), f"entry {name}")
+
+    def describe(self) -> dict:
+        return {"format": self.format, "path": self.path, "truth_entry": self.truth_entry,
+                "yaw_entry": self.yaw_entry, "yaw_unit": self.yaw_unit, "extra_header": self.extra_header}
+
+
+class WpiLog(WpiLogFile):
+    """A ``.wpilog``'s swerve module-state arrays as wheel samples (see the module docstring)."""
+
+    def __init__(self, path, geom: RobotGeometry, modules, states_entry: str | None = None,
+                 truth_entry: str | None = None, angle_unit: str | None = None, yaw_entry: str | None = None,
+                 yaw_unit: str | None = None) -> None:
+        if angle_unit is not None and angle_unit not in ANGLE_UNITS:
+            raise ValueError(f"angle_unit must be one of {ANGLE_UNITS}, got {angle_unit!r}")
+        super().__init__(path, geom, modules, truth_entry=truth_entry, yaw_entry=yaw_entry, yaw_unit=yaw_unit)
+        types = self.types
         self.states_entry = states_entry if states_entry is not None else self._find_states(types)
         if self.states_entry not in types:
             raise self.error(f"no entry {self.states_entry!r} (module states)")
@@ -222,16 +358,8 @@ class WpiLog(LogSource):
             raise self.error(f"entry {self.states_entry!r} is {self.states_type}, not one of {', '.join(STATE_TYPES)}")
         if self.states_type == "double[]" and angle_unit is None:
             raise self.error(f"entry {self.states_entry!r} is a double[] of [angle, speed] pairs, whose angle unit the "
-                             "log does not say: give it (--angle-unit rad or deg)")
+                             "log does not say: give it (--angle-unit rad, deg or rot)")
         self.angle_unit = angle_unit
-        self.truth_entry = truth_entry
-        if truth_entry is not None:
-            if truth_entry not in types:
-                raise self.error(f"no entry {truth_entry!r} (reference pose); pose entries: "
-                                 + (", ".join(n for n, t in types.items() if t in ("struct:Pose2d", "double[]"))
-                                    or "none"))
-            if types[truth_entry] not in ("struct:Pose2d", "double[]"):
-                raise self.error(f"entry {truth_entry!r} is {types[truth_entry]}, not struct:Pose2d or double[]")
         self._states = self._decode_states()
         self.n_samples = int(self._states[0].size)
 
@@ -243,7 +371,7 @@ class WpiLog(LogSource):
             return pick[0]
         if not found:
             raise self.error("no entry of type struct:SwerveModuleState[] (module states); name a double[] entry "
-                             "with --states-entry")
+                             "with --states-entry, or per-module entries with --steer-entry and --wheel-entry")
         raise self.error(f"several module-state entries ({', '.join(found)}): name one with --states-entry")
 
     def _decode_states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -253,9 +381,7 @@ class WpiLog(LogSource):
         if self.states_type == "double[]":
             data, ok = _gather(self._buf, self._index, rec, 16 * n)
             pairs = data.view("<f8").reshape(-1, n, 2)
-            heading, speed = pairs[..., 0], pairs[..., 1]
-            if self.angle_unit == "deg":
-                heading = np.deg2rad(heading)
+            heading, speed = angle_to_rad(pairs[..., 0], self.angle_unit), pairs[..., 1]
         else:
             type_name = self.states_type.removeprefix("struct:").removesuffix("[]")
             try:
@@ -284,25 +410,7 @@ class WpiLog(LogSource):
             beta, phidot = fold_coaxial(beta_from_heading(heading[a:b], self.geom), speed[a:b] / self.geom.r, self.geom)
             yield SampleChunk(t[a:b].copy(), beta, phidot, bad[a:b].copy())
 
-    def ground_truth(self) -> GroundTruth | None:
-        if self.truth_entry is None:
-            return None
-        typ, rec = self._index.records(self.truth_entry)
-        if typ == "double[]":
-            data, ok = _gather(self._buf, self._index, rec, 24)
-            pose = data.view("<f8").reshape(-1, 3)
-        else:
-            try:
-                dt = self.structs.dtype("Pose2d")
-            except (KeyError, ValueError, NotImplementedError) as exc:
-                raise self.error(f"struct Pose2d: {exc}") from None
-            data, ok = _gather(self._buf, self._index, rec, dt.itemsize)
-            p = data.view(dt).reshape(-1)
-            pose = np.column_stack([p["translation"]["x"], p["translation"]["y"], p["rotation"]["value"]])
-        return GroundTruth(self._index.ts[rec[ok]] * 1000, np.asarray(pose, dtype=np.float64),
-                           f"entry {self.truth_entry}")
-
     def describe(self) -> dict:
         return {"format": self.format, "path": self.path, "states_entry": self.states_entry,
                 "states_type": self.states_type, "angle_unit": self.angle_unit, "truth_entry": self.truth_entry,
-                "extra_header": self.extra_header}
+                "yaw_entry": self.yaw_entry, "yaw_unit": self.yaw_unit, "extra_header": self.extra_header}
