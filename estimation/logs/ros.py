@@ -8,7 +8,13 @@ robot file's module names; joints are found by name in each message, so their or
 other joints may be present). Each message's time is its ``header.stamp`` (``time="header"``, the
 default) or the time the bag recorded it (``time="log"``). A reference pose may come from a
 ``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseStamped`` or ``PoseWithCovarianceStamped``
-topic (x, y and the yaw of the orientation).
+topic (x, y and the yaw of the orientation), a gyro heading (``yaw_topic``) from a
+``sensor_msgs/msg/Imu`` or one of those (:mod:`estimation.logs.ros_poses`).
+
+When most messages hold every robot joint, each message is a sample (one that lacks a joint is
+skipped and counted), streamed a chunk at a time. Otherwise (the joints come in groups, in separate
+messages, on one topic or several) the groups are merged onto one clock by sample-and-hold, with a
+maximum age ``max_age_s`` (:mod:`estimation.logs.ros_merge`).
 
 Tested with rosbags 0.11 (``Writer(path, version=9, storage_plugin=...)``; bare files need 0.11).
 """
@@ -18,15 +24,25 @@ from __future__ import annotations
 import heapq
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from estimation.geometry import RobotGeometry
-from estimation.libm import atan2
-from estimation.logs.ros_cdr import POSE_STRINGS, JointStateBatcher, decode_poses, pose_offset
+from estimation.logs.hold import DEFAULT_MAX_AGE_S
+from estimation.logs.ros_cdr import JointStateBatcher
+from estimation.logs.ros_merge import check_signals, merged_chunks, scan_joints
+from estimation.logs.ros_poses import (
+                                       IMU,
+                                       TRUTH_TYPES,
+                                       YAW_TYPES,
+                                       check_yaw_topic,
+                                       read_poses,
+                                       read_yaw,
+                                       yaw_from_quaternion,
+)
 from estimation.logs.source import (
                                     BAD_MISSING_JOINT,
                                     BAD_NO_VELOCITY,
@@ -35,15 +51,15 @@ from estimation.logs.source import (
                                     LogError,
                                     LogSource,
                                     SampleChunk,
+                                    YawTrack,
                                     beta_from_heading,
                                     fold_coaxial,
 )
 
-__all__ = ["RosLog", "BagWriter", "JOINT_STATE", "TRUTH_TYPES", "yaw_from_quaternion", "TIME_SOURCES"]
+__all__ = ["RosLog", "BagWriter", "JOINT_STATE", "TRUTH_TYPES", "YAW_TYPES", "IMU", "yaw_from_quaternion",
+           "TIME_SOURCES"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
-#: message types a reference pose may come from
-TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
 #: where a message's time comes from: its header's stamp, or the time the bag logged it
 TIME_SOURCES = ("header", "log")
 
@@ -57,21 +73,28 @@ def _rosbags():
     return AnyReader, get_typestore(Stores.ROS2_HUMBLE)
 
 
-def yaw_from_quaternion(x, y, z, w):
-    """The rotation about z [rad] of unit quaternions (x, y, z, w) (arrays or floats):
-    atan2(2(wz + xy), 1 − 2(y² + z²))."""
-    return atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 class RosLog(LogSource):
-    """A ROS 2 bag's JointState topic as wheel samples (see the module docstring)."""
+    """A ROS 2 bag's JointState topics as wheel samples (see the module docstring).
+
+    ``topic``: the JointState topic, or a list of them (joint groups on several topics, merged);
+    ``yaw_topic``: a heading for :meth:`yaw` (an Imu with orientation, or a pose topic);
+    ``max_age_s``: the oldest a held joint value may be when groups are merged [s] (> 0; inf: no limit).
+    After :meth:`chunks`, ``merged`` says whether groups were merged, ``clock_joint`` names the joint
+    whose timestamps made the clock and ``stale_ticks`` counts the ticks marked stale.
+    """
 
     format = "ROS 2 bag"
 
-    def __init__(self, path, geom: RobotGeometry, modules, topic: str = "/joint_states",
+    def __init__(self, path, geom: RobotGeometry, modules, topic: str | Sequence[str] = "/joint_states",
                  steer_joint: str = "{module}_steer", drive_joint: str = "{module}_drive",
-                 truth_topic: str | None = None, time: str = "header", steer_convention: str = "beta") -> None:
+                 truth_topic: str | None = None, time: str = "header", steer_convention: str = "beta",
+                 yaw_topic: str | None = None, max_age_s: float = DEFAULT_MAX_AGE_S) -> None:
         super().__init__(path, geom, modules)
+        topics = (topic,) if isinstance(topic, str) else tuple(topic)
+        if not topics or not all(isinstance(x, str) and x for x in topics) or len(set(topics)) != len(topics):
+            raise ValueError(f"topic must be a topic name or a list of distinct topic names, got {topic!r}")
+        if isinstance(max_age_s, bool) or not isinstance(max_age_s, (int, float)) or not max_age_s > 0:
+            raise ValueError(f"max_age_s must be a number > 0 (inf: no limit), got {max_age_s!r}")
         if time not in TIME_SOURCES:
             raise ValueError(f"time must be one of {TIME_SOURCES}, got {time!r}")
         if steer_convention not in STEER_CONVENTIONS:
@@ -79,7 +102,11 @@ class RosLog(LogSource):
         for name, template in (("steer_joint", steer_joint), ("drive_joint", drive_joint)):
             if "{module}" not in template:
                 raise ValueError(f"{name} must contain {{module}} (the module's name), got {template!r}")
-        self.topic, self.truth_topic, self.time, self.steer_convention = topic, truth_topic, time, steer_convention
+        self.topics, self.topic = topics, ", ".join(topics)
+        self.truth_topic, self.yaw_topic, self.time = truth_topic, yaw_topic, time
+        self.steer_convention, self.max_age_s = steer_convention, float(max_age_s)
+        # inf (no limit) or a huge age: a bound that clock - t cannot overflow against
+        self.max_age_ns = round(min(self.max_age_s * 1e9, 2.0**62))
         self.steer_joints = [steer_joint.replace("{module}", m) for m in self.modules]
         self.drive_joints = [drive_joint.replace("{module}", m) for m in self.modules]
         if not Path(path).exists():
@@ -87,15 +114,25 @@ class RosLog(LogSource):
         self._any_reader, self._typestore = _rosbags()
         with self._open() as reader:
             topics = {c.topic: c.msgtype for c in reader.connections}
-            self._check_topic(topics, topic, (JOINT_STATE,), "joint states")
+            for t in self.topics:
+                self._check_topic(topics, t, (JOINT_STATE,), "joint states")
             if truth_topic is not None:
                 self._check_topic(topics, truth_topic, TRUTH_TYPES, "reference pose")
-            conns = [c for c in reader.connections if c.topic == topic]
-            self.n_samples = sum(c.msgcount for c in conns)
-            first = next(self._messages(reader, conns), None)
-        if first is None:
-            raise self.error(f"topic {topic} holds no message")
-        self._check_names(first[1], 0)
+            if yaw_topic is not None:
+                check_yaw_topic(self, reader, topics, yaw_topic)
+            scan = scan_joints(self, reader, [c for c in reader.connections if c.topic in self.topics])
+        if scan.n_messages == 0:
+            raise self.error(f"topic {self.topic} holds no message")
+        # most messages hold every joint: one sample per message; else joint groups, merged
+        self.merged = len(self.topics) > 1 or 2 * scan.n_complete < scan.n_messages
+        self.clock_joint: str | None = None
+        self.stale_ticks = 0
+        if self.merged:
+            check_signals(self, scan)
+            self.clock_joint = (self.steer_joints + self.drive_joints)[int(np.argmax(scan.counts))]
+            self.n_samples = max(scan.counts)
+        else:
+            self.n_samples = scan.n_messages
 
     @contextmanager
     def _open(self):
@@ -124,10 +161,13 @@ class RosLog(LogSource):
                                  "corrupt file?") from None
 
     def _deserialize(self, reader, conn, raw):
+        return self._deserialize_type(reader, conn.msgtype, raw, conn.topic)
+
+    def _deserialize_type(self, reader, msgtype: str, raw, topic: str | None = None):
         try:
-            return reader.deserialize(raw, conn.msgtype)
+            return reader.deserialize(raw, msgtype)
         except Exception as exc:  # noqa: BLE001
-            raise self.error(f"a {conn.topic} message cannot be decoded ({type(exc).__name__}: {exc})") from None
+            raise self.error(f"a {topic or msgtype} message cannot be decoded ({type(exc).__name__}: {exc})") from None
 
     def _time(self, t_log: int, stamp_ns: int, topic: str) -> int:
         if self.time == "log":
@@ -137,13 +177,6 @@ class RosLog(LogSource):
                              "time the bag recorded it")
         return int(stamp_ns)
 
-    def _messages(self, reader, conns) -> Iterator[tuple[int, object]]:
-        """(time [ns], message) of ``conns``, in the bag's time order."""
-        for conn, t_log, raw in self._raw_messages(reader, conns):
-            msg = self._deserialize(reader, conn, raw)
-            stamp = msg.header.stamp
-            yield self._time(t_log, int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), conn.topic), msg
-
     def _check_topic(self, topics: dict, topic: str, types: tuple, what: str) -> None:
         if topic not in topics:
             raise self.error(f"no topic {topic} ({what}); the bag has: "
@@ -151,32 +184,30 @@ class RosLog(LogSource):
         if topics[topic] not in types:
             raise self.error(f"topic {topic} holds {topics[topic]}, not {' or '.join(types)}")
 
-    def _check_names(self, msg, k: int) -> None:
-        names = set(msg.name)
-        for m, s, d in zip(self.modules, self.steer_joints, self.drive_joints):
-            for joint in (s, d):
-                if joint not in names:
-                    raise self.error(f"message {k} of {self.topic}: no joint {joint!r} for module {m!r} (its joints: "
-                                     f"{', '.join(msg.name)}); name the joints with --steer-joint/--drive-joint "
-                                     "templates such as '{module}_steer'")
-
     def _columns(self, names) -> tuple[list[int], list[int]]:
         """The indices of the modules' steering and drive joints in a message's ``names`` (-1: absent)."""
         index = {j: i for i, j in enumerate(names)}
         return [index.get(j, -1) for j in self.steer_joints], [index.get(j, -1) for j in self.drive_joints]
 
+    def _batcher(self, reader) -> JointStateBatcher:
+        """A batcher of the JointState fast path, each new layout checked against rosbags' decoding."""
+
+        def same_values(raw, layout) -> bool:  # rosbags' decoding of a new layout's first message
+            msg = self._deserialize_type(reader, JOINT_STATE, raw)
+            t, pos, vel = JointStateBatcher.decode([raw], layout)
+            stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+            return (tuple(msg.name) == layout.names and int(t[0]) == stamp
+                    and np.array_equal(msg.position, pos[0]) and np.array_equal(msg.velocity, vel[0]))
+
+        return JointStateBatcher(same_values)
+
     def chunks(self, size: int) -> Iterator[SampleChunk]:
+        if self.merged:
+            yield from merged_chunks(self, size)
+            return
         with self._open() as reader:
-            conns = [c for c in reader.connections if c.topic == self.topic]
-
-            def same_values(raw, layout) -> bool:  # rosbags' decoding of a new layout's first message
-                msg = self._deserialize(reader, conns[0], raw)
-                t, pos, vel = JointStateBatcher.decode([raw], layout)
-                stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-                return (tuple(msg.name) == layout.names and int(t[0]) == stamp
-                        and np.array_equal(msg.position, pos[0]) and np.array_equal(msg.velocity, vel[0]))
-
-            batcher = JointStateBatcher(same_values)
+            conns = [c for c in reader.connections if c.topic in self.topics]
+            batcher = self._batcher(reader)
             fill = _Fill(self, size)
             for conn, t_log, raw in self._raw_messages(reader, conns):
                 layout = batcher.layout_of(raw)
@@ -193,61 +224,21 @@ class RosLog(LogSource):
         if self.truth_topic is None:
             return None
         with self._open() as reader:
-            conns = [c for c in reader.connections if c.topic == self.truth_topic]
-            strings = POSE_STRINGS[conns[0].msgtype]
-            layouts: dict[tuple, bool] = {}
-            t_all, poses, groups = [], [], {}
-            for conn, t_log, raw in self._raw_messages(reader, conns):
-                k = len(t_all)
-                got = pose_offset(raw, strings)
-                ident = None if got is None else (got[0], len(raw), got[1])
-                if ident is not None and ident not in layouts:  # a new layout: rosbags must agree on its first message
-                    msg = self._deserialize(reader, conn, raw)
-                    stamp, pose = decode_poses([raw], len(raw), got[1])
-                    layouts[ident] = bool(np.array_equal(pose[0], _pose_values(msg))
-                                          and stamp[0] == _stamp_ns(msg))
-                if ident is not None and layouts[ident]:
-                    rows, raws = groups.setdefault(ident, ([], []))
-                    rows.append(k)
-                    raws.append(raw)
-                    t_all.append((t_log, 0))
-                    poses.append(None)
-                else:
-                    msg = self._deserialize(reader, conn, raw)
-                    t_all.append((t_log, _stamp_ns(msg)))
-                    poses.append(_pose_values(msg))
-        t_log = np.array([t for t, _ in t_all], dtype=np.int64).reshape(-1)
-        stamp = np.array([s for _, s in t_all], dtype=np.int64).reshape(-1)
-        values = np.zeros((len(poses), 7))
-        for k, v in enumerate(poses):
-            if v is not None:
-                values[k] = v
-        for (_, length, off), (rows, raws) in groups.items():
-            stamp[rows], values[rows] = decode_poses(raws, length, off)
-        if self.time == "header":
-            if np.any(stamp == 0):
-                self._time(0, 0, self.truth_topic)  # refuses the log
-            t = stamp
-        else:
-            t = t_log
-        yaw = yaw_from_quaternion(values[:, 3], values[:, 4], values[:, 5], values[:, 6])
-        return GroundTruth(t, np.column_stack([values[:, 0], values[:, 1], yaw]), f"topic {self.truth_topic}")
+            return read_poses(self, reader, self.truth_topic)
+
+    def yaw(self) -> YawTrack | None:
+        if self.yaw_topic is None:
+            return None
+        with self._open() as reader:
+            return read_yaw(self, reader, self.yaw_topic)
 
     def describe(self) -> dict:
-        return {"format": self.format, "path": self.path, "topic": self.topic, "time": self.time,
+        return {"format": self.format, "path": self.path,
+                "topic": self.topics[0] if len(self.topics) == 1 else list(self.topics), "time": self.time,
                 "steer_joints": self.steer_joints, "drive_joints": self.drive_joints,
-                "truth_topic": self.truth_topic, "steer_convention": self.steer_convention}
-
-
-def _stamp_ns(msg) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-
-
-def _pose_values(msg) -> np.ndarray:
-    """x, y, z, qx, qy, qz, qw of a reference-pose message (Odometry, Pose(WithCovariance)Stamped)."""
-    pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-    p, o = pose.position, pose.orientation
-    return np.array([p.x, p.y, p.z, o.x, o.y, o.z, o.w], dtype=np.float64)
+                "truth_topic": self.truth_topic, "yaw_topic": self.yaw_topic, "steer_convention": self.steer_convention,
+                "merged": self.merged, "clock_joint": self.clock_joint, "max_age_s": self.max_age_s,
+                "stale_ticks": self.stale_ticks}
 
 
 class _Fill:
@@ -387,6 +378,24 @@ class BagWriter:
         cls = self._type("geometry_msgs/msg/PoseStamped")
         self._add(topic, "geometry_msgs/msg/PoseStamped", t_ns,
                   lambda i, t: cls(header=self._header(t, frame), pose=self._pose(pose[i])))
+
+    def add_imu(self, topic: str, t_ns, yaw, yaw_rate=None, frame: str = "imu_link") -> None:
+        """sensor_msgs/Imu: orientation of heading ``yaw`` (T,) [rad] (None: no orientation, all zeros with
+        orientation_covariance[0] = -1 as ROS marks it), angular velocity z ``yaw_rate`` (T,) (default 0)."""
+        cls, quat = self._type(IMU), self._type("geometry_msgs/msg/Quaternion")
+        n = len(np.asarray(t_ns))
+        rate = np.zeros(n) if yaw_rate is None else np.asarray(yaw_rate, dtype=np.float64)
+        cov = np.zeros(9)
+        if yaw is None:
+            cov[0] = -1.0
+
+        def make(i, t):
+            q = quat(x=0.0, y=0.0, z=0.0, w=0.0) if yaw is None else self._quaternion(float(yaw[i]))
+            return cls(header=self._header(t, frame), orientation=q, orientation_covariance=cov.copy(),
+                       angular_velocity=self._vector((0.0, 0.0, rate[i])), angular_velocity_covariance=np.zeros(9),
+                       linear_acceleration=self._vector((0.0, 0.0, 0.0)), linear_acceleration_covariance=np.zeros(9))
+
+        self._add(topic, IMU, t_ns, make)
 
     def add_vector3_stamped(self, topic: str, t_ns, vec, frame: str = "base_link") -> None:
         """geometry_msgs/Vector3Stamped: ``vec`` (T, 3)."""

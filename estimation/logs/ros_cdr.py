@@ -92,16 +92,20 @@ class JointStateBatcher:
     reads with ``layout`` (called once per new layout). :meth:`layout_of` returns a message's
     accepted layout, or None (then the caller decodes it another way)."""
 
+    #: how many recently seen layouts are tried before a message is parsed (joint groups published
+    #: in separate messages alternate between a few layouts)
+    RECENT = 4
+
     def __init__(self, check) -> None:
         self._check = check
         self._layouts: dict[tuple, JointStateLayout | None] = {}
-        self._last: JointStateLayout | None = None
+        self._recent: list[JointStateLayout] = []
 
     def layout_of(self, raw: bytes) -> JointStateLayout | None:
-        last = self._last
-        if (last is not None and len(raw) == last.length and raw[_DATA + 8:_DATA + 8 + len(last.key)] == last.key
-                and _U32.unpack_from(raw, last.vel_count_off)[0] == last.n_vel):
-            return last
+        for last in self._recent:
+            if (len(raw) == last.length and raw[_DATA + 8:_DATA + 8 + len(last.key)] == last.key
+                    and _U32.unpack_from(raw, last.vel_count_off)[0] == last.n_vel):
+                return last
         layout = parse_layout(raw)
         if layout is None:
             return None
@@ -110,7 +114,7 @@ class JointStateBatcher:
             self._layouts[ident] = layout if self._check(raw, layout) else None
         accepted = self._layouts[ident]
         if accepted is not None:
-            self._last = accepted
+            self._recent = [accepted] + [r for r in self._recent if r is not accepted][:self.RECENT - 1]
         return accepted
 
     @staticmethod
@@ -125,9 +129,10 @@ class JointStateBatcher:
 
 
 #: the strings before the pose in a reference-pose message: the header's frame id, and an
-#: Odometry's child frame id; the pose (Point x, y, z; Quaternion x, y, z, w: 7 float64) comes next
+#: Odometry's child frame id; the pose (Point x, y, z; Quaternion x, y, z, w: 7 float64) comes next.
+#: An Imu's header is followed by its orientation (Quaternion) and orientation covariance (float64[9])
 POSE_STRINGS = {"nav_msgs/msg/Odometry": 2, "geometry_msgs/msg/PoseStamped": 1,
-                "geometry_msgs/msg/PoseWithCovarianceStamped": 1}
+                "geometry_msgs/msg/PoseWithCovarianceStamped": 1, "sensor_msgs/msg/Imu": 1}
 
 
 def pose_offset(raw: bytes, strings: int) -> tuple[bytes, int] | None:
@@ -149,9 +154,11 @@ def pose_offset(raw: bytes, strings: int) -> tuple[bytes, int] | None:
     return (bytes(raw[_DATA + 8:p]), off) if off + 56 <= len(raw) else None
 
 
-def decode_poses(raws: list[bytes], length: int, off: int) -> tuple[np.ndarray, np.ndarray]:
-    """(stamp [ns] (m,), (m, 7) x, y, z, qx, qy, qz, qw) of messages of one layout."""
+def decode_poses(raws: list[bytes], length: int, off: int, count: int = 7) -> tuple[np.ndarray, np.ndarray]:
+    """(stamp [ns] (m,), (m, count) float64 values from ``off``) of messages of one layout: a pose's
+    x, y, z, qx, qy, qz, qw (the default); an Imu's qx, qy, qz, qw and orientation covariance
+    (``count`` 5 reads its first element)."""
     buf = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), length)
     sec = np.ascontiguousarray(buf[:, _DATA:_DATA + 4]).view("<i4")[:, 0].astype(np.int64)
     nsec = np.ascontiguousarray(buf[:, _DATA + 4:_DATA + 8]).view("<u4")[:, 0].astype(np.int64)
-    return sec * 1_000_000_000 + nsec, np.ascontiguousarray(buf[:, off:off + 56]).view("<f8")
+    return sec * 1_000_000_000 + nsec, np.ascontiguousarray(buf[:, off:off + 8 * count]).view("<f8")
