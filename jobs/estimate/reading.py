@@ -153,6 +153,8 @@ def reader_options(args: argparse.Namespace, fmt: str) -> dict:
             if dest in options:
                 raise ValueError(f"argument {WPILOG_OPTIONS[dest]}: applies to per-module entries only (--steer-entry"
                                  ", --wheel-entry)")
+    if "yaw_unit" in options and "yaw_entry" not in options:
+        raise ValueError("argument --yaw-unit: needs --yaw-entry")
     if getattr(args, "steer_convention", None) is not None:
         if fmt == "wpilog" and not modules:
             raise ValueError("argument --steer-convention: a .wpilog's module states are always headings")
