@@ -309,8 +309,9 @@ class _Fill:
 
 class BagWriter:
     """A ROS 2 bag (MCAP by default, which Foxglove opens; or SQLite3) of the messages an episode
-    export writes. Each ``add_*`` queues one topic's series; :meth:`close` writes them all merged
-    in time order. Times are int nanoseconds; each message's header stamp equals its log time."""
+    export writes. Each ``add_*`` queues one series (several may share a topic, as joint groups
+    do); :meth:`close` writes them all merged in time order. Times are int nanoseconds; each
+    message's header stamp equals its log time."""
 
     def __init__(self, path, storage: str = "mcap") -> None:
         try:
@@ -428,7 +429,11 @@ class BagWriter:
         w = self._writer
         w.open()
         try:
-            streams = [_stream(order, w.add_connection(topic, msgtype, typestore=self.ts), msgtype, t_ns, make)
+            conns: dict = {}  # series on one topic (joint groups) share its connection
+            for topic, msgtype, _, _ in self._series:
+                if (topic, msgtype) not in conns:
+                    conns[topic, msgtype] = w.add_connection(topic, msgtype, typestore=self.ts)
+            streams = [_stream(order, conns[topic, msgtype], msgtype, t_ns, make)
                        for order, (topic, msgtype, t_ns, make) in enumerate(self._series)]
             for t, _, i, conn, msgtype, make in heapq.merge(*streams):
                 w.write(conn, t, self.ts.serialize_cdr(make(i, t), msgtype))
