@@ -18,7 +18,7 @@ __all__ = ["add_reading_arguments", "open_source", "robot_geometry", "reader_opt
 #: flags that only a ROS 2 bag takes (dest -> flag), and only a .wpilog; of those, the ones of
 #: per-module entries (--steer-entry, --wheel-entry) only, and the one of state arrays only
 ROS_OPTIONS = {"topic": "--topic", "steer_joint": "--steer-joint", "drive_joint": "--drive-joint",
-               "truth_topic": "--truth-topic", "time": "--time"}
+               "truth_topic": "--truth-topic", "time": "--time", "yaw_topic": "--yaw-topic", "max_age_s": "--max-age"}
 WPILOG_OPTIONS = {"states_entry": "--states-entry", "truth_entry": "--truth-entry", "angle_unit": "--angle-unit",
                   "steer_entry": "--steer-entry", "wheel_entry": "--wheel-entry", "wheel_scale": "--wheel-scale",
                   "max_age_s": "--max-age", "yaw_entry": "--yaw-entry", "yaw_unit": "--yaw-unit"}
@@ -80,6 +80,12 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
                                                          "PoseStamped or PoseWithCovarianceStamped topic")
     ros.add_argument("--time", choices=TIME_SOURCES, default=None,
                      help="a message's time: its header stamp (header, the default) or when the bag logged it (log)")
+    ros.add_argument("--yaw-topic", default=None, metavar="TOPIC",
+                     help="the gyro heading: a sensor_msgs/Imu topic or a pose topic (its orientation's yaw)")
+    parser.add_argument("--max-age", dest="max_age_s", type=_finite("--max-age", positive=True), default=None,
+                        metavar="SECONDS", help="signals logged apart (wpilog per-module entries, ROS joint groups in "
+                                                "separate messages) are held onto one clock: a sample where some "
+                                                "value is older than this is skipped as stale (default 0.5)")
     wpi = parser.add_argument_group("WPILib data logs")
     wpi.add_argument("--states-entry", default=None, metavar="NAME",
                      help="the module-states entry (default: the one struct:SwerveModuleState[] entry, or the "
@@ -97,9 +103,6 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
     wpi.add_argument("--wheel-scale", type=_finite("--wheel-scale", positive=False), default=None, metavar="X",
                      help="--wheel-entry values times X are the wheel's speed in m/s (default 1: m/s; the wheel "
                           "radius for rad/s; negative for an inverted motor)")
-    wpi.add_argument("--max-age", dest="max_age_s", type=_finite("--max-age", positive=True), default=None,
-                     metavar="SECONDS", help="per-module entries: a sample where some module's value is older "
-                                             "than this is skipped as stale (default 0.5)")
     wpi.add_argument("--truth-entry", default=None, metavar="NAME", help="a reference pose: a struct:Pose2d or "
                                                                          "double[3] entry")
     wpi.add_argument("--yaw-entry", default=None, metavar="NAME",
