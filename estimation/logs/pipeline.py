@@ -12,6 +12,12 @@ sample period (``integrate_pose``), composed in time order. It starts at the ori
 reference pose exists, at the reference pose of the first sample it covers; the drift is then
 the position error over the distance the reference travelled.
 
+Moving apart from standing (:mod:`estimation.logs.motion`): per sample, the rigid-body
+least-squares twist of the wheels (``twist_from_wheels_batch``, with the same β̇ as the dead
+reckoning) and ``moving``, the fastest contact point of that fit at least ``moving_speed`` (default
+:data:`~estimation.logs.motion.MOVING_SPEED`, 0.05 m/s). A gyro the reader gives
+(:meth:`LogSource.yaw`) is interpolated at the samples (``yaw_at``).
+
 Samples are skipped, and counted by reason, when the reader could not read them or a value is
 NaN or infinite (:data:`~estimation.logs.source.BAD_REASONS`). Timestamps that are not strictly
 increasing refuse the log (:class:`~estimation.logs.source.LogError`): the order of the samples,
@@ -30,7 +36,8 @@ from numba import njit
 
 from estimation.estimate import METHODS, estimate_eta
 from estimation.kinematics import integrate_pose, odometry_twist
-from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, GroundTruth, LogSource
+from estimation.logs.motion import MOVING_SPEED, contact_speeds, interp_on, twist_from_wheels_batch
+from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, GroundTruth, LogSource, YawTrack
 
 __all__ = ["DEFAULT_METHODS", "LogEstimate", "estimate_log", "compose_increments", "compare_estimators",
            "odometry_drift"]
@@ -56,6 +63,12 @@ class LogEstimate:
             outside its time span); aligned_at: the first sample it covers (where dead reckoning
             starts from it), or None.
         source: what the reader says it read (:meth:`LogSource.describe`).
+        rigid_twist: (K, 3) the wheels' rigid-body least-squares twist (ẋ, ẏ, θ̇) (no ICR estimate:
+            :func:`~estimation.logs.motion.twist_from_wheels_batch`); rigid_residual: (K,) its
+            residual [m/s]; contact_speed: (K,) its fastest contact point's speed [m/s]; moving:
+            (K,) ``contact_speed >= moving_speed`` [m/s].
+        yaw: the gyro's heading, if the reader gives one; yaw_at: (K,) it interpolated at the
+            samples [rad] (NaN outside its time span), None without a gyro.
     """
 
     t_ns: np.ndarray
@@ -76,6 +89,13 @@ class LogEstimate:
     truth_at: np.ndarray | None = None
     aligned_at: int | None = None
     source: dict = field(default_factory=dict)
+    rigid_twist: np.ndarray | None = None
+    rigid_residual: np.ndarray | None = None
+    contact_speed: np.ndarray | None = None
+    moving: np.ndarray | None = None
+    moving_speed: float = MOVING_SPEED
+    yaw: YawTrack | None = None
+    yaw_at: np.ndarray | None = None
 
     @property
     def t_s(self) -> np.ndarray:
@@ -114,9 +134,10 @@ class _Odometry:
         self.t_prev = 0
         self.pose = np.zeros(3)
 
-    def advance(self, t_ns, beta, phidot, lam) -> tuple[np.ndarray, np.ndarray]:
+    def advance(self, t_ns, beta, phidot, lam) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The odometry twists, the poses and the β̇ used, of the chunk's samples."""
         if t_ns.size == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3))
+            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, self.geom.n))
         first = self.beta_prev is None
         beta_prev = np.concatenate([beta[:1] if first else self.beta_prev[None], beta[:-1]])
         t_prev = np.concatenate([[t_ns[0] if first else self.t_prev], t_ns[:-1]])
@@ -127,7 +148,7 @@ class _Odometry:
         inc = integrate_pose(np.zeros_like(twist), twist, dt)
         poses = compose_increments(self.pose, inc)
         self.beta_prev, self.t_prev, self.pose = beta[-1].copy(), int(t_ns[-1]), poses[-1].copy()
-        return twist, poses
+        return twist, poses, beta_rate
 
 
 def _check_time(t_ns: np.ndarray, last: int | None, offset: int, source: LogSource) -> None:
@@ -143,7 +164,7 @@ def _check_time(t_ns: np.ndarray, last: int | None, offset: int, source: LogSour
 
 
 def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method: str | None = None,
-                 chunk_size: int = 50_000, mu_tol: float = 1e-3,
+                 chunk_size: int = 50_000, mu_tol: float = 1e-3, moving_speed: float = MOVING_SPEED,
                  progress: Callable[[int, int | None], None] | None = None) -> LogEstimate:
     """Read ``source`` chunk by chunk and estimate every good sample (see the module docstring).
 
@@ -152,6 +173,8 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
         odometry_method: the one whose λ̂ the dead reckoning uses (default: the first of ``methods``).
         chunk_size: samples per chunk (memory and progress granularity; results do not depend on it).
         mu_tol: ``estimate_eta``'s sign threshold [m/s] (the simulator's is 1e-3).
+        moving_speed: [m/s] a sample moves when the fastest wheel contact point of the wheels'
+            rigid fit moves at least this fast (see :mod:`estimation.logs.motion`).
         progress: called with (samples read, ``source.n_samples``) after each chunk.
 
     Raises :class:`LogError` for unsorted or duplicated timestamps, a log with no good sample, or
@@ -165,8 +188,12 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
         raise ValueError(f"odometry_method {odometry_method!r} is not among the methods run {methods}")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if isinstance(moving_speed, bool) or not isinstance(moving_speed, (int, float)) or not moving_speed >= 0 \
+            or not math.isfinite(moving_speed):
+        raise ValueError(f"moving_speed must be a finite number >= 0 [m/s], got {moving_speed!r}")
     geom = source.geom
-    parts: dict[str, list] = {k: [] for k in ("t", "beta", "phidot", "twist", "pose", "oor")}
+    parts: dict[str, list] = {k: [] for k in ("t", "beta", "phidot", "twist", "pose", "oor", "rigid", "resid",
+                                              "speed")}
     est = {m: {"lam": [], "mu": [], "qua": []} for m in methods}
     cost = dict.fromkeys(methods, 0.0)
     skipped = dict.fromkeys(BAD_REASONS, 0)
@@ -195,16 +222,18 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
             est[m]["lam"].append(lam)
             est[m]["mu"].append(mu)
             est[m]["qua"].append(qua)
-        twist, poses = odo.advance(t, beta, phidot, est[odometry_method]["lam"][-1])
+        twist, poses, beta_rate = odo.advance(t, beta, phidot, est[odometry_method]["lam"][-1])
+        rigid, resid = twist_from_wheels_batch(beta, beta_rate, phidot, geom)
+        speed = contact_speeds(rigid, beta, geom).max(axis=1) if t.size else np.zeros(0)
         oor = ((beta > geom.steer_max) | (beta <= geom.steer_min)).any(axis=1) if limited else np.zeros(t.size, bool)
         for key, value in (("t", t), ("beta", beta), ("phidot", phidot), ("twist", twist), ("pose", poses),
-                           ("oor", oor)):
+                           ("oor", oor), ("rigid", rigid), ("resid", resid), ("speed", speed)):
             parts[key].append(value)
         if progress is not None:
             progress(n_read, source.n_samples)
     n = geom.n
     cat = {k: np.concatenate(v) if v else np.zeros((0,) + shape)
-           for (k, v), shape in zip(parts.items(), [(), (n,), (n,), (3,), (3,), ()])}
+           for (k, v), shape in zip(parts.items(), [(), (n,), (n,), (3,), (3,), (), (3,), (), ()])}
     if cat["t"].size == 0:
         reasons = "; ".join(f"{c} x {BAD_REASONS[r]}" for r, c in skipped.items() if c)
         raise source.error(f"no good sample among the {n_read} read" + (f" ({reasons})" if reasons else ""))
@@ -213,9 +242,30 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
         lam={m: np.concatenate(est[m]["lam"]) for m in methods}, mu={m: np.concatenate(est[m]["mu"]) for m in methods},
         qua={m: np.concatenate(est[m]["qua"]) for m in methods}, cost_s=cost, odometry_method=odometry_method,
         odom_twist=cat["twist"], pose=cat["pose"], out_of_range=cat["oor"].astype(bool), n_read=n_read,
-        skipped={BAD_REASONS[r]: c for r, c in skipped.items() if c}, source=source.describe())
+        skipped={BAD_REASONS[r]: c for r, c in skipped.items() if c}, source=source.describe(),
+        rigid_twist=cat["rigid"], rigid_residual=cat["resid"], contact_speed=cat["speed"],
+        moving=cat["speed"] >= moving_speed, moving_speed=float(moving_speed))
     _attach_truth(result, source.ground_truth(), source)
+    _attach_yaw(result, source.yaw(), source)
     return result
+
+
+def _attach_yaw(result: LogEstimate, yaw: YawTrack | None, source: LogSource) -> None:
+    """Check the gyro's heading and interpolate it at the samples."""
+    if yaw is None:
+        return
+    t = np.asarray(yaw.t_ns, dtype=np.int64)
+    y = np.asarray(yaw.yaw, dtype=np.float64)
+    if t.ndim != 1 or y.shape != t.shape:
+        raise source.error(f"the gyro's yaw ({yaw.source}) has {t.shape} timestamps and {y.shape} values")
+    if not np.all(np.isfinite(y)):
+        raise source.error(f"the gyro's yaw ({yaw.source}) holds NaN or infinite values")
+    if t.size > 1 and np.diff(t).min() <= 0:
+        j = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise source.error(f"the gyro's yaw ({yaw.source}) has timestamps not strictly increasing at its sample "
+                           f"{j + 1}")
+    result.yaw = YawTrack(t, y, yaw.source)
+    result.yaw_at = interp_on(result.t_ns, t, y)
 
 
 def _attach_truth(result: LogEstimate, truth: GroundTruth | None, source: LogSource) -> None:
