@@ -70,7 +70,9 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
                              "(heading: WPILib's convention, the default for wpilog entries; a URDF steering joint "
                              "whose zero points the wheel forward); wpilog state arrays are always headings")
     ros = parser.add_argument_group("ROS 2 bags")
-    ros.add_argument("--topic", default=None, help="the JointState topic (default /joint_states)")
+    ros.add_argument("--topic", action="append", default=None,
+                     help="the JointState topic (default /joint_states); given more than once, joint groups "
+                          "published on several topics")
     ros.add_argument("--steer-joint", default=None, metavar="TEMPLATE",
                      help="a module's steering joint name, {module} standing for the module's name in the robot "
                           "file (default '{module}_steer')")
