@@ -30,6 +30,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record-d2": ("jobs.record_d2", "regenerate dataset D2 from the simulated robot on the paper track"),
     "estimate": ("jobs.estimate.command", "estimate the ICR, the H state and odometry from a recorded robot log "
                  "(CSV, ROS 2 bag, WPILib .wpilog)"),
+    "calibrate": ("jobs.calibrate.command", "fit each module's steering offset and wheel-speed factor to a log of "
+                  "ordinary driving (CSV, ROS 2 bag, WPILib .wpilog)"),
     "train": ("jobs.training.command", "train an RL baseline (needs the [rl] extra)"),
     "tune": ("jobs.training.tune", "search azimut train's hyperparameters with Optuna (the [tune] extra)"),
 }
