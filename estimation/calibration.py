@@ -220,7 +220,7 @@ def _gauss_newton(theta, beta, brate, phidot, geom, speed, yaw_rate, yaw_w, free
     h = 1e-6
     info = np.eye(p)
     it = 0
-    for it in range(1, iters + 1):
+    for it in range(1, iters + 1):  # noqa: B007 (the count is returned)
         r0 = _objective(theta, beta, brate, phidot, geom, speed, yaw_rate, yaw_w)
         norm = np.sqrt(np.sum(r0**2, axis=1))
         w = np.where(norm <= _HUBER, 1.0, _HUBER / np.maximum(norm, 1e-300))

@@ -116,7 +116,8 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
     dur = (t[-1] - t[0]) * 1e-9 if t.size else 0.0
     modules = []
     for k, name in enumerate(source.modules):
-        entry = {"name": name, "steer_offset_deg": float(np.degrees(offset[k])), "wheel_scale": float(fit.wheel_scale[k]),
+        entry = {"name": name, "steer_offset_deg": float(np.degrees(offset[k])),
+                 "wheel_scale": float(fit.wheel_scale[k]),
                  "steer_offset_std_deg": float(np.degrees(fit.offset_std[k])),
                  "wheel_scale_std": float(fit.scale_std[k]),
                  "steer_offset_halves_spread_deg": None if spread_off is None else spread_off[k],

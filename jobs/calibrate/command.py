@@ -97,8 +97,8 @@ def run(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - t0
     out = Path(args.out)
     files = write_outputs(result, args.source, out, elapsed_s=elapsed)
-    after = result["after"]["qua_IT_mean"]
+    before, after = result["before"]["qua_IT_mean"], result["after"]["qua_IT_mean"]
     print(f"calibrated {len(args.source.modules)} modules on {result['samples']['moving']} moving samples of "
-          f"{result['samples']['read']} in {elapsed:.1f} s: IT's qua while moving {100 * result['before']['qua_IT_mean']:.2f}% "
-          f"as logged, {100 * after:.2f}% calibrated; wrote {', '.join(files)} to {out}")
+          f"{result['samples']['read']} in {elapsed:.1f} s: IT's qua while moving {100 * before:.2f}% as logged, "
+          f"{100 * after:.2f}% calibrated; wrote {', '.join(files)} to {out}")
     return 0

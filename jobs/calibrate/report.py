@@ -34,8 +34,9 @@ def _code_forms(result: dict) -> list[str]:
         rot = ((add / 360.0) + 0.5) % 1.0 - 0.5
         lines.append(f"| {m['name']} | {add:+.2f} | {sub:.2f} | {rad:.4f} | {rot:+.5f} |")
     lines += ["", "Java (BaseFalconSwerve/WPILib style, `Cancoder − angleOffset`):", "", "```java"]
-    lines += [f"public static final Rotation2d angleOffset{k} = Rotation2d.fromDegrees({(-m['steer_offset_deg']) % 360.0:.2f});"
-              f" // {m['name']}" for k, m in enumerate(mods)]
+    lines += [f"public static final Rotation2d angleOffset{k} = "
+              f"Rotation2d.fromDegrees({(-m['steer_offset_deg']) % 360.0:.2f}); // {m['name']}"
+              for k, m in enumerate(mods)]
     lines += ["```", ""]
     return lines
 
@@ -75,7 +76,8 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
         lines.append(f"| {m['name']} | {m['steer_offset_deg']:+.3f} | {m['steer_offset_std_deg']:.3f} | "
                      f"{_f(m['steer_offset_halves_spread_deg'], '.3f')} | "
                      + (f"{m['change_from_current_deg']:+.3f} | " if cur else "")
-                     + f"{m['wheel_scale']:.4f} | {m['wheel_scale_std']:.4f} | {_f(m['wheel_scale_halves_spread'], '.4f')} |")
+                     + f"{m['wheel_scale']:.4f} | {m['wheel_scale_std']:.4f} | "
+                     f"{_f(m['wheel_scale_halves_spread'], '.4f')} |")
     lines += ["", "## Before and after (moving samples)", "",
               "Departure: the measured steering angle minus the constraining surface at IT's estimate, per module "
               "[deg]: signed mean / mean |·| / 95th percentile.", "",
@@ -90,8 +92,8 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
                      + " | ".join(deps) + " |")
     lines += [""] + _code_forms(result)
     lines += ["Apply it to an estimate: `azimut estimate LOG ... --calibration calibration.json`.", "",
-              f"Calibrated in {elapsed_s:.1f} s (reading included); machine {platform.processor() or platform.machine()}, "
-              f"Python {sys.version.split()[0]}.", ""]
+              f"Calibrated in {elapsed_s:.1f} s (reading included); machine "
+              f"{platform.processor() or platform.machine()}, Python {sys.version.split()[0]}.", ""]
     return "\n".join(lines)
 
 
