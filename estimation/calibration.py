@@ -50,6 +50,9 @@ __all__ = ["CalibrationFit", "fit_calibration", "rigid_fit", "apply_offsets", "l
 MOVING_SPEED = 0.05
 #: the common offset is reported as observable when its standard error is below this [deg]
 COMMON_OBSERVABLE_DEG = 0.5
+#: the log must tell the relative offsets and factors apart: refused when the weakest combination of
+#: them has a standard error above this [deg] (all the motions alike: one direction of travel)
+MAX_WEAK_STD_DEG = 1.0
 #: fewer moving samples than this cannot calibrate (8 parameters need many independent motions)
 MIN_MOVING_SAMPLES = 200
 #: Huber threshold on a sample's normalised residual norm [rad]: about 3° of disagreement
@@ -166,6 +169,8 @@ class CalibrationFit:
             mean 1) unless ``scale_absolute``.
         offset_std, scale_std: (n,) standard errors of the last Gauss–Newton step (from the
             residuals' spread; they ignore errors that repeat from sample to sample).
+        weakest_std_deg: the standard error of the worst-determined combination of relative offsets
+            and factors [deg] (at most :data:`MAX_WEAK_STD_DEG`, else the fit is refused).
         common_observable: whether the log fixes the common offset of all modules (else their
             circular mean is set to zero); common_std_deg: its standard error [deg].
         scale_absolute: the factors are absolute (a gyro saw the robot turn).
@@ -179,6 +184,7 @@ class CalibrationFit:
     scale_std: np.ndarray
     common_observable: bool
     common_std_deg: float
+    weakest_std_deg: float
     scale_absolute: bool
     samples: int
     iterations: int
@@ -259,7 +265,7 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
         the fit and the (N,) moving mask it used (after calibration).
 
     Raises ``ValueError`` with fewer than :data:`MIN_MOVING_SAMPLES` moving samples (the message
-    says how many the log has).
+    says how many the log has), or motions too alike to tell the offsets apart.
     """
     n = geom.n
     beta = np.asarray(beta, dtype=np.float64)
@@ -312,6 +318,15 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
     cov0 = np.linalg.inv(info + _gauge(n, info, bool(turning), hold_common=False)) * sigma2
     common_std = math.sqrt(max(float(g1 @ cov0 @ g1), 0.0))
     observable = math.degrees(common_std) < COMMON_OBSERVABLE_DEG
+    gauge = np.zeros((2 * n, 2))
+    gauge[:n, 0], gauge[n:, 1] = 1.0, 1.0
+    proj = np.eye(2 * n) - gauge @ np.linalg.pinv(gauge)
+    eig = np.linalg.eigvalsh(proj @ info @ proj)[2:]  # the two gauge directions are the zeros
+    weakest = math.degrees(math.sqrt(sigma2 / max(eig.min(), 1e-300)))
+    if weakest > MAX_WEAK_STD_DEG:
+        raise ValueError(f"the log's motions are too alike to tell the modules' offsets apart (the weakest "
+                         f"combination is uncertain by ±{weakest:.1f}°, {MAX_WEAK_STD_DEG}° at most): drive in several "
+                         "directions and turn")
     cov = np.linalg.inv(info + _gauge(n, info, bool(turning), hold_common=not observable)) * sigma2
     offset, scale = theta[:n].copy(), np.exp(theta[n:])
     notes = []
@@ -335,6 +350,7 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     fit = CalibrationFit(steer_offset=offset, wheel_scale=scale, offset_std=std[:n], scale_std=std[n:] * scale,
                          common_observable=observable, common_std_deg=math.degrees(common_std),
+                         weakest_std_deg=weakest,
                          scale_absolute=scale_absolute, samples=int(use.sum()), iterations=fit_iters,
                          rms_rad=float(np.sqrt(np.mean(np.sum(r**2, axis=1)))), notes=notes)
     return fit, moving

@@ -129,6 +129,7 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
         "schema": 1, "robot": robot_record(geom, source.modules), "log": source.describe(),
         "modules": modules,
         "common_offset_observable": fit.common_observable, "common_offset_std_deg": fit.common_std_deg,
+        "weakest_combination_std_deg": fit.weakest_std_deg,
         "wheel_scale_absolute": fit.scale_absolute, "gyro": yaw.source if yaw is not None else None,
         "moving_speed_mps": moving_speed,
         "samples": {"read": read, "good": int(t.size), "skipped": skipped, "moving": int(moving.sum()),

@@ -31,14 +31,21 @@ def robot_record(geom: RobotGeometry, modules) -> dict:
             "r_m": np.asarray(geom.r, float).round(9).tolist(), "unlimited_steering": bool(geom.unlimited_steering)}
 
 
-def _same_robot(a: dict, b: dict) -> bool:
+def _robot_difference(a: dict, b: dict) -> str | None:
+    """What differs between the recorded robot ``a`` and the given one ``b`` (None: the same)."""
     if a.get("modules") != b["modules"] or a.get("n") != b["n"]:
-        return False
+        return f"modules {a.get('modules')}, not {b['modules']}"
     for key in ("alpha_deg", "l_m", "b_m", "r_m"):
-        x, y = np.asarray(a.get(key, []), float), np.asarray(b[key], float)
+        try:
+            x = np.asarray(a.get(key, []), float)
+        except (TypeError, ValueError):
+            return f"{key} unreadable"
+        y = np.asarray(b[key], float)
         if x.shape != y.shape or not np.allclose(x, y, rtol=0.0, atol=1e-6):
-            return False
-    return bool(a.get("unlimited_steering")) == b["unlimited_steering"]
+            return f"{key} {np.round(x, 4).tolist()}, not {np.round(y, 4).tolist()}"
+    if bool(a.get("unlimited_steering")) != b["unlimited_steering"]:
+        return "another steering range"
+    return None
 
 
 def read_calibration(path, geom: RobotGeometry, modules) -> tuple[np.ndarray, np.ndarray]:
@@ -57,10 +64,10 @@ def read_calibration(path, geom: RobotGeometry, modules) -> tuple[np.ndarray, np
         raise ValueError(f"{where}: not a calibration of schema {CALIBRATION_SCHEMA} (azimut calibrate writes one)")
     mine = robot_record(geom, modules)
     theirs = data.get("robot")
-    if not isinstance(theirs, dict) or not _same_robot(theirs, mine):
-        made = theirs.get("modules") if isinstance(theirs, dict) else None
-        raise ValueError(f"{where}: made for another robot (modules {made}, or another geometry) than the one given "
-                         f"(modules {mine['modules']}); pass the robot file it was fitted with")
+    diff = "no robot recorded" if not isinstance(theirs, dict) else _robot_difference(theirs, mine)
+    if diff is not None:
+        raise ValueError(f"{where}: made for another robot than the one given ({diff}); pass the robot file it was "
+                         "fitted with")
     offsets, scales = [], []
     for k, (entry, name) in enumerate(zip(data["modules"], mine["modules"])):
         if not isinstance(entry, dict) or entry.get("name") != name:
@@ -105,5 +112,5 @@ class CalibratedLog(LogSource):
 
     def describe(self) -> dict:
         return {**self.source.describe(), "calibration": self.label or "given",
-                "steer_offset_deg": np.rad2deg(self.steer_offset).round(4).tolist(),
-                "wheel_scale": self.wheel_scale.round(6).tolist()}
+                "calibration_steer_offset_deg": np.rad2deg(self.steer_offset).round(4).tolist(),
+                "calibration_wheel_scale": self.wheel_scale.round(6).tolist()}

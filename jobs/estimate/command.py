@@ -45,6 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="samples estimated at a time (memory; results do not depend on it)")
     parser.add_argument("--csv", action="store_true", help="also write samples.csv (slower and larger than .npz)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--calibration", default=None, metavar="FILE",
+                        help="a calibration.json of azimut calibrate (for this robot): its steering offsets are added "
+                             "to the logged angles and its wheel factors applied to the wheel speeds")
 
 
 def check_args(args: argparse.Namespace) -> None:
@@ -57,6 +60,11 @@ def check_args(args: argparse.Namespace) -> None:
     if odo is not None and odo not in args.methods:
         raise ValueError(f"argument --odometry-method: {odo} is not among --methods {','.join(args.methods)}")
     args.source = open_source(args)
+    if args.calibration is not None:
+        from estimation.logs.calibrated import CalibratedLog, read_calibration
+
+        offset, scale = read_calibration(args.calibration, args.source.geom, args.source.modules)
+        args.source = CalibratedLog(args.source, offset, scale, label=str(args.calibration))
 
 
 class _Progress:
