@@ -7,13 +7,16 @@ The rules (thresholds are the module's constants, recorded with the findings):
   times are the sums of the sample periods (each sample counts the period before it).
 * **steering departure** of module k: ``steering_difference(β_k, F_k(λ̂))`` with λ̂ IT's estimate
   (the measured angle minus the angle the constraining surface gives at IT's ICR) [deg].
-* **module offset** (n ≥ 4): module k's angle minus the angle the *other* modules' ICR gives it
-  (IT on the robot without module k): its median over the moving samples (at most
-  :data:`OFFSET_SAMPLES` of them, evenly spaced). A module is named when that median is at least
-  :data:`OFFSET_MIN_DEG` and at least :data:`OFFSET_STAND_OUT` times every other module's: one
-  module off by δ makes every other module look off by less, but only the odd one out reads
-  δ against the others. Where no single module stands out and a module's mean departure is at
-  least :data:`OFFSET_MIN_DEG`, the finding is that the modules disagree.
+* **module offset**: for each module k alone, the constant offset δ_k that best explains the
+  departures while moving (:func:`module_offsets`: the δ_k that minimises the squared departures
+  of the corrected angles; over the moving samples where the wheels do not fight, qua ≥
+  :data:`FIGHT_QUA`, at most :data:`OFFSET_SAMPLES` of them, evenly spaced). One
+  module off by δ makes the others depart too (IT spreads the disagreement over the wheels),
+  but only the odd one out, corrected, brings the departures down to the noise. A module is named
+  when |δ_k| ≥ :data:`OFFSET_MIN_DEG`, its correction leaves at most :data:`OFFSET_EXPLAINS` of the
+  RMS departure, and any other module's leaves :data:`OFFSET_STAND_OUT` times more. Otherwise,
+  where a module's median departure is at least :data:`OFFSET_MIN_DEG`, the finding is that the
+  modules disagree (several offsets, or wrong module positions).
 * **wheels fight**: stretches (:func:`stretches`: at least :data:`STRETCH_MIN_S`, gaps up to
   :data:`BRIDGE_S` bridged) of moving samples with IT's qua below :data:`FIGHT_QUA` (an RMS
   steering departure of about 5°).
@@ -183,24 +186,32 @@ def module_offsets(beta: np.ndarray, geom: RobotGeometry, max_samples: int = OFF
             "rms0_deg": float(np.degrees(np.sqrt(np.mean(dep0**2))))}
 
 
-def departure_stats(result: LogEstimate, geom: RobotGeometry, modules) -> dict:
-    """Per module, while moving: IT's departure (signed mean, mean |·|, 95th percentile |·|) and
-    the offset against the other modules (median, mean), in degrees."""
+def departure_stats(result: LogEstimate, geom: RobotGeometry, modules, departure_deg: np.ndarray | None = None) -> dict:
+    """Per module, while moving: IT's departure [deg] (signed mean, mean |·|, 95th percentile |·|;
+    ``departure_deg`` (K, n) when already computed) and the one-module offset of
+    :func:`module_offsets` with the RMS departure it leaves [deg]; ``rms_deg``: the RMS departure
+    as measured (over the samples of :func:`module_offsets`)."""
     mv = result.moving
-    dep = np.degrees(steering_departure(result, geom)[mv])
-    off = module_offsets(result.beta[mv], geom)
+    if departure_deg is None:
+        departure_deg = np.degrees(steering_departure(result, geom))
+    dep = departure_deg[mv]
+    calm = mv & (result.qua[_main_method(result)] >= FIGHT_QUA)  # not the stretches where the wheels fight
+    off = module_offsets(result.beta[calm], geom)
     table = {}
     for k, name in enumerate(modules):
-        row = {"mean_deg": None, "mean_abs_deg": None, "p95_abs_deg": None, "offset_deg": None,
+        row = {"mean_deg": None, "median_deg": None, "mean_abs_deg": None, "p95_abs_deg": None, "offset_deg": None,
                "rms_without_offset_deg": None}
         if dep.shape[0]:
-            row.update(mean_deg=float(dep[:, k].mean()), mean_abs_deg=float(np.abs(dep[:, k]).mean()),
+            row.update(mean_deg=float(dep[:, k].mean()), median_deg=float(np.median(dep[:, k])),
+                       mean_abs_deg=float(np.abs(dep[:, k]).mean()),
                        p95_abs_deg=float(np.percentile(np.abs(dep[:, k]), 95)))
         if off is not None:
             row.update(offset_deg=float(off["offset_deg"][k]), rms_without_offset_deg=float(off["rms_deg"][k]))
         table[name] = row
-    return {"method": _main_method(result), "samples": int(mv.sum()), "modules": table,
-            "rms_deg": None if off is None else off["rms0_deg"]}
+    rms = np.sqrt(np.mean(dep**2, axis=1))
+    return {"method": _main_method(result), "samples": int(mv.sum()), "samples_offset_fit": int(calm.sum()),
+            "modules": table, "rms_deg": None if off is None else off["rms0_deg"],
+            "median_rms_deg": float(np.median(rms)) if rms.size else None}
 
 
 def _rate_stats(wheel: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> dict:
@@ -324,9 +335,9 @@ def _offset_finding(departure: dict, modules: list) -> dict | None:
             return _finding("module_offset", "check", module=modules[k], offset_deg=row["offset_deg"],
                             mean_deg=row["mean_deg"], p95_abs_deg=row["p95_abs_deg"],
                             rms_deg=departure["rms_deg"], rms_without_deg=float(rms[k]))
-    off = [(m, rows[m]["mean_deg"]) for m in modules if abs(rows[m]["mean_deg"]) >= OFFSET_MIN_DEG]
+    off = [(m, rows[m]["median_deg"]) for m in modules if abs(rows[m]["median_deg"]) >= OFFSET_MIN_DEG]
     if off:
-        return _finding("steering_disagree", "check", modules=[m for m, _ in off], mean_deg=[v for _, v in off],
+        return _finding("steering_disagree", "check", modules=[m for m, _ in off], median_deg=[v for _, v in off],
                         rms_deg=departure["rms_deg"])
     return None
 
@@ -340,11 +351,13 @@ def diagnose(result: LogEstimate, geom: RobotGeometry, modules) -> dict:
     of dicts with ``kind``, ``severity`` (``"info"``: a fact; ``"check"``: something to look at)
     and the numbers they state. Kinds: ``motion``, ``quality``, ``module_offset``,
     ``steering_disagree``, ``fight``, ``frozen``, ``noisy``, ``gyro_scale``, ``gyro_agree``,
-    ``gyro_no_turn``, ``gyro_disagree``, ``no_gyro``."""
+    ``gyro_no_turn``, ``gyro_disagree``, ``no_gyro``. Also the arrays ``rates`` (:func:`gyro_rates`)
+    and ``departure_samples_deg`` (K, n) (:func:`steering_departure` in degrees)."""
     modules = list(modules)
     motion = motion_split(result)
     quality = quality_split(result)
-    departure = departure_stats(result, geom, modules)
+    departure_deg = np.degrees(steering_departure(result, geom))
+    departure = departure_stats(result, geom, modules, departure_deg)
     rates = gyro_rates(result)
     gyro = gyro_comparison(result, rates)
     frozen = frozen_signals(result, geom)
@@ -372,9 +385,12 @@ def diagnose(result: LogEstimate, geom: RobotGeometry, modules) -> dict:
         f.append(_finding("no_gyro", "info", format=result.source.get("format")))
     elif gyro["samples_moving"]:
         o = gyro["odometry"]
-        if o["slope"] is None:
-            f.append(_finding("gyro_no_turn", "info", turning_s=o["turning_s"], rms_diff_rad_s=o["rms_diff_rad_s"],
-                              source=gyro["source"]))
+        if o["slope"] is None:  # a check when the wheels turn where the gyro does not
+            wheels_turn = o["rms_diff_rad_s"] > DISAGREE_RATE
+            tot = gyro["total"] or {}
+            f.append(_finding("gyro_no_turn", "check" if wheels_turn else "info", turning_s=o["turning_s"],
+                              rms_diff_rad_s=o["rms_diff_rad_s"], source=gyro["source"],
+                              gyro_rad=tot.get("gyro_rad"), odometry_rad=tot.get("odometry_rad")))
         elif abs(o["slope"] - 1) > SLOPE_TOL:
             f.append(_finding("gyro_scale", "check", slope=o["slope"], correlation=o["correlation"],
                               turning_s=o["turning_s"], rigid_slope=gyro["rigid"]["slope"], source=gyro["source"]))
@@ -385,4 +401,4 @@ def diagnose(result: LogEstimate, geom: RobotGeometry, modules) -> dict:
             f.append(_finding("gyro_disagree", "check", stretches=gyro["disagree"]))
     return {"thresholds": dict(THRESHOLDS, moving_speed_m_s=result.moving_speed), "motion": motion,
             "quality": quality, "departure": departure, "gyro": gyro, "frozen": frozen, "noise": noise,
-            "findings": f, "rates": rates}
+            "findings": f, "rates": rates, "departure_samples_deg": departure_deg}

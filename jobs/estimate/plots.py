@@ -1,6 +1,8 @@
 """The PNG plots of ``azimut estimate`` (matplotlib, the ``plot`` extra; imported only to write them):
 the measured steering configurations against the constraining surface (the paper's Fig. 10), qua
-over time per estimator (Fig. 11), and the dead-reckoned path against the reference pose.
+over time per estimator (Fig. 11), the dead-reckoned path against the reference pose, and the
+motion plot (IT's qua and each module's steering departure over time with the moving samples
+shaded, and the wheels' turn rate against the gyro's).
 
 Long logs are thinned for drawing only: at most :data:`MAX_POINTS` evenly spaced samples in the
 steering plot, and qua drawn as the mean and the minimum of :data:`QUA_BINS` equal time bins (the
@@ -126,10 +128,50 @@ def odometry(result: LogEstimate, out: Path, files: list[str]) -> None:
     _save(fig, out, "odometry.png", files)
 
 
-def write_plots(result: LogEstimate, geom, modules, out: Path) -> list[str]:
-    """Write the three plots to ``out``; returns their file names."""
+def motion(result: LogEstimate, modules, diag: dict, out: Path, files: list[str]) -> None:
+    plt = _pyplot()
+    rates = diag.get("rates")
+    rows = 3 if rates is not None else 2
+    fig, axes = plt.subplots(rows, 1, figsize=(10, 2.2 + 2.0 * rows), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    step = max(1, result.t_ns.size // MAX_POINTS)
+    t = result.t_s[::step]
+    moving = result.moving[::step]
+    method = diag["departure"]["method"]
+    for ax in axes:
+        ax.fill_between(t, 0, 1, where=moving, transform=ax.get_xaxis_transform(), color="C2", alpha=0.12, lw=0,
+                        label="moving")
+    axes[0].plot(t, result.qua[method][::step], lw=0.7, color="C0", label=f"qua {method}")
+    axes[0].set_ylabel(f"qua {method}")
+    axes[0].set_ylim(min(0.0, float(result.qua[method].min())), 1.02)
+    axes[0].legend(fontsize=7, loc="lower left")
+    dep = diag["departure_samples_deg"][::step]
+    for k, name in enumerate(modules):
+        axes[1].plot(t, dep[:, k], lw=0.7, label=name)
+    lim = np.nanpercentile(np.abs(diag["departure_samples_deg"][result.moving]), 99.5) if result.moving.any() else 5
+    axes[1].set_ylim(-max(1.0, 1.5 * lim), max(1.0, 1.5 * lim))
+    axes[1].set_ylabel("steering departure [deg]")
+    axes[1].legend(fontsize=7, loc="lower left", ncol=min(6, len(modules)))
+    if rates is not None:
+        axes[2].plot(t, rates["gyro"][::step], lw=0.9, color="k", label=f"gyro ({result.yaw.source})")
+        axes[2].plot(t, rates["odometry"][::step], lw=0.7, color="C0",
+                     label=f"dead reckoning ({result.odometry_method})")
+        axes[2].plot(t, rates["rigid"][::step], lw=0.7, color="C1", ls="--", label="rigid fit")
+        axes[2].set_ylabel("turn rate [rad/s]")
+        axes[2].legend(fontsize=7, loc="lower left")
+    axes[-1].set_xlabel("t [s]")
+    thin = f" (every {step}th sample)" if step > 1 else ""
+    axes[0].set_title(f"moving (shaded) and standing{thin}")
+    _save(fig, out, "motion.png", files)
+
+
+def write_plots(result: LogEstimate, geom, modules, out: Path, diag: dict | None = None) -> list[str]:
+    """Write the plots to ``out`` (the motion plot with the log's
+    :func:`~estimation.logs.diagnosis.diagnose` ``diag``); returns their file names."""
     files: list[str] = []
     steer_space(result, geom, modules, out, files)
     qua_time(result, out, files)
     odometry(result, out, files)
+    if diag is not None:
+        motion(result, modules, diag, out, files)
     return files

@@ -5,6 +5,8 @@ signal, and nothing found on a clean log."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -151,3 +153,30 @@ def test_stretches_and_window_rate():
     ns = np.rint(t * 1e9).astype(np.int64)
     np.testing.assert_allclose(window_rate(ns[5:-5], ns, 2.0 * t), 2.0)
     assert np.isnan(window_rate(ns[:1], ns, t)).all()
+
+
+def test_the_report_opens_with_the_diagnosis_and_samples_npz_has_moving(tmp_path, swerve):
+    from jobs.estimate.report import write_outputs
+
+    d = synthetic(swerve, noise=0.002)
+    beta = d["beta"].copy()
+    beta[:, 1] += np.radians(3.0)
+    src = ArrayLog(d["t_ns"], swerve.wrap_steering(beta), d["phidot"], swerve, MODULES,
+                   yaw=YawTrack(d["t_ns"], 1.05 * d["yaw"], "gyro"))
+    files = write_outputs(estimate_log(src, ("IT", "LS")), src, tmp_path, elapsed_s=1.0, plots=False, csv=True)
+    assert "samples.csv" in files
+    npz = np.load(tmp_path / "samples.npz")
+    assert np.array_equal(npz["moving"], d["moving"]) and npz["rigid_twist"].shape == (d["t"].size, 3)
+    assert npz["steer_departure_deg"].shape == (d["t"].size, 4) and np.isfinite(npz["yaw_rate_gyro"]).any()
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert [f["kind"] for f in s["findings"] if f["severity"] == "check"] == ["module_offset", "gyro_scale"]
+    assert s["moving"]["moving_speed_m_s"] == 0.05 and s["thresholds"]["moving_speed_m_s"] == 0.05
+    assert s["moving"]["quality"]["IT"]["moving"]["samples"] == d["moving"].sum()
+    head = (tmp_path / "report.md").read_text().splitlines()[:10]
+    text = "\n".join(head)
+    assert head[2] == "## Diagnosis" and s["diagnosis"][0] in text
+    assert "Moving 75% of the log (18 s); standing 6 s" in text
+    slope = [f for f in s["findings"] if f["kind"] == "gyro_scale"][0]["slope"]
+    assert "Module fr reads +3.0° off the others" in text and f"slope {slope:.3f}" in text
+    report = (tmp_path / "report.md").read_text()
+    assert report.index("## While moving") < report.index("## Estimators on this log, all samples")
