@@ -323,7 +323,8 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
     proj = np.eye(2 * n) - gauge @ np.linalg.pinv(gauge)
     eig = np.linalg.eigvalsh(proj @ info @ proj)[2:]  # the two gauge directions are the zeros
     weakest = math.degrees(math.sqrt(sigma2 / max(eig.min(), 1e-300)))
-    if weakest > MAX_WEAK_STD_DEG:
+    # an exact log of one motion has no noise to scale by: its weakest combination is still unfixed
+    if weakest > MAX_WEAK_STD_DEG or eig.min() < 1e-3 * eig.max():
         raise ValueError(f"the log's motions are too alike to tell the modules' offsets apart (the weakest "
                          f"combination is uncertain by ±{weakest:.1f}°, {MAX_WEAK_STD_DEG}° at most): drive in several "
                          "directions and turn")
