@@ -41,13 +41,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimation.geometry import RobotGeometry
+from estimation.logs.motion import MOVING_SPEED, contact_speeds, rigid_fit
 
-__all__ = ["CalibrationFit", "fit_calibration", "rigid_fit", "apply_offsets", "linear_start", "beta_rates",
+__all__ = ["CalibrationFit", "fit_calibration", "apply_offsets", "linear_start", "beta_rates",
            "COMMON_OBSERVABLE_DEG", "MIN_MOVING_SAMPLES", "MOVING_SPEED"]
 
-#: a sample is moving when the rigid fit's fastest contact point moves at least this fast [m/s]
-#: (see :func:`estimation.logs.pipeline.estimate_log`'s ``moving_speed``)
-MOVING_SPEED = 0.05
 #: the common offset is reported as observable when its standard error is below this [deg]
 COMMON_OBSERVABLE_DEG = 0.5
 #: the log must tell the relative offsets and factors apart: refused when the weakest combination of
@@ -78,43 +76,6 @@ def beta_rates(t_ns: np.ndarray, beta: np.ndarray, geom: RobotGeometry) -> np.nd
     ok = (dt > 0) & (dt <= _MAX_RATE_GAP_S)
     rate[1:][ok] = d[ok] / dt[ok, None]
     return rate
-
-
-def _rows(beta, beta_rate, phidot, geom: RobotGeometry, offset, scale):
-    """The 2n constraint rows A (N, 2n, 3) and right-hand sides y (N, 2n) of every sample."""
-    gam = geom.alpha + beta + offset
-    cg, sg = np.cos(gam), np.sin(gam)
-    px = geom.axis_xy[:, 0] + geom.b * cg
-    py = geom.axis_xy[:, 1] + geom.b * sg
-    a_lat = np.stack([cg, sg, px * sg - py * cg], axis=-1)          # e_k
-    a_roll = np.stack([sg, -cg, -px * cg - py * sg], axis=-1)       # d_k
-    y_roll = scale * geom.r * phidot + geom.b * beta_rate
-    return np.concatenate([a_lat, a_roll], axis=1), np.concatenate([np.zeros_like(y_roll), y_roll], axis=1)
-
-
-def rigid_fit(beta, beta_rate, phidot, geom: RobotGeometry, offset=0.0, scale=1.0, yaw_rate=None,
-              yaw_weight: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The chassis twist of every sample that best explains its wheels (least squares over the 2n
-    rows of the module docstring: :func:`~estimation.kinematics.twist_from_wheels`, batched), with
-    the steering offsets and wheel factors applied; with ``yaw_rate`` (N,) and ``yaw_weight`` > 0
-    [m], one more row ``yaw_weight (θ̇ − yaw_rate) = 0`` per sample. Returns ξ (N, 3) and the
-    residuals (N, 2n) [m/s] of the wheel rows."""
-    a, y = _rows(beta, beta_rate, phidot, geom, offset, scale)
-    ata = np.einsum("nki,nkj->nij", a, a)
-    aty = np.einsum("nki,nk->ni", a, y)
-    if yaw_rate is not None and yaw_weight > 0:
-        ata[:, 2, 2] += yaw_weight**2
-        aty[:, 2] += yaw_weight**2 * yaw_rate
-    ata[:, [0, 1, 2], [0, 1, 2]] += 1e-12
-    xi = np.linalg.solve(ata, aty[..., None])[..., 0]
-    return xi, y - np.einsum("nki,ni->nk", a, xi)
-
-
-def contact_speed(xi: np.ndarray, geom: RobotGeometry) -> np.ndarray:
-    """(N,) the fastest steering-axis point's speed under the twists ξ (N, 3) [m/s]."""
-    vx = xi[:, 0:1] - xi[:, 2:3] * geom.axis_xy[:, 1]
-    vy = xi[:, 1:2] + xi[:, 2:3] * geom.axis_xy[:, 0]
-    return np.hypot(vx, vy).max(axis=1)
 
 
 def linear_start(beta, phidot, geom: RobotGeometry, weight=None, beta_rate=None) -> tuple[np.ndarray, np.ndarray]:
@@ -297,7 +258,7 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
     fit_iters = 0
     for _ in range(2):  # the moving mask from the calibrated rigid fit, then the fit on it
         xi, _ = rigid_fit(beta, brate, phidot, geom, theta[:n], np.exp(theta[n:]))
-        speed = contact_speed(xi, geom)
+        speed = contact_speeds(xi, beta + theta[:n], geom).max(axis=1)
         moving = speed >= moving_speed
         use = moving & (np.isfinite(yaw_rate) if have_yaw else True)
         if use.sum() < MIN_MOVING_SAMPLES:

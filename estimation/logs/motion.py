@@ -35,8 +35,8 @@ import numpy as np
 
 from estimation.geometry import RobotGeometry
 
-__all__ = ["MOVING_SPEED", "RATE_WINDOW_S", "twist_from_wheels_batch", "contact_speeds", "window_rate",
-           "integrated_heading", "interp_on"]
+__all__ = ["MOVING_SPEED", "RATE_WINDOW_S", "rigid_rows", "rigid_fit", "twist_from_wheels_batch", "contact_speeds",
+           "window_rate", "integrated_heading", "interp_on"]
 
 #: [m/s] fastest wheel contact point speed of the rigid fit above which a sample moves
 MOVING_SPEED = 0.05
@@ -56,13 +56,40 @@ def _contact_points(beta: np.ndarray, geom: RobotGeometry) -> tuple[np.ndarray, 
     return e, d, p
 
 
+def rigid_rows(beta, beta_rate, phidot, geom: RobotGeometry, offset=0.0, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The 2n constraint rows A (N, 2n, 3) and right-hand sides y (N, 2n) of every sample (module
+    docstring), with steering offsets added to β and wheel factors applied to φ̇ (calibration):
+    v(P)·u = u_x ẋ + u_y ẏ + θ̇ (P_x u_y − P_y u_x) for u = e_k (target 0) and u = d_k."""
+    e, d, p = _contact_points(np.asarray(beta, dtype=np.float64) + offset, geom)
+    rows = [np.concatenate([u, (p[..., 0] * u[..., 1] - p[..., 1] * u[..., 0])[..., None]], axis=-1) for u in (e, d)]
+    roll = scale * geom.r * phidot + geom.b * beta_rate
+    return np.concatenate(rows, axis=1), np.concatenate([np.zeros_like(roll), roll], axis=1)
+
+
+def rigid_fit(beta, beta_rate, phidot, geom: RobotGeometry, offset=0.0, scale=1.0, yaw_rate=None,
+              yaw_weight: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares twist ξ̇ (N, 3) of every sample's rows (:func:`rigid_rows`) and their
+    residuals y − A ξ̇ (N, 2n) [m/s]; with ``yaw_rate`` (N,) and ``yaw_weight`` > 0 [m]
+    one more row ``yaw_weight (θ̇ − yaw_rate) = 0`` per sample (a gyro, in calibration). Solved
+    through the normal equations (AᵀA is well conditioned: every wheel adds the identity to its
+    2×2 translation block)."""
+    a, y = rigid_rows(beta, beta_rate, phidot, geom, offset, scale)
+    ata = np.einsum("kij,kil->kjl", a, a)
+    aty = np.einsum("kij,ki->kj", a, y)
+    if yaw_rate is not None and yaw_weight > 0:
+        ata[:, 2, 2] += yaw_weight**2
+        aty[:, 2] += yaw_weight**2 * yaw_rate
+    x = np.linalg.solve(ata, aty[..., None])[..., 0]
+    return x, y - np.einsum("kij,kj->ki", a, x)
+
+
 def twist_from_wheels_batch(beta, beta_rate, phidot, geom: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
     """The rigid-body least-squares twist of every sample: (N, 3) (ẋ, ẏ, θ̇) [m/s, m/s, rad/s] and
     (N,) the residual ‖A ξ̇ − y‖ [m/s] (zero when the wheels agree on one rigid motion).
 
     ``beta``, ``beta_rate``, ``phidot``: (N, n). Row by row this is
     :func:`estimation.kinematics.twist_from_wheels` (the same least squares, solved through the
-    normal equations: equal to rounding)."""
+    normal equations: equal to rounding); :func:`rigid_fit` in blocks of bounded memory."""
     beta = np.asarray(beta, dtype=np.float64)
     beta_rate = np.asarray(beta_rate, dtype=np.float64)
     phidot = np.asarray(phidot, dtype=np.float64)
@@ -73,17 +100,8 @@ def twist_from_wheels_batch(beta, beta_rate, phidot, geom: RobotGeometry) -> tup
     resid = np.empty(beta.shape[0])
     for a in range(0, beta.shape[0], _CHUNK):
         sl = slice(a, a + _CHUNK)
-        e, d, p = _contact_points(beta[sl], geom)
-        # rows v(P)·u = u_x ẋ + u_y ẏ + θ̇ (P_x u_y − P_y u_x), for u = e_k (target 0) and u = d_k
-        rows = [np.concatenate([u, (p[..., 0] * u[..., 1] - p[..., 1] * u[..., 0])[..., None]], axis=-1)
-                for u in (e, d)]
-        a_mat = np.concatenate(rows, axis=1)  # (m, 2n, 3)
-        y = np.concatenate([np.zeros_like(phidot[sl]), geom.r * phidot[sl] + geom.b * beta_rate[sl]], axis=1)
-        ata = np.einsum("kij,kil->kjl", a_mat, a_mat)
-        aty = np.einsum("kij,ki->kj", a_mat, y)
-        x = np.linalg.solve(ata, aty[..., None])[..., 0]
-        twist[sl] = x
-        resid[sl] = np.linalg.norm(np.einsum("kij,kj->ki", a_mat, x) - y, axis=1)
+        twist[sl], r = rigid_fit(beta[sl], beta_rate[sl], phidot[sl], geom)
+        resid[sl] = np.linalg.norm(r, axis=1)
     return twist, resid
 
 

@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-import time
 from pathlib import Path
 
 from jobs.args import arg_output_path
@@ -73,28 +71,15 @@ def check_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from estimation.logs import LogError
     from estimation.logs.calibrate import calibrate_source
     from jobs.calibrate.report import write_outputs
-    from jobs.estimate.command import _Progress
+    from jobs.estimate.reading import run_on_log
 
-    if getattr(args, "source", None) is None:
-        try:
-            check_args(args)
-        except ValueError as exc:
-            print(f"azimut calibrate: error: {exc}", file=sys.stderr)
-            return 2
-    progress = _Progress("calibrate")
-    t0 = time.perf_counter()
-    try:
-        result = calibrate_source(args.source, moving_speed=args.moving_speed, current_offsets_deg=args.current_offsets,
-                                  progress=progress)
-    except (LogError, ValueError) as exc:
-        progress.close()
-        print(f"azimut calibrate: error: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return 2
-    progress.close()
-    elapsed = time.perf_counter() - t0
+    done = run_on_log("calibrate", args, check_args, lambda source, progress: calibrate_source(
+        source, moving_speed=args.moving_speed, current_offsets_deg=args.current_offsets, progress=progress))
+    if isinstance(done, int):
+        return done
+    result, elapsed = done
     out = Path(args.out)
     files = write_outputs(result, args.source, out, elapsed_s=elapsed)
     before, after = result["before"]["qua_IT_mean"], result["after"]["qua_IT_mean"]

@@ -20,8 +20,6 @@ truncated file) is refused with one line and exit status 2, before any output is
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 from pathlib import Path
 
 from jobs.args import arg_choice_list, arg_int, arg_output_path, require_module
@@ -67,59 +65,18 @@ def check_args(args: argparse.Namespace) -> None:
         args.source = CalibratedLog(args.source, offset, scale, label=str(args.calibration))
 
 
-class _Progress:
-    """A progress line on a terminal: tqdm's bar when installed, else ``control.episode.progress_bar``."""
-
-    def __init__(self, label: str) -> None:
-        self.label, self.start, self.bar, self.tqdm = label, time.time(), None, None
-        if sys.stderr.isatty():
-            try:
-                from tqdm import tqdm
-            except ImportError:
-                tqdm = None
-            self.tqdm = tqdm
-
-    def __call__(self, done: int, total: int | None) -> None:
-        if not sys.stderr.isatty():
-            return
-        if self.tqdm is not None:
-            if self.bar is None:
-                self.bar = self.tqdm(total=total, desc=self.label, unit="sample", file=sys.stderr)
-            self.bar.update(done - self.bar.n)
-            return
-        from control.episode import progress_bar
-
-        progress_bar(self.label, min(1.0, done / total) if total else 0.0, self.start)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-        elif sys.stderr.isatty():
-            sys.stderr.write("\n")
-
-
 def run(args: argparse.Namespace) -> int:
     from estimation.logs import LogError, estimate_log
+    from jobs.estimate.reading import run_on_log
     from jobs.estimate.report import write_outputs
 
-    if getattr(args, "source", None) is None:
-        try:
-            check_args(args)
-        except ValueError as exc:
-            print(f"azimut estimate: error: {exc}", file=sys.stderr)
-            return 2
+    done = run_on_log("estimate", args, check_args, lambda source, progress: estimate_log(
+        source, args.methods, odometry_method=args.odometry_method, chunk_size=args.chunk, progress=progress),
+        errors=(LogError,))
+    if isinstance(done, int):
+        return done
+    result, elapsed = done
     source = args.source
-    progress = _Progress("estimate")
-    t0 = time.perf_counter()
-    try:
-        result = estimate_log(source, args.methods, odometry_method=args.odometry_method, chunk_size=args.chunk,
-                              progress=progress)
-    except LogError as exc:
-        progress.close()
-        print(f"azimut estimate: error: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return 2
-    progress.close()
-    elapsed = time.perf_counter() - t0
     out = Path(args.out)
     files = write_outputs(result, source, out, elapsed_s=elapsed, plots=not args.no_plots, csv=args.csv)
     skipped = sum(result.skipped.values())

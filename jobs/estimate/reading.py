@@ -9,11 +9,13 @@ or a log that cannot be used (:class:`~estimation.logs.LogError` is a ``ValueErr
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 
 from jobs.args import add_robot_arguments
 
-__all__ = ["add_reading_arguments", "open_source", "robot_geometry", "reader_options", "ROS_OPTIONS",
-           "WPILOG_OPTIONS", "WPILOG_MODULE_OPTIONS"]
+__all__ = ["LogProgress", "run_on_log", "add_reading_arguments", "open_source", "robot_geometry", "reader_options",
+           "ROS_OPTIONS", "WPILOG_OPTIONS", "WPILOG_MODULE_OPTIONS"]
 
 #: flags that only a ROS 2 bag takes (dest -> flag), and only a .wpilog; of those, the ones of
 #: per-module entries (--steer-entry, --wheel-entry) only, and the one of state arrays only
@@ -202,3 +204,57 @@ def open_source(args: argparse.Namespace):
     if fmt == "ros":
         _check_recorded_robot(args, geom)
     return open_log(args.log, geom, modules, fmt=fmt, **options)
+
+
+class LogProgress:
+    """A progress line on a terminal: tqdm's bar when installed, else ``control.episode.progress_bar``."""
+
+    def __init__(self, label: str) -> None:
+        self.label, self.start, self.bar, self.tqdm = label, time.time(), None, None
+        if sys.stderr.isatty():
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                tqdm = None
+            self.tqdm = tqdm
+
+    def __call__(self, done: int, total: int | None) -> None:
+        if not sys.stderr.isatty():
+            return
+        if self.tqdm is not None:
+            if self.bar is None:
+                self.bar = self.tqdm(total=total, desc=self.label, unit="sample", file=sys.stderr)
+            self.bar.update(done - self.bar.n)
+            return
+        from control.episode import progress_bar
+
+        progress_bar(self.label, min(1.0, done / total) if total else 0.0, self.start)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        elif sys.stderr.isatty():
+            sys.stderr.write("\n")
+
+
+def run_on_log(command: str, args: argparse.Namespace, check_args, work, errors=(ValueError,)):
+    """The start of a command that reads a log: ``check_args(args)`` unless the CLI ran it (it opens
+    ``args.source``), then ``work(source, progress)`` with a progress bar on a terminal. Returns
+    (its result, seconds), or 2 after one line ``azimut COMMAND: error: ...`` on stderr when a check
+    or the work raises one of ``errors`` (a log found unusable while read, or a fit refused)."""
+    if getattr(args, "source", None) is None:
+        try:
+            check_args(args)
+        except ValueError as exc:
+            print(f"azimut {command}: error: {exc}", file=sys.stderr)
+            return 2
+    progress = LogProgress(command)
+    t0 = time.perf_counter()
+    try:
+        result = work(args.source, progress)
+    except errors as exc:
+        progress.close()
+        print(f"azimut {command}: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    progress.close()
+    return result, time.perf_counter() - t0
