@@ -40,6 +40,11 @@ from estimation.logs.source import (
 
 __all__ = ["CsvLog", "write_csv_log", "csv_columns", "TRUTH_COLUMNS"]
 
+#: the most values one read of rows may hold (a header of many columns reads fewer rows at a time)
+_MAX_VALUES_PER_READ = 5_000_000
+#: the largest |t| [s] whose nanoseconds fit an int64
+_MAX_T_S = (2**63 - 1) / 1e9 * 0.999
+
 #: the reference pose's columns
 TRUTH_COLUMNS = ("x", "y", "theta")
 
@@ -130,6 +135,9 @@ class CsvLog(LogSource):
     def chunks(self, size: int) -> Iterator[SampleChunk]:
         self._truth_rows = []
         done = 0
+        # rows per read bounded by the values they hold: a header of a million columns must not
+        # allocate a million times the chunk (the results do not depend on the chunk)
+        size = max(1, min(size, _MAX_VALUES_PER_READ // max(len(self.columns), 1)))
         with open(self.path, encoding="utf-8") as fh:
             for _ in range(self._header_line):
                 fh.readline()
@@ -169,6 +177,10 @@ class CsvLog(LogSource):
             k = int(np.flatnonzero(~np.isfinite(t))[0])
             raise self.error(f"a time t is not a finite number ({t[k]}) in the rows after line "
                              f"{self._header_line} (every sample needs its time)")
+        if np.abs(t).max(initial=0.0) > _MAX_T_S:
+            k = int(np.argmax(np.abs(t)))
+            raise self.error(f"t = {t[k]:g} is not a time in seconds (a nanosecond clock holds ±{_MAX_T_S:.3g} s, 292 "
+                             "years): microseconds or nanoseconds? divide the column by 1e6 or 1e9")
         steer = rows[:, self._steer_cols]
         phidot = rows[:, self._wheel_cols]
         if self.steer_convention == "heading":

@@ -125,6 +125,10 @@ def _walk(buf, pos, entry, ts, off, size):
     return k, pos, 0
 
 
+#: the largest record timestamp [µs] whose nanoseconds fit an int64
+_MAX_TIMESTAMP_US = (2**63 - 1) // 1000
+
+
 class _Index:
     """Every record of a log: entry id, timestamp [µs], payload offset and size (numpy arrays), and
     the entries' (name, type, first record, end record) spans from the control records."""
@@ -137,6 +141,12 @@ class _Index:
                              "still being written, or a partial copy)")
         self.entry, self.ts, self.off, self.size = (np.empty(count, np.int64) for _ in range(4))
         _walk(buf, start, self.entry, self.ts, self.off, self.size)
+        # µs as read (u64, stored as i64: 2^63 and beyond read negative) must become ns in an int64
+        beyond = (self.ts < 0) | (self.ts > _MAX_TIMESTAMP_US)
+        if beyond.any():
+            i = int(np.flatnonzero(beyond)[0])
+            raise ValueError(f"record {i} has the timestamp {int(self.ts[i].view(np.uint64))} µs, beyond the "
+                             f"{_MAX_TIMESTAMP_US} µs (292 years) a nanosecond clock holds: a corrupt file?")
         self.spans: list[tuple[str, str, int, int, int]] = []  # name, type, id, first record, end record
         open_: dict[int, int] = {}
         for i in np.flatnonzero(self.entry == 0):
@@ -288,7 +298,7 @@ class WpiLogFile(LogSource):
         try:
             dt = self.structs.dtype(type_name)
         except (KeyError, ValueError, NotImplementedError) as exc:
-            raise self.error(f"struct {type_name}: {exc}") from None
+            raise self.error(f"entry {name!r}, struct {type_name}: {exc}") from None
         _, rec = self._index.records(name)
         data, ok = _gather(self._buf, self._index, rec, dt.itemsize)
         return self._index.ts[rec[ok]] * 1000, data.view(dt).reshape(-1)
@@ -387,7 +397,7 @@ class WpiLog(WpiLogFile):
             try:
                 dt = self.structs.dtype(type_name)
             except (KeyError, ValueError, NotImplementedError) as exc:
-                raise self.error(f"struct {type_name}: {exc}") from None
+                raise self.error(f"entry {self.states_entry!r}, struct {type_name}: {exc}") from None
             fields = [f for f in ("speed", "velocity") if f in (dt.names or ())]
             if not fields or "angle" not in dt.names:
                 raise self.error(f"struct {type_name} ({self.structs.schemas[type_name]!r}) has no speed and angle")

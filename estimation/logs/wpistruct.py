@@ -35,6 +35,16 @@ _PRIMITIVES = {"bool": "?", "char": "S1", "int8": "i1", "int16": "<i2", "int32":
 _DECL = re.compile(r"^(?:enum\s*\{[^}]*\}\s*)?(\w+)\s+(\w+)\s*(?:\[\s*(\d+)\s*\])?\s*(?::\s*(\d+))?$")
 
 
+def _wpilib_dtype(type_name: str) -> np.dtype:
+    """The dtype of a WPILib type by WPILib's own schemas."""
+    if type_name not in _WPILIB_DTYPES:
+        _WPILIB_DTYPES[type_name] = StructRegistry().dtype(type_name, ("",))
+    return _WPILIB_DTYPES[type_name]
+
+
+_WPILIB_DTYPES: dict[str, np.dtype] = {}
+
+
 class StructRegistry:
     """Struct schemas by type name -> packed little-endian NumPy dtypes (nested structs nest)."""
 
@@ -49,7 +59,16 @@ class StructRegistry:
 
     def dtype(self, type_name: str, _seen: tuple = ()) -> np.dtype:
         """The dtype of ``type_name``; ``KeyError`` for an unknown type, ``ValueError`` for a schema
-        that does not parse or refers to itself, ``NotImplementedError`` for bit-fields."""
+        that does not parse or refers to itself, or a WPILib type whose schema in the log has other
+        field types than WPILib's (``int64 speed`` for ``double speed`` has the same size and would
+        decode as nonsense), ``NotImplementedError`` for bit-fields."""
+        dt = self._build(type_name, _seen)
+        if not _seen and type_name in WPILIB_SCHEMAS and dt != _wpilib_dtype(type_name):
+            raise ValueError(f"the log's schema of {type_name} ({self.schemas[type_name]!r}, its parts included) is "
+                             f"not WPILib's ({WPILIB_SCHEMAS[type_name]!r}): its values would be misread")
+        return dt
+
+    def _build(self, type_name: str, _seen: tuple) -> np.dtype:
         if type_name in self._dtypes:
             return self._dtypes[type_name]
         if type_name not in self.schemas:

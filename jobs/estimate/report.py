@@ -19,7 +19,11 @@ from estimation.hrep import twist_from_eta
 from estimation.logs import LogEstimate, LogSource, compare_estimators, odometry_drift
 from estimation.logs.diagnosis import diagnose
 
-__all__ = ["write_outputs", "sample_columns", "summary", "report_markdown", "diagnosis_lines"]
+#: every file ``azimut estimate`` may write in its folder (a plot only with the data it needs)
+OUTPUT_NAMES = ("samples.npz", "samples.csv", "steer_space.png", "qua_time.png", "odometry.png", "motion.png",
+                "summary.json", "report.md")
+
+__all__ = ["OUTPUT_NAMES", "write_outputs", "sample_columns", "summary", "report_markdown", "diagnosis_lines"]
 
 
 def _key(method: str) -> str:
@@ -360,4 +364,8 @@ def write_outputs(result: LogEstimate, source: LogSource, out: Path, *, elapsed_
     s = summary(result, source, elapsed_s, diag)
     (out / "summary.json").write_text(json.dumps(s, indent=2, allow_nan=True))
     (out / "report.md").write_text(report_markdown(s, pngs))
-    return files + pngs + ["summary.json", "report.md"]
+    written = files + pngs + ["summary.json", "report.md"]
+    for name in OUTPUT_NAMES:  # an earlier run's file that this run did not write would be stale beside it
+        if name not in written and (out / name).is_file():
+            (out / name).unlink()
+    return written
