@@ -17,14 +17,18 @@ campaign returns, per task, exactly what the serial run returns.
 
 Each finished task is written at once to ``<store>/<task id>.json`` (atomically), so an
 interrupted campaign (Ctrl-C, a killed worker, a lost node) loses only the tasks in flight;
-``resume=True`` loads what is there and computes only what is missing. A task that raises or
-whose worker dies is retried ``retries`` times (default once), then recorded as failed, without
-stopping the others. Each task limits its own threads (numba, torch, OpenMP/MKL/OpenBLAS) so
-that ``workers`` processes on as many cores do not oversubscribe them.
+``resume=True`` loads what is there and computes only what is missing. A task that fails is
+retried ``retries`` times (default once), then recorded as failed, without stopping the others;
+with ``retry="transient"`` (``azimut eval``) only a failure that can be transient is retried (a
+worker that died, a Ray error, ``MemoryError``, ``OSError``: :func:`is_transient`), not an
+exception the task's own code raised, which its key would raise again. Each task limits its own
+threads (numba, torch, OpenMP/MKL/OpenBLAS) so that ``workers`` processes on as many cores do not
+oversubscribe them.
 
 Tasks that name a ``batch`` function (:class:`~jobs.campaign.task.Task`) and share its ``group``
 run together, as one call per worker (``azimut eval``: a controller's episodes as one vector env);
-each still gets its own record, and one that fails is retried alone.
+each still gets its own record. When a batch raises, each of its tasks is run again alone (with
+the same attempt number: an isolation, not a retry), so that one bad episode does not sink the others.
 
 A task is a :class:`~jobs.campaign.task.Task`; its records, checked when read back (a record that
 is not valid is recomputed), are :class:`~jobs.campaign.store.TaskStore`'s. Statistics over seeds
@@ -53,9 +57,14 @@ from jobs.campaign.store import TaskStore  # re-exported
 from jobs.campaign.task import Task, resolve  # re-exported
 
 __all__ = ["Task", "TaskStore", "EXECUTORS", "run_tasks", "resolve_executor", "ray_available",
-           "ClusterUnreachable", "limit_threads", "thread_env", "bootstrap_ci", "summarize", "CampaignInterrupted"]
+           "ClusterUnreachable", "limit_threads", "thread_env", "bootstrap_ci", "summarize", "CampaignInterrupted",
+           "RETRY_POLICIES", "TRANSIENT_ERRORS", "is_transient"]
 
 EXECUTORS = ("auto", "serial", "process", "ray")
+#: which failures :func:`run_tasks` retries: ``any`` failure, or only the ``transient`` ones
+RETRY_POLICIES = ("any", "transient")
+#: exceptions raised in a task that can go away on another try (memory, files, the network)
+TRANSIENT_ERRORS = (MemoryError, OSError)
 #: environment variables read by the thread pools of numba, torch (OpenMP) and BLAS at import
 THREAD_ENV_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
 
@@ -110,7 +119,7 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
             raise TypeError(f"task function {fn} returned {type(result).__name__}, expected dict")
         rec = {"status": "ok", "result": result}
     except Exception as exc:  # noqa: BLE001 - a task's failure is data, not a crash of the campaign
-        rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+        rec = _failure(exc)
     rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker)
     return rec
 
@@ -131,13 +140,43 @@ def _execute_unit(fn: str, batch: str, keys: list, extras: list, threads: int | 
                                                                                   for r in results):
             raise TypeError(f"batch function {batch} must return a list of {len(keys)} dicts")
         recs = [{"status": "ok", "result": r} for r in results]
-    except Exception as exc:  # noqa: BLE001 - as _execute: data, retried task by task
-        recs = [{"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
-                for _ in keys]
+    except Exception as exc:  # noqa: BLE001 - as _execute: data, run again task by task
+        recs = [dict(_failure(exc), isolate=True) for _ in keys]
     for rec in recs:
         rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker,
                    batch=len(keys))
     return recs
+
+
+def _failure(exc: BaseException) -> dict:
+    """The failed record of an exception raised by a task's code (in the current ``except``)."""
+    return {"status": "failed", "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(),
+            "transient": isinstance(exc, TRANSIENT_ERRORS)}
+
+
+def _lost(exc: BaseException) -> dict:
+    """The failed record of a task whose worker died or whose Ray call failed (transient)."""
+    first = str(exc).splitlines()[0] if str(exc) else ""
+    return {"status": "failed", "error": f"worker lost: {type(exc).__name__}: {first}", "transient": True}
+
+
+def is_transient(rec: dict) -> bool:
+    """Whether a failed record's failure can go away on another try: the worker died, Ray failed,
+    or the task raised one of :data:`TRANSIENT_ERRORS` (a record without the flag, from an older
+    campaign, counts as transient)."""
+    return bool(rec.get("transient", True))
+
+
+def _again(unit: list[Task], rec: dict, attempt: int, retries: int, retry: str) -> int | None:
+    """The attempt number to run a failed task of ``unit`` again with, or None: a failed batch's
+    tasks run again alone with the same number (isolation); a task alone is retried while
+    ``attempt <= retries``, with ``retry="transient"`` only for a transient failure."""
+    if len(unit) > 1 and rec.pop("isolate", False):
+        return attempt
+    rec.pop("isolate", None)
+    if attempt <= retries and (retry == "any" or is_transient(rec)):
+        return attempt + 1
+    return None
 
 
 def _units(todo: Sequence[Task], workers: int | None) -> list[list[Task]]:
@@ -226,18 +265,19 @@ def _finish(task: Task, rec: dict, attempts: int) -> dict:
     return out
 
 
-def _serial(units, threads, retries):
+def _serial(units, threads, retries, retry):
     pending = deque((unit, 1) for unit in units)
     while pending:
         unit, attempt = pending.popleft()
         for task, rec in zip(unit, _execute_unit(*_unit_args(unit), threads)):
-            if rec["status"] != "ok" and attempt <= retries:
-                pending.appendleft(([task], attempt + 1))  # a failed task again, alone
+            again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
+            if again is not None:
+                pending.appendleft(([task], again))  # a failed task again, alone
             else:
                 yield task, rec, attempt
 
 
-def _process(units, workers, threads, retries):
+def _process(units, workers, threads, retries, retry):
     ctx = multiprocessing.get_context("spawn")
 
     def new_slot():
@@ -265,12 +305,13 @@ def _process(units, workers, threads, retries):
                 try:
                     recs = fut.result()
                 except Exception as exc:  # noqa: BLE001 - the worker died (BrokenProcessPool) or could not pickle
-                    recs = [{"status": "failed", "error": f"worker lost: {type(exc).__name__}: {exc}"} for _ in unit]
+                    recs = [dict(_lost(exc), isolate=True) for _ in unit]
                     slots[i].shutdown(wait=False, cancel_futures=True)
                     slots[i] = None
                 for task, rec in zip(unit, recs):
-                    if rec["status"] != "ok" and attempt <= retries:
-                        pending.appendleft(([task], attempt + 1))
+                    again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
+                    if again is not None:
+                        pending.appendleft(([task], again))
                     else:
                         yield task, rec, attempt
     finally:
@@ -294,7 +335,7 @@ def _local_import_path() -> str:
     return os.pathsep.join(out)
 
 
-def _ray(units, workers, threads, retries, ray_address):
+def _ray(units, workers, threads, retries, ray_address, retry):
     import logging
 
     import ray
@@ -330,11 +371,11 @@ def _ray(units, workers, threads, retries, ray_address):
                 try:
                     recs = ray.get(ref)
                 except ray.exceptions.RayError as exc:  # worker crashed, node lost, object lost
-                    recs = [{"status": "failed",
-                             "error": f"worker lost: {type(exc).__name__}: {str(exc).splitlines()[0]}"} for _ in unit]
+                    recs = [dict(_lost(exc), isolate=True) for _ in unit]
                 for task, rec in zip(unit, recs):
-                    if rec["status"] != "ok" and attempt <= retries:
-                        pending.appendleft(([task], attempt + 1))
+                    again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
+                    if again is not None:
+                        pending.appendleft(([task], again))
                     else:
                         yield task, rec, attempt
     finally:
@@ -346,7 +387,7 @@ def _ray(units, workers, threads, retries, ray_address):
 
 def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, executor: str = "serial",
               workers: int = 1, threads: int | None = None, ray_address: str | None = None, retries: int = 1,
-              resume: bool = False, on_result: Callable[[Task, dict], None] | None = None,
+              resume: bool = False, retry: str = "any", on_result: Callable[[Task, dict], None] | None = None,
               progress: Callable[[int, int, Task, dict], None] | None = None) -> list[dict]:
     """Run ``tasks`` and return their records in the order given.
 
@@ -358,6 +399,9 @@ def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, ex
         threads: threads per task (numba, torch, BLAS); default ``cpu_count // workers`` for the
             parallel executors and unchanged for ``serial``.
         retries: how many times a failed task (exception or dead worker) is run again.
+        retry: which failures are retried (:data:`RETRY_POLICIES`): ``any``, or only the
+            ``transient`` ones (:func:`is_transient`; an exception of the task's own code is
+            recorded at once).
         resume: keep the saved records and run only the tasks that have none (or a failed or an
             invalid one, :meth:`TaskStore.load`; the invalid ones are in ``store.rejected``).
         on_result: ``on_result(task, record)`` in this process for each newly finished task before
@@ -374,6 +418,8 @@ def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, ex
     if len(set(ids)) != len(ids):
         raise ValueError("two tasks have the same function and key")
     store.check_writable(tasks)
+    if retry not in RETRY_POLICIES:
+        raise ValueError(f"retry must be one of {', '.join(RETRY_POLICIES)}, got {retry!r}")
     workers = max(1, int(workers))
     executor = resolve_executor(executor, workers, ray_address)
     if threads is None and executor != "serial":
@@ -391,11 +437,11 @@ def run_tasks(tasks: Sequence[Task], store: TaskStore | str | os.PathLike, *, ex
                    else workers)
     total, done = len(tasks), len(records)
     if executor == "serial":
-        stream = _serial(units, threads, retries)
+        stream = _serial(units, threads, retries, retry)
     elif executor == "process":
-        stream = _process(units, workers, threads, retries)
+        stream = _process(units, workers, threads, retries, retry)
     else:
-        stream = _ray(units, workers, threads, retries, ray_address)
+        stream = _ray(units, workers, threads, retries, ray_address, retry)
     try:
         for task, rec, attempts in stream:
             rec = _finish(task, rec, attempts)

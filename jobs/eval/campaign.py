@@ -2,10 +2,13 @@
 :mod:`jobs.campaign.engine`, statistics over seeds, and one report to open.
 
 An episode is defined by its key, ``(controller, track, seed, speed_scale, domain_randomization,
-kicks, max_time)`` and, when they are not the default, the robot (``robot`` or ``robot_file``)
-and its ``imperfections`` preset: the env is reset with ``seed`` (sensor and start noise, the ``random``
-track, domain randomisation) and the kick, if any, is drawn from ``seed`` too, so an episode's
-metrics are the same whichever executor, worker or position in the queue runs it. The episodes of
+kicks, max_time)``, ``inputs`` (the content digests of the code and files it runs: the azimut
+sources, a user controller's modules, a policy's files, a robot file; :mod:`jobs.eval.fingerprint`),
+``track_file`` for a track read from a file (:mod:`jobs.eval.track_files`) and, when they are not
+the default, the robot (``robot`` or ``robot_file``) and its ``imperfections`` preset: the env
+is reset with ``seed`` (sensor and start noise, the ``random`` track, domain randomisation) and
+the kick, if any, is drawn from ``seed`` too, so an episode's metrics are the same whichever
+executor, worker or position in the queue runs it. The episodes of
 one controller with the same options (all but track and seed) run as one batch on a vector env
 (:func:`episode_batch`, one per worker), with the metrics each gets alone, bit for bit.
 
@@ -13,14 +16,15 @@ The report folder holds ``report.md`` (the summary table, mean and 95% bootstrap
 seeds per controller × track × metric; then per track the plots that overlay the controllers,
 and per controller × track its row with its plots embedded; then the per-seed rows),
 ``metrics.json`` (``campaign``, ``summary``, ``episodes``: the per-seed rows), ``plots/`` and
-``episodes/`` (one record per finished episode, what ``--resume`` reads).
+``episodes/`` (one record per finished episode, what ``--resume`` reads, and its trace
+``<id>.npz``: :func:`jobs.eval.results.save_trace`).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import re
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -30,17 +34,17 @@ from typing import Any
 import numpy as np
 
 from azimut_env.task.core import nominal_duration
-from azimut_env.tracks import SCENARIO_NAMES, named_track
+from azimut_env.tracks import SCENARIO_NAMES
 from control.episode import episode_metrics
 from control.rollout import run_episode, run_episodes
 from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor_args
-from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks, summarize
+from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks
 from jobs.campaign.task import canonical, file_digest
 from jobs.eval.controllers import build_controller, check_controllers
 from jobs.eval.outputs import episode_label, is_own_plot, output_layout
 from jobs.eval.plots import comparison_plots, write_plots
-from jobs.eval.report import SCENARIO_COLUMNS, SUMMARY_COLUMNS, limits_text, write_campaign_report
-from jobs.records import provenance
+from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
+from jobs.eval.track_files import episode_track, track_file_entry
 
 __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "episode_batch",
            "draw_kick",
@@ -49,7 +53,7 @@ __all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs"
 #: the env's default control period [s] (``AzimutEnv(control_period=0.02)``)
 DEFAULT_DT = 0.02
 def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float | None = None,
-              dt: float = DEFAULT_DT, n_wheels: int = 4, params=None) -> dict:
+              dt: float = DEFAULT_DT, n_wheels: int = 4, params=None, track_file: dict | None = None) -> dict:
     """The kick of episode ``seed`` (the env's ``kick`` reset option), drawn from the seed alone.
 
     1–``n_wheels`` random wheels (at most 4), an angular impulse of ±(0.2–1.0) N·m·s (as in
@@ -57,7 +61,7 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
     duration (or of ``max_time``, whichever is shorter).
     """
     rng = np.random.default_rng([int(seed), 0x6B1C])  # a stream of its own: not the env's
-    horizon = nominal_duration(named_track(track, params, rng=np.random.default_rng(seed)), speed_scale)
+    horizon = nominal_duration(episode_track(track, params, seed, track_file), speed_scale)
     if max_time is not None:
         horizon = min(horizon, float(max_time))
     step = int(rng.uniform(0.2, 0.6) * horizon / dt)
@@ -69,14 +73,16 @@ def draw_kick(seed: int, track: str, speed_scale: float = 1.0, max_time: float |
 
 def _episode_setup(track: str, seed: int, speed_scale: float, domain_randomization: float, kicks: bool,
                    max_time: float | None, robot: str | None, robot_file: str | None,
-                   imperfections: str | None = None) -> tuple[dict | None, dict | None]:
+                   imperfections: str | None = None, track_file: dict | None = None
+                   ) -> tuple[dict | None, dict | None]:
     """An episode's kick (None: none) and env keyword arguments (None: the defaults)."""
     from jobs.args import robot_env_kwargs
 
     robot_kw = robot_env_kwargs(robot, robot_file, imperfections)
     params = _robot_params(robot_kw.get("robot"), imperfections) if robot_kw else None
     n_wheels = params.n if params is not None else 4
-    kick = draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels, params=params) if kicks else None
+    kick = (draw_kick(seed, track, speed_scale, max_time, n_wheels=n_wheels, params=params, track_file=track_file)
+            if kicks else None)
     env_kwargs = {"domain_randomization": float(domain_randomization)} if domain_randomization else None
     if robot_kw:
         env_kwargs = {**(env_kwargs or {}), **robot_kw}
@@ -103,17 +109,20 @@ def _episode_result(log, track: str, seed: int, kick: dict | None, return_log: b
 def episode_task(controller: str, track: str, seed: int, speed_scale: float = 1.0,
                  domain_randomization: float = 0.0, kicks: bool = False, max_time: float | None = None,
                  return_log: bool = False, robot: str | None = None, robot_file: str | None = None,
-                 inputs: dict | None = None, imperfections: str | None = None) -> dict:
+                 inputs: dict | None = None, imperfections: str | None = None,
+                 track_file: dict | None = None) -> dict:
     """One campaign episode of the controller spec ``controller`` (:mod:`jobs.eval.controllers`):
     ``{"metrics": row}`` (plus ``artifacts.log``, the :class:`~control.episode.EpisodeLog`, with
     ``return_log``); the row's ``controller`` is the controller's name. ``robot`` (a preset's
     name) or ``robot_file`` (a description file) pick the robot (default: azimut3), ``imperfections``
     the preset put on it (default: the one its file names). ``inputs``:
     the content digests of the files the episode reads (:func:`episode_tasks`), in its key so
-    that a changed file is a new episode; not read here."""
+    that a changed file is a new episode; not read here. ``track_file``: the track is the file
+    ``track_file["path"]`` (:func:`jobs.eval.track_files.episode_track`), named ``track``."""
     kick, env_kwargs = _episode_setup(track, seed, speed_scale, domain_randomization, kicks, max_time, robot,
-                                      robot_file, imperfections)
-    log = run_episode(build_controller(controller, speed_scale), track, seed=int(seed), kick=kick, max_time=max_time,
+                                      robot_file, imperfections, track_file)
+    path = episode_track(track, None, seed, track_file) if track_file else track
+    log = run_episode(build_controller(controller, speed_scale), path, seed=int(seed), kick=kick, max_time=max_time,
                       env_kwargs=env_kwargs)
     return _episode_result(log, track, seed, kick, return_log)
 
@@ -136,8 +145,10 @@ def episode_batch(keys: list[dict], extras: list[dict]) -> list[dict]:
     opts["speed_scale"] = 1.0 if opts["speed_scale"] is None else opts["speed_scale"]
     opts["domain_randomization"] = opts["domain_randomization"] or 0.0
     opts["kicks"] = bool(opts["kicks"])
-    setups = [_episode_setup(k["track"], int(k["seed"]), **opts) for k in keys]
-    logs = run_episodes(build_controller(shared["controller"], opts["speed_scale"]), [k["track"] for k in keys],
+    setups = [_episode_setup(k["track"], int(k["seed"]), **opts, track_file=k.get("track_file")) for k in keys]
+    paths = [episode_track(k["track"], None, int(k["seed"]), k["track_file"]) if k.get("track_file") else k["track"]
+             for k in keys]
+    logs = run_episodes(build_controller(shared["controller"], opts["speed_scale"]), paths,
                         [int(k["seed"]) for k in keys], kicks=[kick for kick, _ in setups],
                         max_time=opts["max_time"], env_kwargs=setups[0][1])
     return [_episode_result(log, k["track"], int(k["seed"]), kick, bool(e.get("return_log", False)))
@@ -179,22 +190,25 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
                   robot_file: str | None = None, names: dict[str, str] | None = None,
                   all_logs: bool = False, imperfections: str | None = None) -> list[Task]:
-    """The campaign's tasks, track-major (the report's order); ``plot_seed``'s episodes (every
-    episode with ``all_logs``: the export) return their logs; ``names`` (spec -> name) labels
-    them. The robot (``robot``, ``robot_file``) and the ``imperfections`` preset are in each
-    task's key only when they are given, so the default campaign's task ids are those of before
-    (and ``--resume`` never reuses an episode of another robot)."""
-    from jobs.eval.controllers import controller_files
+    """The campaign's tasks, track-major (the report's order); every episode returns its log with
+    ``all_logs`` (``azimut eval``: each episode's trace, the export), else ``plot_seed``'s only;
+    ``names`` (spec -> name) labels them. The robot (``robot``, ``robot_file``) and the
+    ``imperfections`` preset are in each task's key only when they are given (``--resume`` never
+    reuses an episode of another robot); ``inputs``, the digests of the code and files an episode
+    runs, always (:func:`jobs.eval.fingerprint.controller_inputs`)."""
+    from jobs.eval.fingerprint import controller_inputs
 
     names = names or {}
     tasks = []
-    # the content of every file an episode reads, in its key: a file changed at the same path (a
-    # retrained model, edited statistics or robot file) is a new episode, not a stale record reused
-    inputs = {c: {role: file_digest(p) for role, p in controller_files(c).items()} for c in controllers}
+    # the content of the code and of every file an episode reads, in its key: changed code (azimut's,
+    # a user controller's modules) or a file changed at the same path (a retrained model, edited
+    # statistics or robot file) is a new episode, not a stale record reused
+    inputs = {c: controller_inputs(c) for c in controllers}
     robot_digest = {"robot_file": file_digest(robot_file)} if robot_file else {}
     for track in tracks:
         params = _robot_params(str(Path(robot_file).resolve()) if robot_file else robot, imperfections)
-        nominal = nominal_duration(named_track(track, params, rng=np.random.default_rng(0)), speed_scale)
+        track_file = track_file_entry(track)
+        nominal = nominal_duration(episode_track(track, params, 0, track_file), speed_scale)
         for controller in controllers:
             for seed in seeds:
                 key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),
@@ -206,12 +220,13 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                     key["robot"] = robot
                 if imperfections:
                     key["imperfections"] = imperfections
-                if inputs[controller] or robot_digest:  # only then: the default campaign's ids stay
-                    key["inputs"] = {**inputs[controller], **robot_digest}
+                if track_file:
+                    key["track_file"] = track_file
+                key["inputs"] = {**inputs[controller], **robot_digest}
                 cost = min(nominal, max_time) if max_time else nominal
                 # the ICR controller (and policies) cost more than the twist controllers
                 cost *= 1.0 if controller in ("twist", "twist-setpoint") else 4.0
-                group = {k: v for k, v in key.items() if k not in ("track", "seed")}
+                group = {k: v for k, v in key.items() if k not in ("track", "seed", "track_file")}
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
                                   label=episode_label(names.get(controller, controller), track, seed), cost=cost,
@@ -268,43 +283,7 @@ def seeds_of(args: argparse.Namespace) -> list[int]:
     return list(args.seeds) if args.seeds is not None else [int(args.seed or 0)]
 
 
-# ------------------------------------------------------------------------------------ plots
-
-
-def _export(log, folder: Path, label: str, robot: str | None, storage: str) -> str:
-    """Write one episode as a ROS 2 bag ``folder/<label>`` (replacing an earlier one); returns its
-    path relative to the report folder."""
-    import shutil
-
-    from control.export import export_episode
-
-    target = folder / re.sub(r"[^A-Za-z0-9_.-]+", "_", label)
-    if target.exists():
-        shutil.rmtree(target)
-    folder.mkdir(parents=True, exist_ok=True)
-    export_episode(log, target, robot=robot or "azimut3", storage=storage)
-    return f"{folder.name}/{target.name}"
-
-
-def _save_trace(path: Path, log) -> None:
-    np.savez_compressed(path, t=log.t, pose=log.pose, slip_power=log.slip_power, antagonism=log.antagonism,
-                        nullspace_force=log.nullspace_force, lateral=log.lateral, track_xy=log.track.xy)
-
-
 # ------------------------------------------------------------------------------------- run
-
-
-def _row_of(record: dict, names: dict[str, str]) -> dict:
-    key = record["key"]
-    if record["status"] == "ok":
-        row = dict(record["result"]["metrics"])
-        row["status"] = "ok"
-    else:
-        row = {"controller": names.get(key["controller"], key["controller"]), "track": key["track"],
-               "seed": key["seed"], "status": "failed",
-               "error": record.get("error")}
-    row["attempts"] = record.get("attempts", 1)
-    return row
 
 
 def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], tracks: Sequence[str],
@@ -313,11 +292,14 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
 
     ``controllers`` are specs; the rows, cells and report carry their names
     (``args.controller_names``, else made here). Returns 0, or 1 when an episode failed (after
-    its retries; the report lists it)."""
+    its retries; the report lists it); 130 on Ctrl-C and 143 on SIGTERM, after saving the finished
+    episodes (``--resume`` goes on from them)."""
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
-    from azimut_env.imperfections import imperfections_of
     from jobs.args import robot_env_kwargs, robot_label
+    from jobs.eval.console import EXIT_STATUS, progress_printer, signals_as_interrupts
+    from jobs.eval.results import export_episode, save_trace, write_results
+    from jobs.eval.robots import controller_robots
 
     names = getattr(args, "controller_names", None) or check_controllers(list(controllers), args.speed_scale)
 
@@ -330,14 +312,22 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     video_dir = out / "videos"
     robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
     imperfections = getattr(args, "imperfections", None)
+    campaign_kw = robot_env_kwargs(robot, robot_file, imperfections)
+    robots = controller_robots(controllers, names, args.speed_scale, campaign_kw, robot_label(args))
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
-                          plot_seed=seeds[0] if (plot_seed is not None or video) else None, robot=robot,
-                          robot_file=robot_file, names=names, all_logs=bool(getattr(args, "export", None)),
+                          plot_seed=seeds[0], robot=robot, robot_file=robot_file, names=names, all_logs=True,
                           imperfections=imperfections)
     executor = run_kwargs(args)["executor"]
-    env0 = AzimutEnv(**robot_env_kwargs(robot, robot_file, imperfections))
-    geom, limits = env0.geometry, env0.limits
+    envs: dict[str, Any] = {}  # one env per robot: its geometry and limits for the plots
+
+    def env_of(name: str):
+        kw = robots[name]["env_kwargs"] if name in robots else campaign_kw
+        if canonical(kw) not in envs:
+            envs[canonical(kw)] = AzimutEnv(**kw)
+        return envs[canonical(kw)]
+
+    env0 = env_of("")
     if not args.resume and plot_dir.is_dir():
         for p in plot_dir.glob("*.png"):
             if is_own_plot(p.name):
@@ -347,106 +337,49 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
 
     def on_result(task: Task, rec: dict) -> None:
         art = (rec.get("result") or {}).get("artifacts")
-        if art and "log" in art and export:
-            rec["result"]["export"] = _export(art["log"], out / "exports", task.label, robot_file or robot, export)
-        if art and "log" in art and video:
+        if not art or "log" not in art:
+            return
+        log, first = art["log"], task.key["seed"] == seeds[0]
+        store.folder.mkdir(parents=True, exist_ok=True)
+        save_trace(store.folder / f"{task.id}.npz", log)  # every episode's, plots or not
+        rec["result"]["trace"] = f"episodes/{task.id}.npz"
+        if export:
+            rec["result"]["export"] = export_episode(log, out / "exports", task.label, robot_file or robot, export)
+        if video and first:
             from jobs.eval.video import write_video
 
             name = re.sub(r"[^A-Za-z0-9_.-]+", "_", task.label)
-            rec["result"]["video"] = f"videos/{write_video(art['log'], video_dir / f'{name}.{video}', fmt=video).name}"
-        if art and "log" in art and plot_seed is not None:
+            rec["result"]["video"] = f"videos/{write_video(log, video_dir / f'{name}.{video}', fmt=video).name}"
+        if plot_seed is not None and first:
             plot_dir.mkdir(exist_ok=True)
-            store.folder.mkdir(parents=True, exist_ok=True)
-            _save_trace(store.folder / f"{task.id}.npz", art["log"])
-            rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(art["log"], plot_dir, geom, limits)]
-
-    width = max(len(n) for n in names.values()) if names else 6
-
-    def progress(done: int, total: int, task: Task, rec: dict) -> None:
-        k = task.key
-        if rec["status"] == "ok":
-            m = rec["result"]["metrics"]
-            qua = m.get("mean_qua_moving")
-            qua = f"{qua:.4f}" if qua is not None and math.isfinite(qua) else "- (no moving step)"
-            took = (f"batch of {rec['batch']}: {rec['elapsed_s']:.1f} s" if rec.get("batch")
-                    else f"{rec['elapsed_s']:.1f} s")
-            msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
-                   f"antagonism {m['mean_antagonism_N']:.2f} N, null-space force {m['mean_nullspace_force_N']:.2f} N, "
-                   f"qua moving {qua}, limit-exceeded steps {m['limit_violation_steps']}, "
-                   f"stop+reconfig {m['reconfigure_events']}, {took}")
-        else:
-            msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
-        name = names.get(k["controller"], k["controller"])
-        print(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}",
-              file=stream, flush=True)
+            env = env_of(names.get(task.key["controller"], task.key["controller"]))
+            rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(log, plot_dir, env.geometry, env.limits)]
 
     start = time.perf_counter()
     n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")
     for path, problem in store.rejected:  # recomputed below: say so
         print(f"azimut eval: {path}: not a valid episode record ({problem}); recomputing it", file=sys.stderr)
     store.rejected.clear()
-    try:
-        records = run_tasks(tasks, store, **run_kwargs(args), on_result=on_result, progress=progress)
-    except CampaignInterrupted as exc:
-        print(f"azimut eval: {exc}; run the same command with --resume", file=sys.stderr)
-        return 130
+    with signals_as_interrupts() as caught:
+        try:
+            records = run_tasks(tasks, store, **run_kwargs(args), retry="transient", on_result=on_result,
+                                progress=progress_printer(names, stream, store.folder))
+        except CampaignInterrupted as exc:
+            sig = caught["signal"]
+            print(f"azimut eval: {'terminated (SIGTERM)' if sig == signal.SIGTERM else 'interrupted'}: {exc.done} of "
+                  f"{exc.total} episodes saved in {store.folder}; run the same command with --resume to finish",
+                  file=sys.stderr, flush=True)
+            return EXIT_STATUS.get(sig, 130)
     wall = time.perf_counter() - start
-    rows = [_row_of(r, names) for r in records]
-    specs = {names.get(c, c): c for c in controllers if names.get(c, c) != c}  # a short name's spec (its path)
-    controllers = [names.get(c, c) for c in controllers]  # the report speaks of names
-    ok_rows = [r for r in rows if r["status"] == "ok"]
-    metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
-                                                 if k not in {c[0] for c in SUMMARY_COLUMNS}
-                                                 and k not in ("controller", "track", "seed", "status", "error",
-                                                               "attempts", "kick")
-                                                 and isinstance(ok_rows[0][k], (int, float))]
-    metrics += [c[0] for c in SCENARIO_COLUMNS if c[0] not in metrics and any(c[0] in r for r in ok_rows)]
-    cells = summarize(ok_rows, ("controller", "track"), metrics, n_resamples=args.bootstrap)
-    by = {(c["controller"], c["track"]): c for c in cells}
-    full = []
-    for track in tracks:
-        for controller in controllers:
-            n_failed = sum(1 for r in rows if r["controller"] == controller and r["track"] == track
-                           and r["status"] != "ok")
-            cell = by.get((controller, track), {"controller": controller, "track": track, "n": 0, "metrics": {}})
-            cell["ok"], cell["failed"] = cell["n"], n_failed
-            full.append(cell)
-    plots: dict[tuple[str, str], list[str]] = {}
-    compare: dict[str, list[str]] = {}
-    videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
-              for rec in records
-              if rec["status"] == "ok" and (rec.get("result") or {}).get("video")}
-    exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}":
-               rec["result"]["export"] for rec in records
-               if rec["status"] == "ok" and (rec.get("result") or {}).get("export")}
-    if plot_seed is not None:
-        for rec in records:
-            if rec["status"] == "ok" and rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
-                plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
-        for track in tracks:
-            traces = {}
-            for task in tasks:
-                npz = store.folder / f"{task.id}.npz"
-                if task.key["track"] == track and task.key["seed"] == plot_seed and npz.is_file():
-                    traces[names.get(task.key["controller"])] = dict(np.load(npz))
-            if traces:
-                plot_dir.mkdir(exist_ok=True)
-                compare[track] = [f"plots/{f}" for f in comparison_plots(track, traces, plot_dir)]
-    campaign = {"controllers": list(controllers), "tracks": list(tracks), "seeds": list(seeds),
-                "speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
+    campaign = {"speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
-                "limits": limits_text(limits), "executor": executor, "workers": args.workers, "level": 0.95,
+                "limits": limits_text(env0.limits), "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
-                "computed": len(tasks) - n_before, "resumed": n_before, "videos": videos, "robot": robot_label(args),
-                "imperfections": imperfections_of(env0.params) or "the robot's own", "controller_specs": specs,
-                "exports": exports,
-                "provenance": provenance()}
-    write_campaign_report(out, rows, full, campaign, plots, compare)
-    from jobs.eval.agents import write_agents
-
-    write_agents(out, rows, controllers, tracks, n_resamples=args.bootstrap)  # agents over training seeds, if any
-    n_failed = len(rows) - len(ok_rows)
-    print(f"{len(ok_rows)} of {len(rows)} episodes ok" + (f", {n_failed} failed" if n_failed else "")
+                "computed": len(tasks) - n_before, "resumed": n_before}
+    n_ok, n_all = write_results(out, records, tasks, controllers, tracks, seeds, names, robots, campaign, store.folder,
+                                n_resamples=args.bootstrap, video=bool(video), compare=plot_seed is not None)
+    n_failed = n_all - n_ok
+    print(f"{n_ok} of {n_all} episodes ok" + (f", {n_failed} failed" if n_failed else "")
           + f" in {wall:.1f} s ({executor}, {args.workers} worker(s)); report written to {out}/report.md",
           file=stream, flush=True)
     return 0 if n_failed == 0 else 1

@@ -63,12 +63,29 @@ DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
 
 def arg_tracks(text: str) -> list[str]:
     """``type=`` of ``--tracks``: built-in tracks and scenarios (``suite``: every scenario, in
-    :data:`SCENARIO_NAMES` order), order kept, no repeats."""
+    :data:`SCENARIO_NAMES` order) and waypoint files of the user's (a path:
+    :func:`jobs.eval.track_files.read_track_file`, read and checked here), order kept, no repeats."""
+    from jobs.eval.track_files import looks_like_a_file, read_track_file
+
     items = [t.strip() for t in text.split(",") if t.strip()]
     expanded = []
     for item in items:
         expanded += list(SCENARIO_NAMES) if item == "suite" else [item]
-    return arg_choice_list(ALL_TRACK_NAMES)(",".join(expanded))
+    files = [t for t in expanded if t not in ALL_TRACK_NAMES and looks_like_a_file(t)]
+    for path in files:
+        try:
+            read_track_file(path)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).splitlines()[0]) from None
+    names: list[str] = []
+    if len(files) < len(expanded) or not expanded:
+        try:
+            names = arg_choice_list(ALL_TRACK_NAMES)(",".join(t for t in expanded if t not in files))
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{exc}; or the path of a waypoint file (x,y per line, .csv)") from None
+    if len(set(expanded)) != len(expanded):
+        raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
+    return [t for t in expanded if t in files or t in names]
 
 
 _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
@@ -114,8 +131,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"{','.join(DEFAULT_CONTROLLERS)})")
     parser.add_argument("--tracks", default=",".join(DEFAULT_TRACKS), type=arg_tracks,
                         help=f"comma-separated tracks among {', '.join(TRACK_NAMES)} (default: these, paper first), "
-                             f"and scenarios among {', '.join(SCENARIO_NAMES)}, scaled to the robot ('suite': all six "
-                             "scenarios; docs/robots.md)")
+                             f"scenarios among {', '.join(SCENARIO_NAMES)}, scaled to the robot ('suite': all six "
+                             "scenarios; docs/robots.md), and paths of your own: a CSV file of waypoints x,y[,heading"
+                             "[,speed]] in m, rad, m/s (docs/control.md)")
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
                         help="env seed (noise, start, random track); default 0")
     add_robot_arguments(parser, imperfections=True)
@@ -246,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         controllers = (list(args.controllers) if isinstance(args.controllers, list)
                        else arg_controllers(args.controllers))
-        tracks = _parse_list(args.tracks, ALL_TRACK_NAMES, "track(s)")
+        tracks = list(args.tracks) if isinstance(args.tracks, list) else arg_tracks(args.tracks)
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
         if args.kick_runs < 0:

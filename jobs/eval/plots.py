@@ -150,6 +150,7 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
     Returns the file names (relative to ``out``)."""
     plt = _pyplot()
     files: list[str] = []
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"compare_{track}")  # a file name (a track may be a path)
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     _trajectory_axes(ax, next(iter(traces.values()))["track_xy"])
     for i, (controller, tr) in enumerate(traces.items()):
@@ -157,7 +158,7 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
             ax.plot(tr["pose"][:, 0], tr["pose"][:, 1], color=f"C{i}", lw=1.2, label=controller)
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"trajectories on {track}")
-    _save(fig, out, f"compare_{track}" + PLOT_ENDING["trajectory"], files, 100)
+    _save(fig, out, stem + PLOT_ENDING["trajectory"], files, 100)
 
     series = (("slip_power", "slip power Σ|F·v_slip| [W]"), ("antagonism", "antagonism [N]"),
               ("nullspace_force", "null-space force [N]"))
@@ -172,7 +173,7 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
     axes[0].legend(fontsize=8, loc="upper right")
     axes[0].set_title(f"slip, antagonism and null-space force over time on {track}")
     fig.tight_layout()
-    _save(fig, out, f"compare_{track}" + PLOT_ENDING["slip_force"], files, 100)
+    _save(fig, out, stem + PLOT_ENDING["slip_force"], files, 100)
     return files
 
 

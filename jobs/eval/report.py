@@ -1,7 +1,9 @@
 """``azimut eval``'s report: ``report.md`` and ``metrics.json``, readable without the README.
 
-``report.md`` says what ran (controllers, tracks, seeds, robot, limits in words), which code ran
-it (package version and git commit, :func:`jobs.records.provenance`), the summary table (mean
+``report.md`` opens with a verdict (per track, the fastest finisher, the least slip and the least
+lateral error: :mod:`jobs.eval.verdict`), then says what ran (controllers, tracks, seeds, the robot
+each controller drove, limits in words), which code ran it (package version and git commit,
+:func:`jobs.records.provenance`), the summary table (mean
 over seeds, with the bootstrap interval in brackets only where one is shown), the plots per track
 and controller, the per-seed rows when there are several seeds, and a "Columns" section that
 defines every column (:mod:`jobs.glossary`). Counts print as integers. ``metrics.json`` holds the
@@ -147,13 +149,19 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
     specs = campaign.get("controller_specs") or {}
     named = "".join(f"; {name} = {spec}" for name, spec in specs.items())
-    lines = ["# azimut eval", "",
+    from jobs.eval.verdict import verdict_lines
+
+    lines = ["# azimut eval", "", "## Verdict", "",
+             f"Best per track (means over {'the seeds' if len(seeds) > 1 else 'one seed'}, "
+             "from the summary table below):", ""]
+    lines += verdict_lines(cells, list(campaign["tracks"]), list(campaign["controllers"]))
+    lines += ["", "## What ran", "",
              f"Controllers {', '.join(campaign['controllers'])}{named}; tracks {', '.join(campaign['tracks'])}; "
              f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
              f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
              + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
-             f"Robot {campaign.get('robot', 'azimut3')}"
-             + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else "")
+             (campaign.get("robot_sentence") or f"Robot {campaign.get('robot', 'azimut3')}"
+              + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else ""))
              + f"; control period {campaign['control_period']} s; "
              f"{campaign['limits']}.",
              f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
@@ -163,8 +171,11 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     lines += _summary_table(cells, table)
     failed = [r for r in rows if r.get("status") != "ok"]
     if failed:
-        lines += ["", "Failed episodes (after a retry):", ""]
-        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')}" for r in failed]
+        lines += ["", "Failed episodes (an error of the episode's own code is not retried; its traceback is in "
+                  "the episode's record):", ""]
+        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')} (after "
+                  f"{r.get('attempts', 1)} attempt(s))" + (f"; traceback in `{r['record']}`" if r.get("record") else "")
+                  for r in failed]
     by_cell = {(c["controller"], c["track"]): c for c in cells}
     if plots or compare:
         lines += ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}. {_PLOT_GUIDE}"]

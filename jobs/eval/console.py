@@ -1,0 +1,103 @@
+"""What ``azimut eval`` says while it runs: one line per finished episode (:func:`progress_printer`;
+a failed one names its error, where its traceback is, and whether it was retried), and SIGTERM
+taken as Ctrl-C (:func:`signals_as_interrupts`: the finished episodes are saved, one line, exit
+status 143, ``--resume`` goes on)."""
+
+from __future__ import annotations
+
+import math
+import re
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ["progress_printer", "failure_text", "where_raised", "signals_as_interrupts", "EXIT_STATUS"]
+
+#: exit status of an interrupted campaign, by signal (128 + the signal's number, the shells' convention)
+EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+_FRAME = re.compile(r'^\s*File "(?P<file>[^"]+)", line (?P<line>\d+), in (?P<fn>\S+)', re.M)
+
+
+def where_raised(traceback_text: str | None) -> str | None:
+    """``file:line in function`` of the innermost frame of a formatted traceback, or None."""
+    frames = list(_FRAME.finditer(traceback_text or ""))
+    if not frames:
+        return None
+    last = frames[-1]
+    return f"{Path(last['file']).name}:{last['line']} in {last['fn']}"
+
+
+def failure_text(rec: dict, record_path: Path | str) -> str:
+    """A failed episode in words: its error, where it was raised, how many attempts and why no
+    more, and where its traceback is (``record_path``, the episode's record)."""
+    attempts = rec.get("attempts", 1)
+    text = f"FAILED after {attempts} attempt(s): {rec.get('error')}"
+    where = where_raised(rec.get("traceback"))
+    if where:
+        text += f" (at {where})"
+    if rec.get("transient") is False:
+        text += "; not retried (an error the episode's code raised comes back on every try)"
+    if rec.get("traceback"):
+        text += f"; traceback in {record_path}"
+    else:
+        text += f"; no traceback (the worker died); record in {record_path}"
+    return text
+
+
+def progress_printer(names: dict[str, str], stream, records_folder: Path) -> Callable:
+    """The ``progress(done, total, task, rec)`` callback of :func:`jobs.campaign.engine.run_tasks`
+    that prints one line per finished episode on ``stream``."""
+    width = max(len(n) for n in names.values()) if names else 6
+
+    def progress(done: int, total: int, task, rec: dict) -> None:
+        k = task.key
+        if rec["status"] == "ok":
+            m = rec["result"]["metrics"]
+            qua = m.get("mean_qua_moving")
+            qua = f"{qua:.4f}" if qua is not None and math.isfinite(qua) else "- (no moving step)"
+            took = (f"batch of {rec['batch']}: {rec['elapsed_s']:.1f} s" if rec.get("batch")
+                    else f"{rec['elapsed_s']:.1f} s")
+            msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
+                   f"antagonism {m['mean_antagonism_N']:.2f} N, null-space force {m['mean_nullspace_force_N']:.2f} N, "
+                   f"qua moving {qua}, limit-exceeded steps {m['limit_violation_steps']}, "
+                   f"stop+reconfig {m['reconfigure_events']}, {took}")
+        else:
+            msg = failure_text(rec, records_folder / f"{task.id}.json")
+        name = names.get(k["controller"], k["controller"])
+        print(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}",
+              file=stream, flush=True)
+
+    return progress
+
+
+@contextmanager
+def signals_as_interrupts() -> Iterator[dict]:
+    """Within: SIGTERM raises ``KeyboardInterrupt`` in the main thread, as Ctrl-C does, so that
+    the campaign engine saves what finished and stops the workers; yields a dict whose ``signal``
+    is the signal that came (SIGINT when none was seen here). A further SIGTERM while the first is
+    being handled is ignored; a SIGTERM ignored by the caller (``SIG_IGN``) stays ignored; outside
+    the main thread nothing changes. The previous handlers are put back on exit."""
+    state = {"signal": signal.SIGINT}
+    if threading.current_thread() is not threading.main_thread():
+        yield state
+        return
+    previous = {signal.SIGTERM: signal.getsignal(signal.SIGTERM)}  # Ctrl-C keeps Python's own handler
+
+    def handler(signum, frame):
+        if state.get("fired"):
+            return
+        state["fired"], state["signal"] = True, signal.Signals(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    for sig, old in previous.items():
+        if old is not signal.SIG_IGN:
+            signal.signal(sig, handler)
+    try:
+        yield state
+    finally:
+        for sig, old in previous.items():
+            if old is not None:
+                signal.signal(sig, old)

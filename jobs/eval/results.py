@@ -1,0 +1,141 @@
+"""What ``azimut eval`` writes from its episodes' records: each episode's trace
+(``episodes/<id>.npz``: :func:`save_trace`), its ROS 2 bag (:func:`export_episode`), and the
+rows, statistics, plots and report (:func:`write_results`)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from jobs.campaign.engine import summarize
+from jobs.eval.report import SCENARIO_COLUMNS, SUMMARY_COLUMNS, write_campaign_report
+
+__all__ = ["TRACE_ARRAYS", "save_trace", "export_episode", "row_of", "write_results"]
+
+#: the arrays of an episode's trace (``episodes/<id>.npz``), by name: (EpisodeLog attribute, meaning);
+#: one row per logged control step (``track_xy``: the track's sampled points)
+TRACE_ARRAYS = {
+    "t": ("t", "time at the end of each control step [s], (T,)"),
+    "pose": ("pose", "true pose (x [m], y [m], θ [rad]), (T, 3)"),
+    "lateral": ("lateral", "signed lateral error to the track [m], (T,)"),
+    "slip_power": ("slip_power", "slip power Σ|F·v_slip| [W], (T,)"),
+    "antagonism": ("antagonism", "antagonism of the tire forces [N], (T,)"),
+    "nullspace_force": ("nullspace_force", "null-space force of the tire forces [N], (T,)"),
+    "beta_cmd": ("beta_cmd", "the controller's steering set-points β_c [rad], (T, n)"),
+    "phidot_cmd": ("phidot_cmd", "the controller's wheel-speed set-points φ̇_c [rad/s], (T, n)"),
+    "beta_meas": ("beta_meas", "measured steering angles β (encoders, with their noise) [rad], (T, n)"),
+    "phidot_meas": ("phidot_meas", "measured wheel speeds φ̇ [rad/s], (T, n)"),
+    "beta_true": ("beta_true", "true steering angles [rad], (T, n)"),
+    "track_xy": (None, "the track's points (x, y) [m], (P, 2)"),
+}
+
+
+def save_trace(path: Path, log) -> None:
+    """Write an episode's trace (:data:`TRACE_ARRAYS`) to ``path`` (compressed NumPy archive)."""
+    arrays = {name: np.asarray(getattr(log, attr)) for name, (attr, _) in TRACE_ARRAYS.items() if attr}
+    np.savez_compressed(path, track_xy=log.track.xy, **arrays)
+
+
+def export_episode(log, folder: Path, label: str, robot: str | None, storage: str) -> str:
+    """Write one episode as a ROS 2 bag ``folder/<label>`` (replacing an earlier one); returns its
+    path relative to the report folder."""
+    import shutil
+
+    from control.export import export_episode as export
+
+    target = folder / re.sub(r"[^A-Za-z0-9_.-]+", "_", label)
+    if target.exists():
+        shutil.rmtree(target)
+    folder.mkdir(parents=True, exist_ok=True)
+    export(log, target, robot=robot or "azimut3", storage=storage)
+    return f"{folder.name}/{target.name}"
+
+
+def row_of(record: dict, names: dict[str, str], records_folder: Path | None = None) -> dict:
+    """An episode's row of ``metrics.json`` from its record (a failed one: its error and, with
+    ``records_folder``, the record that holds its traceback)."""
+    key = record["key"]
+    if record["status"] == "ok":
+        row = dict(record["result"]["metrics"])
+        row["status"] = "ok"
+    else:
+        row = {"controller": names.get(key["controller"], key["controller"]), "track": key["track"],
+               "seed": key["seed"], "status": "failed",
+               "error": record.get("error")}
+        if records_folder is not None:
+            row["record"] = str(records_folder / f"{record['id']}.json")
+    row["attempts"] = record.get("attempts", 1)
+    return row
+
+
+def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequence[str], tracks: Sequence[str],
+                  seeds: Sequence[int], names: dict[str, str], robots: dict[str, dict], campaign: dict,
+                  records_folder: Path, *, n_resamples: int, video: bool, compare: bool) -> tuple[int, int]:
+    """The rows, the summary cells (mean and interval over seeds), the comparison plots of the
+    first seed and ``report.md``/``metrics.json`` (:func:`jobs.eval.report.write_campaign_report`);
+    ``campaign``: the run's facts so far (completed here). Returns (episodes ok, episodes)."""
+    from jobs.eval.agents import write_agents
+    from jobs.eval.plots import comparison_plots
+    from jobs.eval.robots import robot_sentence
+    from jobs.records import provenance
+
+    rows = [row_of(r, names, records_folder) for r in records]
+    for row in rows:  # the robot each episode ran
+        r = robots.get(row["controller"])
+        if r is not None:
+            row["robot"], row["imperfections"] = r["robot"], r["imperfections"]
+    controllers = [names.get(c, c) for c in specs]  # the report speaks of names
+    ok_rows = [r for r in rows if r["status"] == "ok"]
+    skip = ("controller", "track", "seed", "status", "error", "attempts", "kick", "robot", "imperfections", "record")
+    metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
+                                                 if k not in {c[0] for c in SUMMARY_COLUMNS} and k not in skip
+                                                 and isinstance(ok_rows[0][k], (int, float))]
+    metrics += [c[0] for c in SCENARIO_COLUMNS if c[0] not in metrics and any(c[0] in r for r in ok_rows)]
+    cells = summarize(ok_rows, ("controller", "track"), metrics, n_resamples=n_resamples)
+    by = {(c["controller"], c["track"]): c for c in cells}
+    full = []
+    for track in tracks:
+        for controller in controllers:
+            n_failed = sum(1 for r in rows if r["controller"] == controller and r["track"] == track
+                           and r["status"] != "ok")
+            cell = by.get((controller, track), {"controller": controller, "track": track, "n": 0, "metrics": {}})
+            cell["ok"], cell["failed"] = cell["n"], n_failed
+            if controller in robots:
+                cell["robot"], cell["imperfections"] = robots[controller]["robot"], robots[controller]["imperfections"]
+            full.append(cell)
+    ok = [rec for rec in records if rec["status"] == "ok"]
+    videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
+              for rec in ok if video and rec["result"].get("video")}
+    exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}":
+               rec["result"]["export"] for rec in ok if rec["result"].get("export")}
+    plots: dict[tuple[str, str], list[str]] = {}
+    comparisons: dict[str, list[str]] = {}
+    plot_seed = seeds[0]
+    if compare:
+        for rec in ok:
+            if rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
+                plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
+        for track in tracks:
+            traces = {}
+            for task in tasks:
+                npz = records_folder / f"{task.id}.npz"
+                if task.key["track"] == track and task.key["seed"] == plot_seed and npz.is_file():
+                    traces[names.get(task.key["controller"])] = dict(np.load(npz))
+            if traces:
+                (out / "plots").mkdir(exist_ok=True)
+                comparisons[track] = [f"plots/{f}" for f in comparison_plots(track, traces, out / "plots")]
+    distinct = {(r["robot"], r["imperfections"]) for r in robots.values()}
+    one = next(iter(distinct)) if len(distinct) == 1 else ("per controller (see robots)", None)
+    campaign = {"controllers": controllers, "tracks": list(tracks), "seeds": list(seeds), **campaign,
+                "videos": videos, "robot": one[0], "imperfections": one[1],
+                "robots": {name: {"robot": r["robot"], "imperfections": r["imperfections"]}
+                           for name, r in robots.items()},
+                "robot_sentence": robot_sentence(robots),
+                "controller_specs": {names.get(c, c): c for c in specs if names.get(c, c) != c},
+                "exports": exports, "provenance": provenance()}
+    write_campaign_report(out, rows, full, campaign, plots, comparisons)
+    write_agents(out, rows, controllers, list(tracks), n_resamples=n_resamples)  # agents over training seeds, if any
+    return len(ok_rows), len(rows)

@@ -1,0 +1,91 @@
+"""The opening of ``azimut eval``'s report: which controller is best at what, in a few lines,
+computed from the summary cells (mean over seeds per controller × track).
+
+Per track: the fastest finisher (the least completion time among the controllers that finished
+every episode on it), the least slip energy and the least RMS lateral error (among the controllers
+with a value); with several seeds, a best whose 95% interval overlaps the runner-up's is said to be
+not separated from it. With several tracks, a last line counts the tracks each controller is best
+on, per criterion.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["CRITERIA", "verdict_lines"]
+
+#: (metric, words, unit, scale, format): what the verdict ranks, each the lower the better
+CRITERIA = [("completion_time_s", "fastest finisher", "s", 1.0, "{:.1f}"),
+            ("slip_energy_J", "least slip", "J", 1.0, "{:.2f}"),
+            ("rms_lateral_m", "least lateral error", "cm RMS", 100.0, "{:.2f}")]
+
+
+def _mean(cell: dict, metric: str) -> float | None:
+    stats = cell.get("metrics", {}).get(metric) or {}
+    value = stats.get("mean")
+    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) else None
+
+
+def _finished_all(cell: dict) -> bool:
+    done = _mean(cell, "completed")
+    return done is not None and done >= 1.0 and cell.get("failed", 0) == 0
+
+
+def _overlap(a: dict, b: dict, metric: str) -> bool:
+    sa, sb = a["metrics"].get(metric) or {}, b["metrics"].get(metric) or {}
+    if min(sa.get("n", 0), sb.get("n", 0)) < 2 or any(not isinstance(s.get(k), (int, float)) for s in (sa, sb)
+                                                      for k in ("lo", "hi")):
+        return False
+    return sa["hi"] >= sb["lo"] and sb["hi"] >= sa["lo"]
+
+
+def _best(cells: list[dict], metric: str, words: str, unit: str, scale: float, fmt: str) -> tuple[str, str | None]:
+    """``(clause, winner)`` of one criterion on one track's cells."""
+    pool = [c for c in cells if _mean(c, metric) is not None and (metric != "completion_time_s" or _finished_all(c))]
+    if not pool:
+        return (f"{words}: none (no controller finished every episode)" if metric == "completion_time_s"
+                else f"{words}: no value"), None
+    pool.sort(key=lambda c: _mean(c, metric))
+    best = pool[0]
+    text = f"{words} **{best['controller']}** ({fmt.format(scale * _mean(best, metric))} {unit}"
+    if len(pool) > 1:
+        second = pool[1]
+        text += f"; next {second['controller']} {fmt.format(scale * _mean(second, metric))}"
+        if _overlap(best, second, metric):
+            text += ", not separated by the 95% intervals"
+    elif len(cells) > 1:
+        text += "; the only one" + (" to finish every episode" if metric == "completion_time_s" else " with a value")
+    return text + ")", best["controller"]
+
+
+def verdict_lines(cells: list[dict], tracks: list[str], controllers: list[str]) -> list[str]:
+    """The verdict as Markdown lines: one bullet per track, and a tally over the tracks when there
+    are several. ``cells``: the summary cells (``controller``, ``track``, ``metrics`` of mean/lo/hi/n,
+    ``ok``, ``failed``)."""
+    lines = []
+    wins: dict[str, dict[str, int]] = {words: {} for _, words, *_ in CRITERIA}
+    for track in tracks:
+        mine = [c for c in cells if c["track"] == track and c.get("n", 0) > 0]
+        if not mine:
+            lines.append(f"- **{track}**: no episode finished without an error")
+            continue
+        clauses = []
+        for metric, words, unit, scale, fmt in CRITERIA:
+            clause, winner = _best(mine, metric, words, unit, scale, fmt)
+            clauses.append(clause)
+            if winner is not None:
+                wins[words][winner] = wins[words].get(winner, 0) + 1
+        not_done = [c["controller"] for c in mine if not _finished_all(c)]
+        tail = (f"; did not finish every episode: {', '.join(not_done)}" if not_done and len(not_done) < len(mine)
+                else "")
+        lines.append(f"- **{track}**: " + "; ".join(clauses) + tail + ".")
+    if len(tracks) > 1 and len(controllers) > 1:
+        tally = []
+        for words, counts in wins.items():
+            if counts:
+                ranked = sorted(counts.items(), key=lambda kv: (-kv[1], controllers.index(kv[0])
+                                                                 if kv[0] in controllers else 0))
+                tally.append(f"{words}: " + ", ".join(f"{name} on {n} of {len(tracks)}" for name, n in ranked))
+        if tally:
+            lines.append("- **Over the tracks**: " + "; ".join(tally) + ".")
+    return lines
