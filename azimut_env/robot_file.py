@@ -30,14 +30,18 @@ from dataclasses import MISSING, Field, fields, is_dataclass, replace
 from importlib import resources
 from typing import Any
 
+import numpy as np
+
 from azimut_env.imperfections import IMPERFECTION_PRESETS, with_imperfections
 from estimation.geometry import RobotGeometry
 from estimation.robot_file import (
     PARAMETER_TABLES,
     RobotFileError,
+    module_names,
     number,
     parse_robot_text,
     read_robot_file,
+    unit_hint,
     where,
 )
 
@@ -51,6 +55,13 @@ PRESET_NAMES = ("azimut3", "swerve", "tri", "hex")
 DEFAULT_PRESET = "azimut3"
 #: the key of ``[imperfections]`` that names the robot's imperfections preset
 PRESET_KEY = "preset"
+#: plausibility bounds of parameter keys, ``(table, key): (bound, unit, what a value past it
+#: likely is)``: a file past one is refused with the likely mistake (``docs/robots.md``)
+PLAUSIBLE = {("chassis", "mass"): (2000.0, "kilograms", "grams"),
+             ("steering", "module_mass"): (200.0, "kilograms", "grams"),
+             ("chassis", "length"): (25.0, "metres", "millimetres"),
+             ("chassis", "width"): (25.0, "metres", "millimetres"),
+             ("chassis", "com_height"): (10.0, "metres", "millimetres")}
 #: keys of ``[limits]`` that the file may not set (the steering range comes from ``[geometry]``)
 _FROM_GEOMETRY = {"steer_min", "steer_max"}
 
@@ -105,6 +116,10 @@ def _group(base: Any, table: Any, source: str, section: str) -> Any:
             kwargs[key] = _group(getattr(base, key), value, source, f"{section}.{key}")
         else:
             kwargs[key] = _value(default, value, source, f"[{section}].{key}")
+            if (section, key) in PLAUSIBLE and abs(kwargs[key]) > PLAUSIBLE[section, key][0]:
+                bound, unit, smaller = PLAUSIBLE[section, key]
+                raise RobotFileError(f"{where(source, f'[{section}].{key}')} = {kwargs[key]:g}: beyond {bound:g} is "
+                                     f"implausible: {unit_hint(kwargs[key], unit, smaller=smaller)}")
     try:
         return replace(base, **kwargs)
     except (ValueError, TypeError) as exc:
@@ -146,10 +161,53 @@ def params_from_description(data: dict, params_cls: type) -> Any:
                               for name in groups if name in data}
     if "gravity" in data:
         kwargs["gravity"] = number(data["gravity"], source, "gravity")
+    table = data.get("chassis", {})
+    kwargs["chassis"] = _outline(kwargs.get("chassis", base.chassis), table, geometry, source)
     try:
-        return replace(base, **kwargs)
+        params = replace(base, **kwargs)
     except (ValueError, TypeError) as exc:
         raise RobotFileError(f"robot file {source}: {exc}") from None
+    _check_support(params, data, source)
+    return params
+
+
+def _outline(chassis: Any, table: dict, geometry: RobotGeometry, source: str) -> Any:
+    """The chassis of a file: its ``length`` (along X) and ``width`` (along Y) must hold every
+    steering axis (the chassis box is centred on the centre of mass, the frame's origin). A
+    dimension the file leaves out keeps the default plate's (0.6 m: the presets azimut3, tri and
+    hex) where that holds every axis, and is otherwise derived from the modules: twice the
+    farthest axis plus the largest wheel radius. The plate's inertia follows
+    (``ChassisParams.inertia``); the mass does not (``[chassis] mass``: the default 27 kg unless
+    the file gives it)."""
+    xy = geometry.axis_xy
+    margin = float(np.max(geometry.r))
+    changes = {}
+    for axis, key in enumerate(("length", "width")):
+        k = int(np.argmax(np.abs(xy[:, axis])))
+        reach = float(abs(xy[k, axis]))
+        size = getattr(chassis, key)
+        if key in table:
+            if 2.0 * reach > size * (1.0 + 1e-9):
+                raise RobotFileError(f"{where(source, f'[chassis].{key}')} = {size:g}: module {k}'s steering axis at "
+                                     f"{'xy'[axis]} = {xy[k, axis]:.6g} m lies outside the chassis ({key} >= "
+                                     f"{2.0 * reach:.6g} m needed; leave {key} out to derive it from the modules)")
+        elif 2.0 * reach > size:  # the default plate does not hold the axes: the axes' box plus a wheel radius
+            changes[key] = 2.0 * (reach + margin)
+    return replace(chassis, **changes) if changes else chassis
+
+
+def _check_support(params: Any, data: dict, source: str) -> None:
+    """The centre of mass (the chassis frame's origin) must be inside the modules' support: every
+    wheel's static load (``RobotParams.static_normal_loads``, the least-norm loads on the axes)
+    positive. Otherwise the robot would tip over; the simulator cannot load its wheels."""
+    share = params.load_map()[:, 0]  # each axis's share of the weight
+    k = int(np.argmin(share))
+    if not share[k] > 1e-6:
+        name = module_names(data)[k]
+        raise RobotFileError(f"{where(source, f'[geometry.modules][{k}]')} ({name}): the centre of mass, the chassis "
+                             f"frame's origin, is outside the modules' support (this wheel would carry "
+                             f"{share[k]:.3g} of the weight): give the steering axes from the centre of mass "
+                             "(x_m, y_m or alpha_deg, l_m around the origin)")
 
 
 def params_from_file(path, params_cls: type) -> Any:

@@ -47,7 +47,8 @@ else:  # pragma: no cover - Python 3.10: the tomli backport (a core dependency t
     import tomli as tomllib
 
 __all__ = ["SCHEMA_VERSION", "PARAMETER_TABLES", "TOP_LEVEL_KEYS", "RobotFileError", "read_robot_file",
-           "check_description", "parse_robot_text", "geometry_kwargs", "module_names", "number", "where"]
+           "check_description", "parse_robot_text", "geometry_kwargs", "module_names", "number", "where",
+           "MAX_LENGTH_M", "MAX_RADIUS_M", "MAX_OFFSET_M", "unit_hint"]
 
 #: the version of the file format this code reads (the ``schema`` key)
 SCHEMA_VERSION = 1
@@ -56,6 +57,12 @@ SCHEMA_VERSION = 1
 PARAMETER_TABLES = ("chassis", "steering", "steer_motor", "wheel", "tire", "limits", "sensors", "imperfections")
 #: the top-level keys that are not tables
 TOP_LEVEL_KEYS = ("schema", "name", "description", "sources", "gravity")
+
+#: plausibility bounds of the geometry (a robot file in millimetres, not metres, is refused by
+#: them with a hint): |x|, |y|, l of a steering axis [m], the wheel radius r [m], |b| [m]
+MAX_LENGTH_M = 10.0
+MAX_RADIUS_M = 1.0
+MAX_OFFSET_M = 1.0
 
 _GEOMETRY_KEYS = ("steering", "steer_range_deg", "b_m", "r_m", "modules")
 _MODULE_KEYS = ("name", "x_m", "y_m", "alpha_deg", "l_m", "b_m", "r_m")
@@ -77,6 +84,20 @@ def number(value: Any, source: str, key: str) -> float:
     if not math.isfinite(value):
         raise RobotFileError(f"{where(source, key)} = {value!r}: must be finite")
     return float(value)
+
+
+def unit_hint(value: float, unit: str, factor: float = 1000.0, smaller: str = "millimetres") -> str:
+    """The likely-mistake tail of a refusal of an implausibly large value: ``"metres expected
+    (millimetres?); 0.3?"``."""
+    return f"{unit} expected ({smaller}?); {value / factor:.6g}?"
+
+
+def _bounded(value: float, bound: float, source: str, key: str, what: str, unit: str = "metres") -> float:
+    """``value`` if ``|value| <= bound``, else :class:`RobotFileError` naming the likely mistake."""
+    if abs(value) > bound:
+        raise RobotFileError(f"{where(source, key)} = {value:g}: {what} beyond {bound:g} m is implausible: "
+                             + unit_hint(value, unit))
+    return value
 
 
 def _check_keys(table: Any, allowed: tuple[str, ...], source: str, key: str) -> dict:
@@ -158,7 +179,8 @@ def _module_axis(mod: dict, source: str, key: str) -> tuple[float, float]:
         raise RobotFileError(f"{where(source, key)}: give the steering axis as x_m, y_m or as alpha_deg, l_m, "
                              f"not both (got {', '.join(cart + polar)})")
     if len(cart) == 2:
-        x, y = number(mod["x_m"], source, f"{key}.x_m"), number(mod["y_m"], source, f"{key}.y_m")
+        x, y = (_bounded(number(mod[k], source, f"{key}.{k}"), MAX_LENGTH_M, source, f"{key}.{k}",
+                         "a steering axis") for k in ("x_m", "y_m"))
         if x == 0.0 and y == 0.0:
             raise RobotFileError(f"{where(source, key)}: x_m = 0, y_m = 0: a steering axis at the chassis centre "
                                  "(l = 0) is not supported")
@@ -168,6 +190,7 @@ def _module_axis(mod: dict, source: str, key: str) -> tuple[float, float]:
         l = number(mod["l_m"], source, f"{key}.l_m")
         if l <= 0:
             raise RobotFileError(f"{where(source, key + '.l_m')} = {mod['l_m']!r}: must be > 0 [m]")
+        _bounded(l, MAX_LENGTH_M, source, f"{key}.l_m", "a steering axis")
         return float(np.deg2rad(alpha)), l
     have = cart + polar
     raise RobotFileError(f"{where(source, key)}: the steering axis needs x_m and y_m, or alpha_deg and l_m"
@@ -197,10 +220,13 @@ def geometry_kwargs(data: dict, source: str | None = None) -> dict:
             raise RobotFileError(f"{where(source, key)} = {rng!r}: must hold 0 inside and span 180 degrees "
                                  "(]β_min, β_max] of width π, the range where the ICR -> steering map is a bijection)")
         smin, smax = float(np.deg2rad(lo)), float(np.deg2rad(hi))
-    b_default = number(geo["b_m"], source, "[geometry].b_m") if "b_m" in geo else 0.0
+    b_default = _bounded(number(geo["b_m"], source, "[geometry].b_m"), MAX_OFFSET_M, source, "[geometry].b_m",
+                         "an offset b") if "b_m" in geo else 0.0
     r_default = number(geo["r_m"], source, "[geometry].r_m") if "r_m" in geo else None
     if r_default is not None and r_default <= 0:
         raise RobotFileError(f"{where(source, '[geometry].r_m')} = {geo['r_m']!r}: must be > 0 [m]")
+    if r_default is not None:
+        _bounded(r_default, MAX_RADIUS_M, source, "[geometry].r_m", "a wheel radius")
     mods = geo.get("modules")
     if not isinstance(mods, list) or not mods:
         raise RobotFileError(f"robot file {source}: [geometry] needs its modules ([[geometry.modules]] tables, "
@@ -213,11 +239,13 @@ def geometry_kwargs(data: dict, source: str | None = None) -> dict:
         key = f"[geometry.modules][{k}]"
         _check_keys(mod, _MODULE_KEYS, source, key)
         a_k, l_k = _module_axis(mod, source, key)
-        b_k = number(mod["b_m"], source, f"{key}.b_m") if "b_m" in mod else b_default
+        b_k = _bounded(number(mod["b_m"], source, f"{key}.b_m"), MAX_OFFSET_M, source, f"{key}.b_m",
+                       "an offset b") if "b_m" in mod else b_default
         if "r_m" in mod:
             r_k = number(mod["r_m"], source, f"{key}.r_m")
             if r_k <= 0:
                 raise RobotFileError(f"{where(source, key + '.r_m')} = {mod['r_m']!r}: must be > 0 [m]")
+            _bounded(r_k, MAX_RADIUS_M, source, f"{key}.r_m", "a wheel radius")
         elif r_default is not None:
             r_k = r_default
         else:
@@ -232,8 +260,29 @@ def geometry_kwargs(data: dict, source: str | None = None) -> dict:
         l.append(l_k)
         b.append(b_k)
         r.append(r_k)
+    _check_layout(mods, np.array(alpha), np.array(l), np.array(r), source)
     return dict(alpha=np.array(alpha), l=np.array(l), b=np.array(b), r=np.array(r), steer_min=smin, steer_max=smax,
                 unlimited_steering=unlimited)
+
+
+def _check_layout(mods: list, alpha: np.ndarray, l: np.ndarray, r: np.ndarray, source: str) -> None:
+    """Layouts no robot has, refused with the likely mistake: every ``alpha_deg`` within ±2π (the
+    angles given in radians: the modules then sit in a wedge of at most 12.6° on one side of the
+    centre), and two steering axes closer than the larger of their wheels' radii (the wheels would
+    overlap: e.g. nearly equal ``alpha_deg`` at one ``l_m``)."""
+    given = [float(m["alpha_deg"]) for m in mods if "alpha_deg" in m]
+    if len(given) == len(mods) and max(abs(a) for a in given) <= 2 * math.pi:
+        k = int(np.argmax(np.abs(given)))
+        raise RobotFileError(f"{where(source, f'[geometry.modules][{k}].alpha_deg')} = {given[k]:g}: degrees "
+                             f"expected (every |alpha_deg| <= 2π: radians?); {math.degrees(given[k]):.6g}?")
+    xy = np.column_stack([l * np.cos(alpha), l * np.sin(alpha)])
+    for k in range(len(l)):
+        for j in range(k):
+            gap = float(np.hypot(*(xy[k] - xy[j])))
+            if 0.0 < gap < max(r[k], r[j]):  # 0: RobotGeometry's own refusal (one point, one line)
+                raise RobotFileError(f"{where(source, f'[geometry.modules][{k}]')}: its steering axis is {gap:.3g} m "
+                                     f"from module {j}'s, closer than the wheel radius {max(r[k], r[j]):g} m (the "
+                                     "wheels would overlap; alpha_deg in degrees, x_m, y_m, l_m in metres?)")
 
 
 def module_names(data: dict) -> tuple[str, ...]:

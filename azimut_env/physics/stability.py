@@ -44,7 +44,8 @@ from azimut_env.params import RobotParams
 from azimut_env.physics.modules import mass_matrix
 from azimut_env.physics.tire import stability_numbers
 
-__all__ = ["stability_figures", "check_stability", "check_substeps", "check_load_scale", "LOADED_MARGIN_MAX"]
+__all__ = ["stability_figures", "check_stability", "check_substeps", "check_load_scale", "stability_hint",
+           "LOADED_MARGIN_MAX"]
 
 #: the largest tire stability margin (b + 2a) a changed load may take (symplectic Euler diverges at 4)
 LOADED_MARGIN_MAX = 4.0
@@ -156,3 +157,41 @@ def check_load_scale(params: RobotParams, dt: float, chassis_mass: float) -> Non
     if worst * scale >= LOADED_MARGIN_MAX:
         raise ValueError(f"chassis mass {chassis_mass} kg loads the tires {scale:.2f}x the nominal: the contact's "
                          f"stability margin {worst * scale:.2f} would reach 4 at this substep: raise substeps")
+
+
+def stability_hint(params: RobotParams, dt: float) -> str:
+    """The parameters most likely behind a failed stability budget at the substep ``dt`` [s], named
+    as a robot file's keys (``docs/robots.md``), for a one-line refusal: each figure past its
+    bound with the dominant term of what it depends on (module docstring)."""
+    p, g = params, params.geometry
+    figures = stability_figures(p, dt)
+    bad = [k for k, (v, b) in figures.items() if not v < b * (1 + 1e-12)]
+    load = float(p.static_normal_loads().max())
+    mass, inertia = (float(v) for v in p.body_inertia())
+    i_m = p.steering.module_inertia
+    terms = {f"[wheel] inertia = {p.wheel.inertia:g} kg·m² for r_m = {float(np.max(g.r)):g} m":
+             float(np.max(g.r ** 2 / p.wheel.inertia)),
+             f"b_m = {float(np.max(np.abs(g.b))):g} m for [steering] module_inertia = {i_m:g} kg·m²":
+             float(np.max(g.b ** 2)) / i_m,
+             f"a {mass:g} kg robot ([chassis] mass, [steering] module_mass)":
+             1.0 / mass + float(np.max((g.l + np.abs(g.b)) ** 2)) / inertia}
+    hints = []
+    for name in bad:
+        if name.startswith("tire_long"):
+            hints.append(max(terms, key=terms.get))
+        elif name.startswith("tire_lat"):
+            hints.append(f"a {mass:g} kg robot ([chassis] mass, [steering] module_mass)")
+        elif name.startswith("tire_twist"):
+            hints.append(f"[steering] module_inertia = {i_m:g} kg·m²")
+        elif name.startswith("spring"):
+            hints.append(f"[steering] stiffness = {p.steering.stiffness:g}, damping = {p.steering.damping:g} for "
+                         f"module_inertia = {i_m:g} kg·m²")
+        elif name == "load_transfer_gain":
+            hints.append(f"[chassis] com_height = {p.chassis.com_height:g} m")
+        else:
+            hints.append(f"[wheel] drive_stall_torque = {p.wheel.drive_stall_torque:g} N·m for inertia = "
+                         f"{p.wheel.inertia:g} kg·m²")
+    if any(name.startswith("tire") for name in bad):
+        hints.append(f"a static wheel load of {load:.4g} N (the tire's stiffness grows with it)")
+    what = ", ".join(f"{k} = {figures[k][0]:.3g} (must be <= {figures[k][1]:g})" for k in bad)
+    return f"{what}; look at {'; '.join(dict.fromkeys(hints))}" if bad else ""
