@@ -165,6 +165,11 @@ def antagonism_kernel(P, F, gam, d_long, d_lat, n: int) -> float:
         a22 += eps
         a33 += eps
         det = _det3(a11, a12, a13, a22, a23, a33)
+    if not (det > 0.0 and det < math.inf):
+        # the product of three dampings under- or overflowed (slip speeds of 1e200 m/s after an
+        # absurd kick gave det = 0 and a ZeroDivisionError): no finite answer; the state is past
+        # the blow-up limits and the step ends the episode (AzimutPhysics.check)
+        return 0.0
     c11 = a22 * a33 - a23 * a23
     c12 = a13 * a23 - a12 * a33
     c13 = a12 * a23 - a13 * a22

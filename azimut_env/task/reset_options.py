@@ -12,14 +12,17 @@ import numpy as np
 from azimut_env.physics.blowup import BlowUpLimits
 from azimut_env.physics.obstacles import Obstacle
 from azimut_env.tracks import ALL_TRACK_NAMES, Track
-from azimut_env.validation import check_finite, check_index_list, check_int
+from azimut_env.validation import check_finite, check_index_list, check_int, check_range
 
-__all__ = ["RESET_OPTIONS", "check_reset_options", "check_kick", "check_track", "coerce_obstacles",
-           "start_progress_on"]
+__all__ = ["RESET_OPTIONS", "KICK_IMPULSE_MAX", "check_reset_options", "check_kick", "check_track",
+           "coerce_obstacles", "start_progress_on"]
 
 #: the keys ``reset(options=...)`` accepts
 RESET_OPTIONS = frozenset({"track", "obstacles", "kick", "start_progress"})
 _INT64_MAX = int(np.iinfo(np.int64).max)
+#: the largest |impulse| of a ``kick`` [N·m·s]: 2000 × the default 0.5, already 5·10⁴ rad/s on a
+#: 0.02 kg·m² module, far past every blow-up limit; 1e200 overflowed the physics' summary
+KICK_IMPULSE_MAX = 1000.0
 
 
 def coerce_obstacles(obstacles: Any, what: str = "obstacles") -> tuple[Obstacle, ...]:
@@ -91,7 +94,8 @@ def check_kick(kick: Any, n: int) -> dict[str, Any]:
     # the step is stored in an int64 array: a larger one (2**63) raised OverflowError mid-reset
     return dict(step=check_int("options['kick']['step']", kick.get("step", 0), min_value=0, max_value=_INT64_MAX),
                 wheels=check_index_list("options['kick']['wheels']", kick.get("wheels", range(n)), n),
-                impulse=check_finite("options['kick']['impulse']", kick.get("impulse", 0.5)))
+                impulse=check_range("options['kick']['impulse']", kick.get("impulse", 0.5), -KICK_IMPULSE_MAX,
+                                     KICK_IMPULSE_MAX))
 
 
 def check_track(track: Any, what: str = "track") -> str | Track:
