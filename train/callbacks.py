@@ -13,7 +13,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from train.policy import TrainedPolicy
 from train.rollout import policy_metrics
 
-__all__ = ["InfoStatsCallback", "HeldOutEvalCallback", "WallClockLimit"]
+__all__ = ["InfoStatsCallback", "HeldOutEvalCallback", "WallClockLimit", "StopOnSignal"]
 
 _INFO_KEYS = ("slip_power", "antagonism", "nullspace_force", "heading_error", "lateral_error")
 
@@ -128,3 +128,13 @@ class WallClockLimit(BaseCallback):
     def _on_step(self) -> bool:
         self.fired = time.perf_counter() - self._start >= self.seconds
         return not self.fired
+
+
+class StopOnSignal(BaseCallback):
+    """Stop ``learn`` at the step after a SIGINT or SIGTERM (:func:`train.interrupts.requested`);
+    :func:`train.trainer.train` then saves the run as interrupted."""
+
+    def _on_step(self) -> bool:
+        from train.interrupts import requested
+
+        return requested() is None

@@ -26,7 +26,8 @@ from typing import Any
 from azimut_env import ENV_ID
 from train.envs import action_key
 
-__all__ = ["EVAL_TRACKS", "RUN_ARGS", "check_resume", "checkpoint_steps", "latest_checkpoint", "train"]
+__all__ = ["EVAL_TRACKS", "RUN_ARGS", "check_resume", "checkpoint_steps", "latest_checkpoint", "run_steps", "train",
+           "was_interrupted"]
 
 #: the built-in tracks a run can be evaluated on, the default two first
 EVAL_TRACKS = ("circle", "figure8", "square", "crab", "paper")
@@ -96,10 +97,39 @@ def check_resume(out: Path, algo: str, action: str, env_kwargs: dict | None, ste
         raise ValueError(f"--resume: no checkpoint in {out}/checkpoints")
     check_checkpoint(ckpt)
     _check_trained_with(out, ckpt, algo, action, env_kwargs)
-    if steps is not None and (out / "model.zip").exists() and checkpoint_steps(ckpt) >= int(steps):
-        raise ValueError(f"--resume: the newest checkpoint of {out} has {checkpoint_steps(ckpt)} steps already, "
-                         f"--steps {steps} is the run's total (give a larger one to train on)")
+    if steps is not None:
+        done = run_steps(out, ckpt)
+        finished = (out / "model.zip").exists() and not was_interrupted(out)
+        if done > int(steps) or (finished and done >= int(steps)):
+            raise ValueError(f"--resume: the run in {out} has {done} steps already, --steps {steps} is the run's "
+                             f"total, not steps to add (give one above {done} to train on)")
     return ckpt
+
+
+def run_steps(out: Path, ckpt: Path | None = None) -> int:
+    """The environment steps the run in ``out`` has done: those of its newest checkpoint, or of its
+    ``run.json`` when it has its final model and says more (a run finished after its last checkpoint)."""
+    ckpt = latest_checkpoint(out) if ckpt is None else ckpt
+    done = checkpoint_steps(ckpt) if ckpt is not None else 0
+    if (Path(out) / "model.zip").exists():
+        try:
+            rec = json.loads((Path(out) / "run.json").read_text())
+            n = rec.get("num_timesteps") if isinstance(rec, dict) else None
+            if isinstance(n, int) and not isinstance(n, bool):
+                done = max(done, n)
+        except (OSError, ValueError):
+            pass
+    return done
+
+
+def was_interrupted(out: Path) -> bool:
+    """Whether the run in ``out`` was stopped by a signal (its ``run.json`` says ``"interrupted"``):
+    its ``model.zip`` is then the interrupted model, not a final one, and ``--resume`` continues it."""
+    try:
+        rec = json.loads((Path(out) / "run.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(rec, dict) and bool(rec.get("interrupted"))
 
 
 def _fused_adam(hp: dict) -> dict:
@@ -141,9 +171,10 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, WallClockLimit
+    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, StopOnSignal, WallClockLimit
     from train.envs import make_sb3_env
     from train.hyperparams import load_hyperparams
+    from train.interrupts import raise_if_requested
 
     env_kwargs = dict(env_kwargs or {})
     ckpt = latest_checkpoint(out) if resume else None
@@ -162,6 +193,10 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
 
         venv = VecNormalize.load(str(vecnormalize_path(ckpt)), venv)
         model = cls.load(str(ckpt), env=venv, device="cpu")
+        if model.num_timesteps > int(steps):  # never a record of more steps than its budget (check_resume first)
+            venv.close()
+            raise ValueError(f"--resume: the run in {out} has {model.num_timesteps} steps already, --steps {steps} "
+                             f"is the run's total, not steps to add (give one above {model.num_timesteps})")
         print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
     else:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
@@ -177,7 +212,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     except ImportError:
         pass
     model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
-    callbacks = [InfoStatsCallback()]
+    callbacks = [StopOnSignal(), InfoStatsCallback()]
     if time_limit_min > 0:
         guard = WallClockLimit(60.0 * time_limit_min)
         callbacks.append(guard)
@@ -191,31 +226,70 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     t0 = time.perf_counter()
     # SB3 adds the steps a resumed model has done to total_timesteps: give it what is left
     todo = max(int(steps) - start_steps, 0) if ckpt is not None else steps
-    model.learn(total_timesteps=todo, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
-                progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
-    learn_s = time.perf_counter() - t0
-    ckpt_dir = out / "checkpoints"
-    if ckpt_dir.is_dir() and not any(ckpt_dir.iterdir()):
-        ckpt_dir.rmdir()  # a run shorter than checkpoint_every: no empty folder left behind
-    done_steps = model.num_timesteps - start_steps
-    model.save(str(out / "model.zip"))
-    venv.save(str(out / "vecnormalize.pkl"))
-    final = evaluator.evaluate()
+
+    def record_of(final_rows: list, complete: bool, stopped: str | None, learn_s: float) -> dict:
+        done_steps = model.num_timesteps - start_steps
+        return {"complete": complete, "stopped": stopped,
+                "time_limit_min": time_limit_min, "algo": algo, "action": action,
+                "track": track, "seed": seed,
+                "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
+                "correction_cost": float(correction_cost), "eval_tracks": list(eval_tracks),
+                "hyperparams": hp, "hyperparams_version": hp_version, "env_id": ENV_ID, "env_kwargs": env_kwargs,
+                "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
+                "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
+                "machine": f"{platform.node()} ({os.cpu_count()} CPUs, shared)", "final_eval": final_rows,
+                **(record_extra or {})}
+
+    learn_s = math.nan
+    try:
+        model.learn(total_timesteps=todo, callback=CallbackList(callbacks), reset_num_timesteps=ckpt is None,
+                    progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
+        learn_s = time.perf_counter() - t0
+        raise_if_requested()  # StopOnSignal ended learn: an interrupted run, not a finished one
+        ckpt_dir = out / "checkpoints"
+        if ckpt_dir.is_dir() and not any(ckpt_dir.iterdir()):
+            ckpt_dir.rmdir()  # a run shorter than checkpoint_every: no empty folder left behind
+        model.save(str(out / "model.zip"))
+        venv.save(str(out / "vecnormalize.pkl"))
+        final = evaluator.evaluate()
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM through train.interrupts: save what there is
+        learn_s = time.perf_counter() - t0 if math.isnan(learn_s) else learn_s
+        raise _interrupted(exc, model, venv, out, record_of([], False, "interrupted", learn_s)) from None
     final["final"] = True
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
     complete = int(model.num_timesteps) >= int(steps) and not evaluator.stopped
     stopped = "on_evaluation" if evaluator.stopped else "time_limit" if time_limit_min > 0 and guard.fired else None
-    record = {"complete": complete, "stopped": stopped,
-              "time_limit_min": time_limit_min, "algo": algo, "action": action,
-              "track": track, "seed": seed,
-              "steps": steps, "num_timesteps": int(model.num_timesteps), "num_robots": num_robots,
-              "correction_cost": float(correction_cost), "eval_tracks": list(eval_tracks),
-              "hyperparams": hp, "hyperparams_version": hp_version, "env_id": ENV_ID, "env_kwargs": env_kwargs,
-              "learn_wall_s": learn_s, "steps_per_s_in_learn": done_steps / learn_s if learn_s > 0 else math.nan,
-              "torch_threads": torch.get_num_threads(), "resumed_from": str(ckpt) if ckpt else None,
-              "machine": f"{platform.node()} ({os.cpu_count()} CPUs, shared)", "final_eval": final["rows"],
-              **(record_extra or {})}
+    record = record_of(final["rows"], complete, stopped, learn_s)
     (out / "run.json").write_text(json.dumps(record, indent=1, allow_nan=True, default=str))
     venv.close()
     return record
+
+
+def _interrupted(exc: KeyboardInterrupt, model, venv, out: Path, record: dict):
+    """Save an interrupted run (see :func:`train`): a checkpoint at its steps (what ``--resume``
+    continues from), ``model.zip`` + ``vecnormalize.pkl`` and ``run.json`` (``"complete": false``,
+    ``"interrupted"``: the signal, ``"saved"``: the files); returns the
+    :class:`~train.interrupts.Interrupted` to raise. SB3 and the env are between two Python
+    operations, so the networks and the statistics are whole (a checkpoint torn by the signal is
+    rewritten under the same name)."""
+    from train.interrupts import Interrupted, signal_name
+
+    signum = int(getattr(exc, "signum", 2))
+    n = int(model.num_timesteps)
+    ckpt_dir = out / "checkpoints"
+    ckpt_dir.mkdir(exist_ok=True)
+    saved = [ckpt_dir / f"model_{n}_steps.zip", ckpt_dir / f"model_vecnormalize_{n}_steps.pkl",
+             out / "model.zip", out / "vecnormalize.pkl"]
+    model.save(str(saved[0]))
+    venv.save(str(saved[1]))
+    model.save(str(saved[2]))
+    venv.save(str(saved[3]))
+    record = {**record, "interrupted": signal_name(signum), "saved": [str(p) for p in saved]}
+    (out / "run.json").write_text(json.dumps(record, indent=1, allow_nan=True, default=str))
+    for close in (model.logger.close, venv.close):
+        try:
+            close()
+        except Exception:  # noqa: BLE001,S110 (an env or logger torn by the signal: its files are saved above)
+            pass
+    return Interrupted(signum, record)

@@ -232,6 +232,36 @@ def _run_rllib(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Train (see the module docstring). SIGINT (Ctrl-C) or SIGTERM: the run is saved as it stands
+    (:func:`train.trainer.train`), one line says what and how to continue, exit 130 (SIGTERM: 143)."""
+    from train.interrupts import exit_code, signals_as_interrupts
+
+    if getattr(args, "seeds", None) is not None:  # the campaign's own Ctrl-C handling (its workers' too)
+        return _run(args)
+    try:
+        with signals_as_interrupts():
+            return _run(args)
+    except KeyboardInterrupt as exc:
+        print(interrupted_line(exc, args), file=sys.stderr, flush=True)
+        return exit_code(exc)
+
+
+def interrupted_line(exc: KeyboardInterrupt, args: argparse.Namespace) -> str:
+    """The one line of an interrupted ``azimut train``: the signal, the steps done, what was saved
+    and the command that continues."""
+    from train.interrupts import signal_name
+
+    name = signal_name(getattr(exc, "signum", 2))
+    record = getattr(exc, "record", None)
+    if record is None:
+        return f"azimut train: interrupted ({name}) before learning started; nothing saved"
+    ckpt = Path(record["saved"][0]).name
+    return (f"azimut train: interrupted ({name}) at {record['num_timesteps']} of {record['steps']} steps; saved "
+            f"{args.out}/checkpoints/{ckpt}, model.zip and run.json ('complete': false, 'interrupted': "
+            f"'{name}'); the same command with --resume continues")
+
+
+def _run(args: argparse.Namespace) -> int:
     if getattr(args, "seeds", None) is not None:  # one agent per seed, as campaign tasks (jobs.training.seeds)
         from jobs.training.seeds import run_seeds
 

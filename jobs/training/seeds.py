@@ -37,16 +37,17 @@ def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, n
                     time_limit_min: float, out: str, env_kwargs: dict | None = None, torch_threads: int = 1,
                     resume: bool = False, quiet: bool = True, correction_cost: float = 0.0) -> dict:
     """Train one seed into ``out`` (with ``resume``, from its newest checkpoint when it has one
-    and no final model); returns ``{"run": run.json, "evaluations": [...]}``."""
+    and no final model, or an interrupted one); returns ``{"run": run.json, "evaluations": [...]}``."""
     import torch
 
     from jobs.records import provenance
     from jobs.training.plots import write_learning_curve
-    from train.trainer import latest_checkpoint, train
+    from train.trainer import latest_checkpoint, train, was_interrupted
 
     torch.set_num_threads(int(torch_threads))
     folder = Path(out)
-    resume = bool(resume) and latest_checkpoint(folder) is not None and not (folder / "model.zip").exists()
+    resume = bool(resume) and latest_checkpoint(folder) is not None and (not (folder / "model.zip").exists()
+                                                                         or was_interrupted(folder))
     record = train(algo, action, track, int(seed), int(steps), folder, int(num_robots), tuple(eval_tracks),
                    int(eval_every), int(checkpoint_every), resume, overrides, False, quiet,
                    env_kwargs=env_kwargs, time_limit_min=float(time_limit_min),
@@ -149,12 +150,13 @@ def check_seed_args(args: argparse.Namespace) -> None:
     check_executor_args(args)
     if args.resume:  # the seeds that will resume from a checkpoint: read and match it now, not in the task
         from jobs.args import robot_args_kwargs
-        from train.trainer import check_resume, latest_checkpoint
+        from train.trainer import check_resume, latest_checkpoint, was_interrupted
 
         for seed in args.seeds:
             folder = Path(args.out) / f"seed_{seed}"
-            if latest_checkpoint(folder) is not None and not (folder / "model.zip").exists():
-                check_resume(folder, args.algo, args.action, robot_args_kwargs(args))
+            if latest_checkpoint(folder) is not None and (not (folder / "model.zip").exists()
+                                                          or was_interrupted(folder)):
+                check_resume(folder, args.algo, args.action, robot_args_kwargs(args), steps=args.steps)
     if not args.resume:
         for seed in args.seeds:
             if (Path(args.out) / f"seed_{seed}" / "model.zip").exists():
