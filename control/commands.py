@@ -1,6 +1,7 @@
 """The set-points a controller sends for one control period: one type for every controller (the
 ICR controller, single and batched, the twist baseline, the feed-forward driver, trained policies
-and a user's own :class:`control.controller.Controller`)."""
+and a user's own :class:`control.controller.Controller`), and :func:`checked_command`, the episode
+loop's check of what a controller returned."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["WheelCommand"]
+__all__ = ["WheelCommand", "checked_command"]
 
 
 @dataclass(frozen=True)
@@ -18,9 +19,11 @@ class WheelCommand:
     Attributes:
         beta: steering set-points β_c [rad], inside the steering range.
         phidot: propulsion set-points φ̇_c [rad/s].
-        beta_rate: β̇_c [rad/s] (finite difference of the steering set-points over the period);
-            None where the controller does not know it (the commanded-limit check then leaves
-            β̇ out, as it does β̈ and φ̈ when they are None).
+        beta_rate: β̇_c [rad/s] as the controller knows it (e.g. the finite difference of its
+            steering set-points over the period), or None. The commanded-limit check of the
+            episode loop differences the set-points themselves whatever the controller declares
+            (:class:`control.limits.SetpointLimitCheck`); a declared rate over its limit counts
+            too, and a NaN one is refused.
         beta_accel: β̈_c [rad/s²], or None.
         phiddot: φ̈_c [rad/s²], or None.
         info: diagnostics of the controller that made them (for the ICR controller: mode, κ, the
@@ -28,7 +31,9 @@ class WheelCommand:
             arrays for a batch).
         action: (N, 2n) float32 env action to send as it is, or None: the episode loop
             (:mod:`control.rollout`) then sends ``env.action_from_setpoints(beta, phidot)``.
-            A trained policy gives its own action, so its rollouts stay what it was trained on.
+            A trained policy gives its own action, so its rollouts stay what it was trained on;
+            the commanded-limit check then reads the set-points back from the action
+            (``env.setpoints_from_action``), what the env applies.
         mode: (N,) int :class:`~control.icr.config.Mode` values of the controller (its RUNNING,
             STOPPING and RECONFIGURING; None: always RUNNING). The metrics count a step as
             moving only while RUNNING.
@@ -45,3 +50,80 @@ class WheelCommand:
     action: np.ndarray | None = None
     mode: np.ndarray | None = None
     events: np.ndarray | None = None
+
+
+#: the set-point and rate fields of a command: (N, n) arrays of real numbers
+ARRAY_FIELDS = ("beta", "phidot", "beta_rate", "beta_accel", "phiddot")
+#: the declared rates among them (optional)
+RATE_FIELDS = frozenset({"beta_rate", "beta_accel", "phiddot"})
+
+
+def _real_array(value, controller: str, key: str) -> np.ndarray:
+    """``value`` as a float64 array, refusing what is not an array of real numbers: strings,
+    bytes, complex numbers (the imaginary part would be dropped), booleans (``True`` would be read
+    as 1), objects (``None``), ragged lists. The message names the controller and the field."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"controller {controller!r} returned {key} of type {type(value).__name__}, not an array "
+                        "of real numbers")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # a ragged list
+        raise TypeError(f"controller {controller!r} returned {key} that is not an array of real numbers "
+                        f"({' '.join(str(exc).split())})") from None
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"controller {controller!r} returned {key} of dtype {arr.dtype}, not an array of real "
+                        "numbers (floats or integers; no bool, complex, string or object)")
+    return arr.astype(np.float64, copy=True)
+
+
+def checked_command(cmd, controller: str, num: int, n: int) -> WheelCommand:
+    """``cmd`` checked as the command of ``num`` robots of ``n`` wheels from the controller named
+    ``controller``, with its set-points and rates as float64 arrays (copies).
+
+    Refused, with a message naming the controller and the field: not a :class:`WheelCommand`
+    (``TypeError``); a set-point or rate that is not an array of real numbers (strings, complex,
+    bool, object: ``TypeError``); a shape other than (num, n) ((num, 2n) for ``action``, (num,)
+    for ``mode`` and ``events``), a NaN or infinite set-point, a NaN rate, a NaN or infinite
+    action (``ValueError``). An infinite declared rate is a number, over its limit: the
+    commanded-limit check counts it.
+    """
+    if not isinstance(cmd, WheelCommand):
+        raise TypeError(f"controller {controller!r}: act() must return a WheelCommand, got {type(cmd).__name__}")
+    out = {}
+    for key in ARRAY_FIELDS:
+        value = getattr(cmd, key)
+        if value is None:
+            out[key] = None
+            continue
+        arr = out[key] = _real_array(value, controller, key)
+        if arr.shape != (num, n):
+            raise ValueError(f"controller {controller!r}: command {key} must have shape ({num}, {n}), "
+                             f"got {arr.shape}")
+        rate = key in RATE_FIELDS
+        bad = np.isnan(arr) if rate else ~np.isfinite(arr)
+        if bad.any():
+            i, k = (int(j) for j in np.argwhere(bad)[0])
+            what = "NaN" if rate else "NaN or inf"
+            raise ValueError(f"controller {controller!r} returned {key} with {what} ({arr[i, k]} at robot {i}, "
+                             f"wheel {k}; {int(bad.sum())} value(s) in all)")
+    action = cmd.action
+    if action is not None:
+        try:
+            arr = np.asarray(action)
+        except (TypeError, ValueError) as exc:  # a ragged list
+            raise TypeError(f"controller {controller!r} returned action that is not an array of real numbers "
+                            f"({' '.join(str(exc).split())})") from None
+        if arr.dtype.kind not in "biuf":  # bools are 0/1, the env's convention for actions
+            raise TypeError(f"controller {controller!r} returned action of dtype {arr.dtype}, not an array of real "
+                            "numbers")
+        if arr.shape != (num, 2 * n):
+            raise ValueError(f"controller {controller!r}: command action must have shape ({num}, {2 * n}), "
+                             f"got {arr.shape}")
+        if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+            raise ValueError(f"controller {controller!r} returned action with NaN or inf")
+    for key in ("mode", "events"):
+        value = getattr(cmd, key)
+        if value is not None and np.shape(value) != (num,):
+            raise ValueError(f"controller {controller!r}: command {key} must have shape ({num},), "
+                             f"got {np.shape(value)}")
+    return WheelCommand(info=cmd.info, action=cmd.action, mode=cmd.mode, events=cmd.events, **out)

@@ -43,8 +43,12 @@ class EpisodeLog:
         (made from the previous row's measurements; the first from the reset's); mu_true: (T,) |μ| of
         the true motion [m/s]; twist_true: (T, 3) the true chassis-frame twist (ẋ, ẏ, θ̇);
         mode: (T,) the controller's :class:`~control.icr.config.Mode`; violations: (T,) a
-        commanded limit exceeded; events: the stop-and-reconfigure sequences; completed: the
-        track was finished; error: why the episode ended early (the env's error, ``"off
+        commanded limit exceeded (any of ``limit_flags``); limit_flags: (T, 5) which: steering
+        rate, steering acceleration, wheel speed, wheel acceleration, steering range
+        (:data:`control.limits.LIMIT_KINDS`; of the set-points themselves, differenced over the
+        period, the first against the measured state at the reset, or a rate the controller
+        declares: :class:`control.limits.SetpointLimitCheck`); events: the stop-and-reconfigure
+        sequences; completed: the track was finished; error: why the episode ended early (the env's error, ``"off
         track"``, ``"stalled"``, ``"time limit"``), None otherwise; ret: the return.
     """
 
@@ -73,6 +77,7 @@ class EpisodeLog:
     twist_true: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     violations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    limit_flags: np.ndarray = field(default_factory=lambda: np.zeros((0, 5), dtype=bool))
     #: (T,) bool: the step's command was a hold (the track held the robot still: exactly zero)
     hold: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     events: int = 0

@@ -42,11 +42,11 @@ from gymnasium.vector import AutoresetMode
 from azimut_env.task.core import nominal_duration
 from azimut_env.tracks import SCENARIO_NAMES, TRACK_NAMES, Track, make_track
 from azimut_env.vector_env import AzimutVectorEnv
-from control.commands import WheelCommand
+from control.commands import WheelCommand, checked_command
 from control.controller import Controller, make_controller
 from control.episode import EpisodeLog, progress_bar
 from control.icr.config import Mode
-from control.limits import limit_violations
+from control.limits import SetpointLimitCheck, limit_violations
 
 __all__ = ["run_episodes", "run_episode", "END_TOLERANCE"]
 
@@ -72,32 +72,28 @@ def _track(spec, seed: int) -> Track | str:
     return make_track(spec, rng=np.random.default_rng(seed))
 
 
-def _violations(cmd: WheelCommand, limits) -> np.ndarray:
-    """(N,) bool: a commanded limit exceeded (:func:`control.limits.limit_violations`; the rates
-    the command leaves None are not checked)."""
+def _declared(cmd: WheelCommand, limits) -> np.ndarray:
+    """(N, 4) bool: the declared rates over their limits (:func:`control.limits.limit_violations`
+    of β̇, β̈, φ̇, φ̈; the rates the command leaves None are not checked)."""
     zero = np.zeros(np.shape(cmd.phidot))
     vals = [zero if v is None else v for v in (cmd.beta_rate, cmd.beta_accel, cmd.phidot, cmd.phiddot)]
-    return limit_violations(*vals, limits).any(axis=-1)
+    return limit_violations(*vals, limits)
 
 
-def _check_command(cmd, num: int, n: int, name: str) -> None:
-    if not isinstance(cmd, WheelCommand):
-        raise TypeError(f"controller {name!r}: act() must return a WheelCommand, got {type(cmd).__name__}")
-    for key in ("beta", "phidot", "beta_rate", "beta_accel", "phiddot"):
-        value = getattr(cmd, key)
-        if value is not None and np.shape(value) != (num, n):
-            raise ValueError(f"controller {name!r}: command {key} must have shape ({num}, {n}), got {np.shape(value)}")
-    if cmd.action is not None and np.shape(cmd.action) != (num, 2 * n):
-        raise ValueError(f"controller {name!r}: command action must have shape ({num}, {2 * n}), "
-                         f"got {np.shape(cmd.action)}")
-    for key in ("mode", "events"):
-        value = getattr(cmd, key)
-        if value is not None and np.shape(value) != (num,):
-            raise ValueError(f"controller {name!r}: command {key} must have shape ({num},), got {np.shape(value)}")
+def _limit_flags(cmd: WheelCommand, env, check: SetpointLimitCheck) -> np.ndarray:
+    """(N, 5) bool, the :data:`~control.limits.LIMIT_KINDS` exceeded this period: by the set-points
+    themselves (those the env applies, read back from the command's action if it has one;
+    :class:`~control.limits.SetpointLimitCheck`), or by a rate the controller declares."""
+    if cmd.action is None:
+        flags = check.step(cmd.beta, cmd.phidot)
+    else:
+        flags = check.step(*env.setpoints_from_action(cmd.action), from_action=True)
+    flags[:, :4] |= _declared(cmd, env.limits)
+    return flags
 
 
 def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, beta_meas: np.ndarray,
-            phidot_meas: np.ndarray, motor: np.ndarray, violation: bool) -> None:
+            phidot_meas: np.ndarray, motor: np.ndarray, flags: np.ndarray) -> None:
     """Append robot i's row (the keys of :class:`EpisodeLog`) after a step, from the env's info
     (the vector env's batched info, whose row i is the single env's info of that robot)."""
     row = [("pose", info["pose"][i]), ("lateral", info["lateral_error"][i]), ("heading", info["heading_error"][i]),
@@ -110,7 +106,8 @@ def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, be
            ("lam_hat", eta_hat[0][i]), ("mu_hat", float(eta_hat[1][i])),
            ("mu_true", abs(float(info["eta_true"][1][i]))),
            ("twist_true", np.array(info["twist"][i], dtype=np.float64)),
-           ("mode", int(cmd.mode[i]) if cmd.mode is not None else int(Mode.RUNNING)), ("violations", violation)]
+           ("mode", int(cmd.mode[i]) if cmd.mode is not None else int(Mode.RUNNING)),
+           ("violations", bool(flags.any())), ("limit_flags", flags.copy())]
     if "hold" in cmd.info:  # the path followers' holds (Track.holds): the command was exactly zero
         row.append(("hold", bool(cmd.info["hold"][i])))
     if cmd.beta_rate is not None:
@@ -192,6 +189,8 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
           max_time: float | None, progress: bool) -> list[EpisodeLog]:
     num, n, dt, name = len(seeds), env.n, env.control_period, controller.name
     obs, _ = env.reset(seed=seeds, options=options)
+    check = SetpointLimitCheck(env.limits, dt, num, n)  # the first period differenced against the reset's
+    check.reset(np.arange(num), env.measured_beta, env.measured_phidot)  # measured state
     controller.reset(env, np.arange(num))
     scale = getattr(controller, "speed_scale", 1.0)
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
@@ -208,10 +207,9 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
     k = 0
     while alive.any():
         eta_hat = env.estimated_eta  # (λ̂, μ̂) the controller reads
-        cmd = controller.act(env, obs)
-        _check_command(cmd, num, n, name)
+        cmd = checked_command(controller.act(env, obs), name, num, n)
         action = cmd.action if cmd.action is not None else env.action_from_setpoints(cmd.beta, cmd.phidot)
-        viol = _violations(cmd, env.limits)
+        flags = _limit_flags(cmd, env, check)
         obs, reward, terminated, truncated, info = env.step(action)
         if cmd.events is not None:
             events = np.asarray(cmd.events, dtype=np.int64)
@@ -225,7 +223,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
                 logs[i].error = str(errors[i])
                 ended.append(i)
                 continue
-            _record(recs[i], info, i, cmd, eta_hat, beta_meas, phidot_meas, motor, bool(viol[i]))
+            _record(recs[i], info, i, cmd, eta_hat, beta_meas, phidot_meas, motor, flags[i])
             end = _end_of(info, i, lengths[i], terminated, truncated)
             if end is None and k + 1 >= horizons[i]:
                 end = (False, None)
@@ -244,6 +242,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
                 mask = np.zeros(num, dtype=np.bool_)
                 mask[i] = True
                 obs, _ = env.reset(options={"reset_mask": mask, "track": env.tracks[i]})
+            check.reset(over, env.measured_beta, env.measured_phidot)
             controller.reset(env, over)
         k += 1
     if progress and sys.stderr.isatty():

@@ -256,11 +256,16 @@ def test_each_end_of_an_episode(short_track):
 
 
 def test_the_loop_checks_what_the_command_gives(short_track):
-    """No rates: only φ̇ is checked against its limit; a mode: moving only while RUNNING."""
+    """No rates declared: the set-points themselves are checked (issue 31: differenced over the
+    period, the first against the measured state at the reset); a mode: moving only while RUNNING."""
     fast = run_episode(Drive(speed=1e3), short_track, seed=0, max_time=0.2)
     assert fast.violations.all() and fast.beta_rate.size == 0 and (fast.mode == int(Mode.RUNNING)).all()
+    assert fast.limit_flags[:, 2].all()  # the wheel speed, every step
     slow = run_episode(Drive(speed=0.3), short_track, seed=0, max_time=0.2)
-    assert not slow.violations.any()
+    # the jump from rest to 0.3 m/s (φ̈ = 3.75 rad/s / 0.02 s) and to the steering of a straight line
+    # (β̈ out of the start noise, and back): the first two periods only
+    assert slow.violations[:2].all() and not slow.violations[2:].any()
+    assert slow.limit_flags[0].tolist() == [False, True, False, True, False]
     m = episode_metrics(fast)
     assert m["limit_violation_steps"] == fast.t.size and m["reconfigure_events"] == 0
 
