@@ -60,6 +60,19 @@ class Controller(Protocol):
     scale of the track's profile the controller drives at; the default time limit of an
     episode is 3 × the nominal duration at that scale + 10 s) and ``env_kwargs`` (dict: keyword
     arguments the env must be built with, e.g. a trained policy's observation settings).
+
+    Required: the robots of a batch are independent. Row i of the command may depend only on
+    robot i (its row of the env's interface and of ``obs``, and what the controller kept of
+    robot i since ``reset``), never on the other rows, on how many robots there are or on the
+    order ``act`` handles them in (no mean over the batch, no random generator drawn for all
+    robots in turn). ``azimut eval`` splits a controller's episodes into batches over its
+    workers: a controller that is not independent gives results that depend on ``--workers``
+    and on which episodes share a batch, silently. :func:`control.checks.check_batch_independence`
+    runs two robots as a batch and each alone and says where they differ.
+
+    The episode loop checks what ``act`` returns (:func:`control.commands.checked_command`) and
+    counts the commanded limits the set-points exceed from the set-points themselves
+    (:class:`control.limits.SetpointLimitCheck`), whatever rates the command declares.
     """
 
     #: a short name, used in every metrics row, legend and file name

@@ -5,8 +5,9 @@
 eq. (16)–(17) for β; the wheel speeds of ``docs/icr-controller.md`` eq. (W)), with proportional
 pose correction. It ignores the actuator limits (its steering set-points jump and flip across
 the stops), which is why it exists: it shows what motor lag alone does to qua. The rate-aware driver
-is the ICR reference controller (:class:`control.path_controllers.ICRPathController`). It knows no
-β̇, β̈ or φ̈ of its own, so the commanded-limit check of an episode covers only its φ̇.
+is the ICR reference controller (:class:`control.path_controllers.ICRPathController`). It declares
+no β̇, β̈ or φ̈; the commanded-limit check of an episode differences its set-points
+(:class:`control.limits.SetpointLimitCheck`): on ``paper`` they exceed a limit on about 95 steps.
 """
 
 from __future__ import annotations

@@ -26,7 +26,16 @@ running episode; what it does after its own episode ended is not logged. Sub-env
 single env seeded with ``seeds[i]`` and the robots' physics do not interact, so a batch gives
 each robot the episode it gets alone, as long as the controller treats its robots independently
 (the built-ins do; a policy's network may round a batch differently;
-``tests/control/test_controller_api.py`` checks it bit for bit).
+``tests/control/test_controller_api.py`` checks it bit for bit; a controller of yours:
+:func:`control.checks.check_batch_independence`).
+
+What ``act`` returns is checked first (:func:`control.commands.checked_command`: shapes, real
+numbers, no NaN; the message names the controller and the field). Each period's commanded-limit
+check (``EpisodeLog.violations`` and ``limit_flags``, ``azimut eval``'s
+``limit_violation_steps``) reads the set-points the env gets: the command's β and φ̇, or those
+read back from its action (``env.setpoints_from_action``), differenced over the period, the
+first period against the measured state at the reset (:class:`control.limits.SetpointLimitCheck`);
+a rate the command declares over its limit counts too.
 """
 
 from __future__ import annotations

@@ -31,6 +31,14 @@ _QUA = ("qua, the estimation quality of the paper's eq. (28)–(29): qua = 1 −
 _MOVING = ("the moving steps: the controller in its RUNNING mode (not stopping, not turning wheels in place; a "
            "controller without modes always is) and the true chassis speed μ = ‖(ẋ, ẏ, θ̇)‖ above 0.05 m/s")
 
+_LIMITS = ("measured on the set-points themselves whatever rates the controller declares (those the env applies: "
+           "read back from the action of a controller that sends its own): the steering rate (β_k − β_{k−1})/dt, "
+           "the steering acceleration (its difference over dt), the wheel acceleration (φ̇_k − φ̇_{k−1})/dt, the "
+           "wheel speed φ̇_k, and the steering angle β_k against its stops; dt the control period, the first step "
+           "differenced against the measured steering angles and wheel speeds at the reset (at rest), with "
+           "unlimited steering the angle's change taken the short way round; a rate the controller declares over its "
+           "limit counts too; by more than 1e-6 relative (floating rounding; plus a float32 action's own rounding)")
+
 #: metric key or column name -> (header, definition)
 GLOSSARY: dict[str, Column] = {
     "controller": Column("controller", "the controller driving the robot: icr (the ICR-based controller on the IT "
@@ -78,9 +86,8 @@ GLOSSARY: dict[str, Column] = {
     "standstill_share": Column("standstill share", "the share of steps that are not moving steps (stopped, or "
                                                    "turning wheels in place)"),
     "limit_violation_steps": Column(
-        "limit-exceeded steps", "the number of control steps whose wheel commands exceeded an actuator limit "
-                                "(steering rate or acceleration, wheel speed or acceleration) by more than 1e-6 "
-                                "relative"),
+        "limit-exceeded steps", "the number of control steps whose wheel commands exceeded an actuator limit, "
+                                f"{_LIMITS}"),
     "reconfigure_events": Column("stop+reconfig", "the number of times the ICR controller stopped the robot to turn "
                                                   "its wheels in place (a steering stop or axis on the way, or a "
                                                   "knocked wheel); 0 for controllers that never stop"),
@@ -98,7 +105,8 @@ KICK_GLOSSARY: dict[str, Column] = {
                                      "lateral error was back under 5 cm for good within 3 s of the kick"),
     "failed": Column("failed", "trials whose run ended on an error (a physics failure, off the track)"),
     "limit_violation_steps": Column("limit-exceeded steps", "control steps whose commands exceeded an actuator "
-                                                            "limit, summed over the trials"),
+                                                            "limit (as in azimut eval's table), summed over the "
+                                                            "trials"),
     "recovery": Column("recovery time p50/p90/max [s]", "from the kick until the lateral error is under 5 cm for "
                                                         "good: median, 90th percentile and largest over the trials "
                                                         "that got there"),
