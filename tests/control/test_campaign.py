@@ -145,15 +145,19 @@ def test_batched_tasks_run_together_with_the_results_they_get_alone(executor_nam
     assert "batch" not in recs[6]
 
 
-def test_a_failed_batch_is_retried_task_by_task(tmp_path):
+def test_a_failed_batch_is_run_again_task_by_task(tmp_path):
+    """A batch that raises: each of its tasks runs again alone with the same attempt number (an
+    isolation, not a retry: also with retries=0 and retry="transient"), so a bad episode does not
+    sink the others."""
     logs = tmp_path / "logs"
     logs.mkdir()
     tasks = _batch_tasks([1, 2], logs, fail_batch=True)
     recs = run_tasks(tasks, tmp_path / "store", retries=1)
-    assert [r["status"] for r in recs] == ["ok", "ok"] and [r["attempts"] for r in recs] == [2, 2]
+    assert [r["status"] for r in recs] == ["ok", "ok"] and [r["attempts"] for r in recs] == [1, 1]
     assert [r["result"] for r in recs] == [r["result"] for r in run_tasks(_sum_tasks([1, 2]), tmp_path / "alone")]
-    failing = run_tasks(tasks, tmp_path / "store2", retries=0)
-    assert [r["status"] for r in failing] == ["failed", "failed"] and "this batch fails" in failing[0]["error"]
+    for retry in ("any", "transient"):
+        alone = run_tasks(tasks, tmp_path / f"store-{retry}", retries=0, retry=retry)
+        assert [r["status"] for r in alone] == ["ok", "ok"] and [r["attempts"] for r in alone] == [1, 1]
 
 
 def test_eval_batches_give_each_episode_its_metrics_alone_bit_for_bit(tmp_path):
