@@ -22,7 +22,7 @@ from azimut_env.validation import check_range
 __all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_output_layout",
            "require_module",
            "arg_robot", "arg_robot_file", "arg_imperfections", "add_robot_arguments", "robot_params",
-           "robot_env_kwargs", "robot_args_kwargs", "robot_label"]
+           "robot_env_kwargs", "robot_args_kwargs", "robot_label", "check_robot_stability", "arg_name_list"]
 
 
 def _scientific_int(text) -> int | None:
@@ -108,6 +108,19 @@ def _writable_dir(path: str) -> bool:
     return True
 
 
+def _check_links(text: str, path: str) -> None:
+    """``ValueError`` when ``path`` or a folder on its way is a symbolic link to nothing (a dangling
+    link: ``os.path.exists`` is False, yet nothing can be created there)."""
+    q = path
+    while True:
+        if os.path.islink(q) and not os.path.exists(q):
+            raise ValueError(f"{text}: {q} is a symbolic link to {os.readlink(q)!r}, which does not exist")
+        parent = os.path.dirname(q)
+        if parent == q:
+            return
+        q = parent
+
+
 def _first_existing(path: str) -> str:
     while not os.path.exists(path):
         parent = os.path.dirname(path)
@@ -135,6 +148,7 @@ def check_output_path(path: str | os.PathLike, *, directory: bool = False) -> st
     if not text or "\0" in text:
         raise ValueError(f"invalid path {text!r}")
     p = os.path.abspath(text)
+    _check_links(text, p)
     if directory:
         if os.path.exists(p) and not os.path.isdir(p):
             raise ValueError(f"{text}: exists and is not a directory")
@@ -217,6 +231,18 @@ def check_output_layout(out: str | os.PathLike, files: Sequence[str] = (),
                 for entry in entries:
                     if entry.name.endswith(tuple(suffixes)) and entry.is_dir():
                         raise ValueError(f"{entry.path}: is a directory (files of {rel}/ are written there)")
+
+
+def arg_name_list(choices: Sequence[str]) -> Callable[[str], list[str]]:
+    """:func:`arg_choice_list` of names spelt with ``-`` that also takes them with ``_``
+    (``icr_rate`` for ``icr-rate``, as the tables print them); returns the ``-`` spellings."""
+    inner = arg_choice_list(choices)
+
+    def convert(text: str) -> list[str]:
+        return inner(text.replace("_", "-") if isinstance(text, str) else text)
+
+    convert.__name__ = "list"
+    return convert
 
 
 def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
@@ -315,6 +341,24 @@ def robot_env_kwargs(robot: str | None = None, robot_file: str | None = None,
     ``{"robot": absolute path}``, and ``{"imperfections": name}``, plain strings (JSON-safe)."""
     kwargs = {"robot": os.path.abspath(robot_file)} if robot_file else ({"robot": robot} if robot else {})
     return {**kwargs, "imperfections": imperfections} if imperfections else kwargs
+
+
+def check_robot_stability(args: argparse.Namespace) -> None:
+    """For a command without a ``--substeps`` flag: the robot of ``--robot-file`` (with
+    ``--imperfections``) must be inside the physics' stability budget at the envs' substeps, or
+    ``ValueError`` naming the file, the figures and the likely keys (before, the command crashed
+    with a traceback whose advice, raise substeps, no flag of it allows)."""
+    if not getattr(args, "robot_file", None) or hasattr(args, "substeps"):
+        return
+    from azimut_env.physics.stability import stability_hint
+    from azimut_env.task.config import TaskConfig
+
+    cfg = TaskConfig()
+    hint = stability_hint(robot_params(args), cfg.control_period / cfg.substeps)
+    if hint:
+        raise ValueError(f"argument --robot-file: robot file {args.robot_file}: outside the simulation's stability "
+                         f"budget at the envs' {cfg.substeps} substeps per {cfg.control_period:g} s step: {hint} "
+                         "(a unit mistake? docs/robots.md#plausibility)")
 
 
 def robot_label(args: argparse.Namespace) -> str:

@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from azimut_env.tracks import TRACK_NAMES
-from jobs.args import add_robot_arguments, arg_choice_list, arg_int, robot_label
+from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_name_list, robot_label
 from jobs.bench_speed import JOBS, check_baseline, load_average, reference_steps_per_s, run_baseline_bench
 
 __all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
@@ -297,6 +297,10 @@ def memory_per_robot(num_envs: int = 512, track: str = "paper", substeps: int = 
 
 
 
+#: ``--num-envs`` bound: ~10 kB per robot (RSS growth at 4096 robots), 1 GB; 10**7 was a MemoryError
+MAX_NUM_ENVS = 100_000
+
+
 def _int_list(text: str) -> list[int]:
     try:
         values = [int(x) for x in text.split(",")]
@@ -304,14 +308,18 @@ def _int_list(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"expected a comma-separated list of integers, got {text!r}") from None
     if not values or any(v < 1 for v in values):
         raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
+    if max(values) > MAX_NUM_ENVS:
+        raise argparse.ArgumentTypeError(f"{max(values)} robots: at most {MAX_NUM_ENVS} (about 10 kB and a pymunk "
+                                         f"body per robot: {max(values) * 1e-5:.3g} GB for {max(values)})")
     return values
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--action", default=None, metavar="NAME[,NAME...]",
-                        type=arg_choice_list(tuple(ACTION_BENCH)),
+                        type=arg_name_list(tuple(ACTION_BENCH)),
                         help="only time the vector env behind these action spaces (raw, residual, icr-rate, "
-                             "icr-target, twist) with a controller in the loop, at --action-envs robots")
+                             "icr-target, twist; icr_rate, icr_target as the tables print them) with a controller "
+                             "in the loop, at --action-envs robots")
     parser.add_argument("--action-envs", type=arg_int(1, 4096), default=16,
                         help="robots for --action (default 16)")
     parser.add_argument("--steps", type=arg_int(1, 100_000_000), default=5000,

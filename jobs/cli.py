@@ -16,6 +16,7 @@ import argparse
 import importlib
 import importlib.util
 import sys
+import threading
 
 #: name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -60,21 +61,50 @@ def _available() -> dict[str, tuple[str, str]]:
     return out
 
 
-def _compile_notice(name: str) -> None:
+def _version() -> str:
+    """The installed package's version (``pyproject.toml``), or "unknown" from a source tree."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("azimut")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+#: seconds a command runs, with the numba cache cold, before :func:`_compile_notice` speaks
+NOTICE_DELAY_S = 5.0
+
+
+def _compile_notice(name: str, delay: float = 0.0) -> threading.Timer | None:
     """One line on stderr when the numba kernels of these sources are not compiled yet (a first
-    run after an install or an update): the first progress line comes a minute or two later. Only
-    on a terminal: a script's or a test's captured stderr keeps its one-line errors."""
+    run after an install or an update): the first progress line comes a minute or two later. On a
+    terminal and off one (CI, nohup, notebooks, where the silence was the longest). ``main``
+    starts it once every argument is checked, ``delay`` seconds into the work (a timer it cancels
+    when the command ends), so that a refusal, or an error that ends the work at once (an
+    unreachable Ray cluster), stays one line. Returns the timer (None: printed now, or warm)."""
     from estimation.numba_cache import CACHE_DIR
 
-    if CACHE_DIR is not None and sys.stderr.isatty() and not any(CACHE_DIR.glob("*.nbi")):
+    if CACHE_DIR is None or any(CACHE_DIR.glob("*.nbi")):
+        return None
+
+    def say() -> None:
         print(f"azimut {name}: compiling the numba kernels (the first run of this version: a minute or two; "
               f"cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+
+    if delay <= 0:
+        say()
+        return None
+    timer = threading.Timer(delay, say)
+    timer.daemon = True
+    timer.start()
+    return timer
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     commands = _available()
     parser = argparse.ArgumentParser(prog="azimut", description="AZIMUT-3 simulator, ICR estimation and control.")
+    parser.add_argument("--version", action="store_true", help="print the package version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (_, help_) in commands.items():
         sub.add_parser(name, help=help_, add_help=False)
@@ -82,6 +112,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"azimut: error: a command is required (choose from {', '.join(commands)}; azimut --help)",
               file=sys.stderr)
         return 2
+    if argv[0] == "--version":
+        print(f"azimut {_version()}")
+        return 0
     if argv[0] in ("-h", "--help") or argv[0] not in commands:
         if argv[0] not in ("-h", "--help"):
             print(f"azimut: error: unknown command {argv[0]!r} (choose from {', '.join(commands)})", file=sys.stderr)
@@ -94,15 +127,18 @@ def main(argv: list[str] | None = None) -> int:
     module.add_arguments(cmd_parser)
     try:
         args = cmd_parser.parse_args(argv[1:])
-        check = getattr(module, "check_args", None)
-        if check is not None:
+        from jobs.args import check_robot_stability
+
+        for check in (getattr(module, "check_args", None), check_robot_stability):
+            if check is None:
+                continue
             try:
                 check(args)
             except (ValueError, TypeError) as exc:
                 cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    _compile_notice(name)
+    notice = _compile_notice(name, NOTICE_DELAY_S)
     try:
         return int(module.run(args) or 0)
     except ConnectionError as exc:
@@ -111,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"azimut {name}: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        if notice is not None:
+            notice.cancel()
 
 
 if __name__ == "__main__":
