@@ -164,7 +164,14 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     tracks of the periodic deterministic evaluations (every ``eval_every`` steps, and at the end);
     ``resume`` continues from :func:`latest_checkpoint` (SAC starts a new replay buffer) up to
     ``steps`` in all, the checkpoint's included; the run must have been trained with the same
-    ``algo``, ``action`` and ``env_kwargs`` (:func:`check_resume`, ``ValueError``)."""
+    ``algo``, ``action`` and ``env_kwargs`` and have done at most ``steps`` (:func:`check_resume`,
+    ``ValueError``).
+
+    A ``KeyboardInterrupt`` (Ctrl-C) in learning or the final evaluation, or a SIGINT/SIGTERM
+    under :func:`train.interrupts.signals_as_interrupts` (learning stops at the next step), saves
+    the run as it stands (a checkpoint at its steps, ``model.zip``, ``run.json`` with
+    ``"complete": false`` and ``"interrupted"``) and raises
+    :class:`~train.interrupts.Interrupted` carrying that record."""
     import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback

@@ -5,8 +5,12 @@
 held-out ``--eval-tracks`` (the median pruner's reports). The study lives in ``--storage`` (default
 ``sqlite:///OUT/study.db``): the same command run in other processes or on other machines with the
 same storage and ``--study-name`` adds its trials to the same study. ``OUT`` gets ``trials/trial_<n>/``
-(each trial's run folder), ``trials.json`` (every trial: state, value, hyperparameters) and
-``best_hyperparams.json``, the versioned file ``azimut train --hyperparams`` reads.
+(each trial's run folder), ``study.json`` (the study's name, storage and defining arguments:
+one study per ``OUT``, and a resume keeps those arguments, :func:`check_args`), ``trials.json``
+(every trial: state, value, hyperparameters, why it failed; rewritten at the start, after each
+trial and on an interruption) and ``best_hyperparams.json``, the versioned file ``azimut train
+--hyperparams`` reads. Trials left running by a dead process are failed at the start
+(:func:`train.tuning.fail_dead_trials`); Ctrl-C or SIGTERM ends with one line, exit 130/143.
 """
 
 from __future__ import annotations

@@ -219,12 +219,13 @@ def test_sigint_ends_tune_with_one_line_and_trials_json(tmp_path):
 # ----------------------------------------------------------------------------- 7: a storage that is a folder
 
 
-@pytest.mark.parametrize("where", ["default", "given"])
+@pytest.mark.parametrize("where", ["default", "given", "given with a query"])
 def test_an_sqlite_storage_that_is_a_folder_is_refused_in_one_line(tmp_path, where, capsys):
     out = tmp_path / "study"
     folder = out / "study.db" if where == "default" else tmp_path / "a-folder"
     folder.mkdir(parents=True)
-    argv = ["tune", "--out", str(out), *TINY_TUNE] + ([] if where == "default" else ["--storage", f"sqlite:///{folder}"])
+    url = f"sqlite:///{folder}" + ("?timeout=5" if "query" in where else "")
+    argv = ["tune", "--out", str(out), *TINY_TUNE] + ([] if where == "default" else ["--storage", url])
     rc = main(argv)
     err = _errors(capsys.readouterr().err)
     assert rc == 2 and len(err) == 1 and "is a folder, not an SQLite file" in err[0], err
