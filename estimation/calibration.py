@@ -58,6 +58,10 @@ _HUBER = 0.05
 #: added to every sample's speed when its residuals are normalised [m/s]: below it, wheel-speed
 #: quantisation and noise dominate
 _SPEED_FLOOR = 0.05
+#: the wheels' yaw rate after calibration may differ from the gyro's by this [rad/s] plus this share
+#: of the gyro's RMS rate (the gyro's rate is a 0.2 s window, the wheels' instantaneous)
+_GYRO_TOL = 0.1
+_GYRO_REL = 0.3
 #: a gap between samples longer than this has no steering rate [s]
 _MAX_RATE_GAP_S = 0.1
 
@@ -272,11 +276,19 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
         theta, r, info, iters = _gauss_newton(theta, beta[use], brate[use], phidot[use], geom, norm, yr,
                                               yaw_w if have_yaw else 0.0, free_scale=bool(turning))
         fit_iters += iters
+    if have_yaw:  # the wheels alone (no gyro rows) must turn as the gyro says, else one of them is wrong
+        xi, _ = rigid_fit(beta[use], brate[use], phidot[use], geom, theta[:n], np.exp(theta[n:]))
+        diff = float(np.sqrt(np.mean((xi[:, 2] - yaw_rate[use]) ** 2)))
+        own = float(np.sqrt(np.mean(yaw_rate[use] ** 2)))
+        if diff > _GYRO_TOL + _GYRO_REL * own:
+            raise ValueError(f"the gyro and the wheels disagree on the turn rate while moving (RMS {diff:.2f} rad/s, "
+                             f"the gyro's own {own:.2f} rad/s): a gyro in another unit (--yaw-unit), an entry that is "
+                             "not the heading, or a drive motor inverted; calibrate without the gyro, or fix it")
     dof = max(r.size - 2 * n, 1)
     sigma2 = float(np.sum(r**2) / dof)
     # the common offset's standard error: the mean offset's variance, the other parameters free
     g1 = np.concatenate([np.ones(n) / n, np.zeros(n)])
-    cov0 = np.linalg.inv(info + _gauge(n, info, bool(turning), hold_common=False)) * sigma2
+    cov0 = np.linalg.pinv(info + _gauge(n, info, bool(turning), hold_common=False)) * sigma2
     common_std = math.sqrt(max(float(g1 @ cov0 @ g1), 0.0))
     observable = math.degrees(common_std) < COMMON_OBSERVABLE_DEG
     gauge = np.zeros((2 * n, 2))
@@ -288,15 +300,17 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
     if weakest > MAX_WEAK_STD_DEG or eig.min() < 1e-3 * eig.max():
         raise ValueError(f"the log's motions are too alike to tell the modules' offsets apart (the weakest "
                          f"combination is uncertain by ±{weakest:.1f}°, {MAX_WEAK_STD_DEG}° at most): drive in several "
-                         "directions and turn")
-    cov = np.linalg.inv(info + _gauge(n, info, bool(turning), hold_common=not observable)) * sigma2
+                         "directions and turn (or the angles are not in the unit given: --angle-unit)")
+    cov = np.linalg.pinv(info + _gauge(n, info, bool(turning), hold_common=not observable)) * sigma2
     offset, scale = theta[:n].copy(), np.exp(theta[n:])
     notes = []
     if not observable:
         offset -= math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
-        notes.append("The log does not fix the common offset of all modules (the robot barely turns, and no gyro): "
-                     "the offsets are relative, set so that their mean is zero; all modules may share one unknown "
-                     "rotation.")
+        notes.append("The log does not fix the common offset of all modules ("
+                     + ("the robot barely turns while moving, and the gyro cannot fix it either" if have_yaw
+                        else "the robot barely turns, and no gyro")
+                     + "): the offsets are relative, set so that their circular mean is zero (or your current "
+                     "offsets' common part); all modules may share one more unknown turn.")
     elif coaxial and not have_yaw:
         mean = math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
         if abs(mean) > math.pi / 2:  # the robot driving backwards fits as well: take the turn nearer zero

@@ -13,7 +13,7 @@ from estimation.calibration import apply_offsets, fit_calibration
 from estimation.estimate import estimate_eta
 from estimation.logs.calibrated import robot_record
 from estimation.logs.motion import window_rate
-from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, LogSource
+from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, BAD_STALE, LogSource
 
 __all__ = ["read_samples", "figures", "calibrate_source"]
 
@@ -68,6 +68,41 @@ def _wrap_deg(x):
     return (np.asarray(x) + 180.0) % 360.0 - 180.0
 
 
+#: IT's mean qua while moving above which the logged angles already agree
+_ANGLES_AGREE = 0.98
+#: a fitted change larger than this [deg] is what only the wheel speeds can ask for when the angles agree
+_BIG_CHANGE_DEG = 10.0
+#: IT's mean qua while moving, after calibration, below which the wheels still disagree
+_STILL_DISAGREE = 0.95
+
+
+def _spread_deg(x) -> float:
+    """The largest departure [deg] of the angles ``x`` from their circular mean."""
+    return float(np.abs(_wrap_deg(np.degrees(x - math.atan2(np.mean(np.sin(x)), np.mean(np.cos(x)))))).max())
+
+
+def _warnings(source, geom, offset, before, after, current, cur, beta, phidot, moving) -> list[str]:
+    """What a team should check before pasting the offsets (one sentence each)."""
+    out = []
+    convention = source.describe().get("steer_convention")
+    if convention in (None, "beta") and geom.n >= 3:
+        # headings read as β: the offsets then come out as π/2 − α_k plus the true ones
+        shifted = offset + geom.alpha - np.pi / 2
+        if _spread_deg(offset) > 20.0 and _spread_deg(shifted) < 5.0:
+            out.append("These offsets are nearly π/2 − α of each module: the log may hold module headings (WPILib's "
+                       "convention) read as the paper's β; pass --steer-convention heading.")
+    if after["qua_IT_mean"] < _STILL_DISAGREE:
+        out.append(f"The wheels still disagree after calibration (IT's quality {100 * after['qua_IT_mean']:.1f}% while "
+                   "moving): check the robot file (module positions, the robot given) before trusting these offsets.")
+    if cur is not None:
+        b_neg, p_neg = apply_offsets(beta, phidot, geom, -cur, np.ones(geom.n))
+        neg = figures(b_neg, p_neg, geom, moving)["qua_IT_mean"]
+        if neg > current["qua_IT_mean"] + 0.05:
+            out.append(f"Your --current-offsets give {100 * current['qua_IT_mean']:.1f}% where their negatives give "
+                       f"{100 * neg:.1f}%: they may be your code's offsets to subtract; pass their negatives.")
+    return out
+
+
 def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_deg=None, chunk: int = 50_000,
                      progress: Callable | None = None) -> dict:
     """Calibrate ``source`` (see the module docstring); the result is what ``calibration.json``
@@ -77,7 +112,14 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
     t, beta, phidot, read, skipped = read_samples(source, chunk, progress)
     yaw = source.yaw()
     yaw_rate = window_rate(t, yaw.t_ns, yaw.yaw) if yaw is not None else None
-    fit, moving = fit_calibration(t, beta, phidot, geom, moving_speed=moving_speed, yaw_rate=yaw_rate)
+    try:
+        fit, moving = fit_calibration(t, beta, phidot, geom, moving_speed=moving_speed, yaw_rate=yaw_rate)
+    except ValueError as exc:
+        stale = skipped.get(BAD_REASONS[BAD_STALE], 0)
+        hint = (f" ({stale} of the {read} samples read were skipped as stale: a signal logged on change that "
+                "stopped? --max-age)" if stale > 0.2 * max(read, 1) else "")
+        gyro = f" (gyro: {yaw.source})" if yaw is not None and "gyro" in str(exc) else ""
+        raise ValueError(f"{source.path}: {exc}{gyro}{hint}") from None
     cur = None if current_offsets_deg is None else np.radians(np.asarray(current_offsets_deg, dtype=np.float64))
     offset = fit.steer_offset.copy()
     if cur is not None:
@@ -113,6 +155,20 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
     if cur is not None:
         b_cur, p_cur = apply_offsets(beta, phidot, geom, cur, np.ones(n))
         current = {**figures(b_cur, p_cur, geom, moving), "steer_offset_deg": np.degrees(cur).tolist()}
+    base = before if current is None else current
+    change = _wrap_deg(np.degrees(offset - (np.zeros(n) if cur is None else cur)))
+    if not fit.common_observable:
+        change = change - math.degrees(math.atan2(np.mean(np.sin(np.radians(change))),
+                                                  np.mean(np.cos(np.radians(change)))))
+    biggest = float(np.abs(_wrap_deg(change)).max())
+    if base["qua_IT_mean"] >= _ANGLES_AGREE and biggest > _BIG_CHANGE_DEG:
+        how = "with --current-offsets" if current is not None else "as logged"
+        raise ValueError(f"{source.path}: the steering angles already agree (IT's quality "
+                         f"{100 * base['qua_IT_mean']:.1f}% while moving {how}), yet the "
+                         f"fit would turn a module by {biggest:.0f}°: only the wheel speeds ask "
+                         "for it (a drive motor inverted, a wheel speed of the wrong sign or scale?); check them, "
+                         "calibrate refuses to propose these offsets")
+    warnings = _warnings(source, geom, offset, before, after, current, cur, beta, phidot, moving)
     dur = (t[-1] - t[0]) * 1e-9 if t.size else 0.0
     modules = []
     for k, name in enumerate(source.modules):
@@ -135,5 +191,5 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
         "samples": {"read": read, "good": int(t.size), "skipped": skipped, "moving": int(moving.sum()),
                     "fitted": fit.samples, "duration_s": float(dur)},
         "fit": {"iterations": fit.iterations, "rms_residual_deg": math.degrees(fit.rms_rad)},
-        "before": before, "current": current, "after": after, "notes": fit.notes,
+        "before": before, "current": current, "after": after, "notes": fit.notes, "warnings": warnings,
     }

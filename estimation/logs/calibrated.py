@@ -77,6 +77,8 @@ def read_calibration(path, geom: RobotGeometry, modules) -> tuple[np.ndarray, np
         for field, value in (("steer_offset_deg", off), ("wheel_scale", sc)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"{where}: module {name}'s {field} must be a finite number, got {value!r}")
+        if abs(off) > 360.0:
+            raise ValueError(f"{where}: module {name}'s steer_offset_deg {off} is outside ±360")
         if not 0.5 <= sc <= 2.0:
             raise ValueError(f"{where}: module {name}'s wheel_scale {sc} is outside [0.5, 2]")
         offsets.append(math.radians(off))
@@ -95,7 +97,8 @@ class CalibratedLog(LogSource):
         self.steer_offset = np.asarray(steer_offset, dtype=np.float64)
         self.wheel_scale = np.asarray(wheel_scale, dtype=np.float64)
         if self.steer_offset.shape != (source.geom.n,) or self.wheel_scale.shape != (source.geom.n,):
-            raise LogError(f"a calibration of {self.steer_offset.size} modules for a robot of {source.geom.n}")
+            raise LogError(f"{source.path}: a calibration of {self.steer_offset.size} modules for a robot of "
+                           f"{source.geom.n} ({', '.join(source.modules)}): pass the calibration made for this robot")
         self.label = label
         self.n_samples = source.n_samples
 

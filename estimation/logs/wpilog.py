@@ -141,12 +141,13 @@ class _Index:
                              "still being written, or a partial copy)")
         self.entry, self.ts, self.off, self.size = (np.empty(count, np.int64) for _ in range(4))
         _walk(buf, start, self.entry, self.ts, self.off, self.size)
-        # µs as read (u64, stored as i64: 2^63 and beyond read negative) must become ns in an int64
-        beyond = (self.ts < 0) | (self.ts > _MAX_TIMESTAMP_US)
+        # µs as read: a signed 64-bit count (WPILib's DataLogReader reads it signed: NetworkTables values
+        # from before the robot clock started come negative); as ns it must still fit an int64
+        beyond = (self.ts > _MAX_TIMESTAMP_US) | (self.ts < -_MAX_TIMESTAMP_US)
         if beyond.any():
             i = int(np.flatnonzero(beyond)[0])
-            raise ValueError(f"record {i} has the timestamp {int(self.ts[i].view(np.uint64))} µs, beyond the "
-                             f"{_MAX_TIMESTAMP_US} µs (292 years) a nanosecond clock holds: a corrupt file?")
+            raise ValueError(f"record {i} has the timestamp {int(self.ts[i])} µs, beyond the ±{_MAX_TIMESTAMP_US} µs "
+                             "(292 years) a nanosecond clock holds: a corrupt file?")
         self.spans: list[tuple[str, str, int, int, int]] = []  # name, type, id, first record, end record
         open_: dict[int, int] = {}
         for i in np.flatnonzero(self.entry == 0):

@@ -30,8 +30,8 @@ def _degrees_list(text: str) -> list[float]:
         values = [float(x) for x in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers of degrees, got {text!r}") from None
-    if not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"offsets must be finite, got {text!r}")
+    if not all(math.isfinite(v) and abs(v) <= 720.0 for v in values):
+        raise argparse.ArgumentTypeError(f"offsets must be finite degrees within ±720, got {text!r}")
     return values
 
 
@@ -54,7 +54,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--current-offsets", type=_degrees_list, default=None, metavar="DEG,...",
                         help="the offsets the robot's code applies now, as degrees to ADD to the logged angle, one "
                              "per module in the robot file's order (code that subtracts an angleOffset: its "
-                             "negatives); the report compares them with the fit")
+                             "negatives; write --current-offsets=-12,... when the first is negative); the report "
+                             "compares them with the fit")
     parser.add_argument("--moving-speed", type=_speed, default=MOVING_SPEED, metavar="M_PER_S",
                         help=f"a sample is moving when the wheels' rigid fit moves a steering axis at least this fast "
                              f"(default {MOVING_SPEED})")

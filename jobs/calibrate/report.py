@@ -18,7 +18,11 @@ def _f(v, spec: str) -> str:
 def _code_forms(result: dict) -> list[str]:
     """The offsets in the forms robot code takes them."""
     mods = result["modules"]
-    lines = ["## Paste into your code", "",
+    lines = ["## Paste into your code", ""]
+    if not result["common_offset_observable"]:
+        lines += ["**These offsets are relative**: this log does not fix the turn all modules share. Point one "
+                  "wheel straight ahead by hand, and shift every offset by the same angle so that it reads 0.", ""]
+    lines += [
              "`steer_offset_deg` is what to **add** to the angle as logged. Robot code usually subtracts an offset "
              "from the raw encoder (BaseFalconSwerve/WPILib templates `angleOffset`, YAGSL's "
              "`absoluteEncoderOffset`, AdvantageKit's `zeroRotation`): there the offset is the negative. CTRE's "
@@ -45,6 +49,17 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
     mods, before, after, cur = result["modules"], result["before"], result["after"], result["current"]
     sm = result["samples"]
     lines = [f"# azimut calibrate: {result['log'].get('path', '')}", ""]
+    for w in result.get("warnings", []):
+        lines.append(f"**Check before pasting:** {w}")
+    if result.get("warnings"):
+        lines.append("")
+    rob = result["robot"]
+    conv = result["log"].get("steer_convention") or ("heading" if "states_entry" in result["log"] else "beta")
+    lines.append(f"Robot: {rob['n']} modules ({', '.join(rob['modules'])}) at α = "
+                 f"{', '.join(f'{a:.1f}' for a in rob['alpha_deg'])}°, l = {', '.join(f'{x:.3f}' for x in rob['l_m'])} "
+                 f"m, b = {', '.join(f'{x:.3f}' for x in rob['b_m'])} m; angles read as "
+                 + ("module headings (WPILib's convention)" if conv == "heading" else
+                    "the paper's β (a log of WPILib headings needs --steer-convention heading)") + ".")
     lines.append(f"Calibrated on {sm['moving']} moving samples ({sm['fitted']} fitted) of {sm['read']} read over "
                  f"{sm['duration_s']:.1f} s; moving: the wheels' rigid fit moves a steering axis at "
                  f"{result['moving_speed_mps']} m/s or faster.")
@@ -66,9 +81,12 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
                                          else "relative (geometric mean 1)."))
     for note in result["notes"]:
         lines.append(f"Note: {note}")
+    lines.append(f"Fit: {result['fit']['iterations']} Gauss–Newton iterations, RMS residual "
+                 f"{result['fit']['rms_residual_deg']:.2f}° per sample (outliers included; Huber-weighted in the fit).")
     lines += ["", "## Offsets and wheel factors", "",
               "Uncertainty: the standard error of the fit, and half the difference between the fits on the first "
-              "and second halves of the moving samples (errors that repeat through the log show in neither).", "",
+              "and second halves of the moving samples (errors that repeat through the log show in neither; '-' "
+              "where a half alone cannot be fitted).", "",
               "| module | steer offset [deg] | ± s.e. | halves ± | " + ("change from current [deg] | " if cur else "")
               + "wheel factor | ± s.e. | halves ± |",
               "|---|---:|---:|---:|" + ("---:|" if cur else "") + "---:|---:|---:|"]

@@ -210,3 +210,47 @@ def test_cli_applies_and_refuses(tmp_path, capsys):
     line = _csv(tmp_path, geom, np.repeat(beta[:1], 2000, 0), np.repeat(phidot[:1], 2000, 0),
                 np.arange(2000, dtype=np.int64) * 20_000_000, "line.csv")
     refused(["calibrate", str(line), "--robot-file", str(robot)], "too alike")
+
+
+def test_refusals_and_warnings_found_by_a_new_user(tmp_path):
+    """A gyro in the wrong unit, headings read as β, offsets given with the wrong sign, and angles that
+    already agree while only the wheel speeds ask for large turns (an inverted drive motor)."""
+    from estimation.logs import YawTrack
+
+    geom = _swerve()
+    t, beta, phidot = _kinematic_log(geom)
+    t_s = (t - t[0]) * 1e-9
+    yaw = np.cumsum(np.concatenate([[0.0], 1.1 * np.sin(0.17 * t_s[1:] + 0.5) * np.diff(t_s)]))
+    d = np.deg2rad([3.0, -2.0, 1.0, 0.5])
+    bl, pl = apply_offsets(beta, phidot, geom, -d, np.ones(4))
+    good = calibrate_source(ArrayLog(t, bl, pl, geom, yaw=YawTrack(t, yaw, "gyro")), moving_speed=0.05)
+    assert np.allclose([m["steer_offset_deg"] for m in good["modules"]], np.rad2deg(d), atol=0.05)
+    assert good["wheel_scale_absolute"] and not good["warnings"]
+    with pytest.raises(ValueError, match="gyro and the wheels disagree.*gyro: gyro"):
+        calibrate_source(ArrayLog(t, bl, pl, geom, yaw=YawTrack(t, np.rad2deg(yaw), "gyro")), moving_speed=0.05)
+    inverted = pl.copy()
+    inverted[:, 1] *= -1  # a drive motor inverted: the angles agree, the speeds ask for a 180° turn
+    with pytest.raises(ValueError, match="already agree.*wheel speeds"):
+        calibrate_source(ArrayLog(t, bl + d, inverted, geom), moving_speed=0.05)
+    headings = bl + geom.alpha - np.pi / 2  # WPILib headings read as β
+    res = calibrate_source(ArrayLog(t, headings, pl, geom), moving_speed=0.05)
+    assert any("--steer-convention heading" in w for w in res["warnings"])
+    big = np.deg2rad([20.0, -40.0, 60.0, 10.0])
+    braw, praw = apply_offsets(beta, phidot, geom, -big, np.ones(4))
+    res = calibrate_source(ArrayLog(t, braw, praw, geom), moving_speed=0.05,
+                           current_offsets_deg=list(-np.rad2deg(big)))  # the code's offsets to subtract, as given
+    assert any("negatives" in w for w in res["warnings"])
+
+
+@pytest.mark.skipif(not (REAL / "team1672_20250214_212636.wpilog").is_file(), reason="Team 1672's log (../shared)")
+def test_team1672_with_its_gyro_is_refused_not_misfitted(tmp_path, capsys):
+    """Team 1672's angles agree (98.8%) while its wheel speeds and gyro disagree (an inverted motor, or
+    the robot on blocks): calibrate refuses instead of proposing 90° and 171° corrections."""
+    rc = main(["calibrate", str(REAL / "team1672_20250214_212636.wpilog"), "--robot-file",
+               str(REAL / "team1672_neo.toml"), "--states-entry",
+               "NT:/SmartDashboard/swerve/advantagescope/currentStates",
+               "--yaw-entry", "NT:/SmartDashboard/swerve/imu/raw", "--yaw-unit", "deg", "--out", str(tmp_path / "c")])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "already agree" in err, err
+    assert not (tmp_path / "c").exists()

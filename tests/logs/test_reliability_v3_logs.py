@@ -114,3 +114,17 @@ def test_wpilib_types_decode_by_their_own_schemas():
     reg.add("Rotation2d", "float value;float pad")
     with pytest.raises(ValueError, match="not WPILib's"):
         reg.dtype("Pose2d")  # a part that lies makes the whole lie
+
+
+def test_wpilog_negative_timestamps_are_read_as_wpilib_reads_them(tmp_path):
+    """NetworkTables values from before the robot clock started carry negative timestamps (Team
+    1672's log has 84): read signed, as WPILib's DataLogReader does, not refused."""
+    robot = _robot(tmp_path)
+    states = np.column_stack([np.ones(4), np.zeros(4)]).astype("<f8").tobytes()
+    body = _record(0, 0, _start(1, "NT:/early", "double")) + _record(1, -123_000_000 & (2**64 - 1),
+                                                                        struct.pack("<d", 1.0))
+    body += _record(0, 0, _start(2, "/states", "struct:SwerveModuleState[]"))
+    body += b"".join(_record(2, 20_000 * k, states) for k in range(5))
+    path = tmp_path / "early.wpilog"
+    path.write_bytes(b"WPILOG" + struct.pack("<HI", 0x0100, 0) + body)
+    assert main(["estimate", str(path), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")]) == 0
