@@ -42,6 +42,8 @@ __all__ = ["CsvLog", "write_csv_log", "csv_columns", "TRUTH_COLUMNS"]
 
 #: the most values one read of rows may hold (a header of many columns reads fewer rows at a time)
 _MAX_VALUES_PER_READ = 5_000_000
+#: a median sample period above this [s] is not a robot log in seconds (a robot logs at 10-1000 Hz)
+_MAX_PERIOD_S = 10.0
 #: the largest |t| [s] whose nanoseconds fit an int64
 _MAX_T_S = (2**63 - 1) / 1e9 * 0.999
 
@@ -134,6 +136,7 @@ class CsvLog(LogSource):
 
     def chunks(self, size: int) -> Iterator[SampleChunk]:
         self._truth_rows = []
+        self._period_checked = False
         done = 0
         # rows per read bounded by the values they hold: a header of a million columns must not
         # allocate a million times the chunk (the results do not depend on the chunk)
@@ -177,6 +180,12 @@ class CsvLog(LogSource):
             k = int(np.flatnonzero(~np.isfinite(t))[0])
             raise self.error(f"a time t is not a finite number ({t[k]}) in the rows after line "
                              f"{self._header_line} (every sample needs its time)")
+        if not self._period_checked and t.size > 2:
+            self._period_checked = True
+            step = float(np.median(np.diff(t)))
+            if step > _MAX_PERIOD_S:
+                raise self.error(f"the samples are {step:g} s apart (median): t must be in seconds; microseconds or "
+                                 "milliseconds? divide the column by 1e6 or 1e3")
         if np.abs(t).max(initial=0.0) > _MAX_T_S:
             k = int(np.argmax(np.abs(t)))
             raise self.error(f"t = {t[k]:g} is not a time in seconds (a nanosecond clock holds ±{_MAX_T_S:.3g} s, 292 "

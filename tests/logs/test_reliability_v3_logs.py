@@ -53,8 +53,11 @@ def test_csv_times_in_microseconds_are_refused_as_such(tmp_path, capsys):
     robot = _robot(tmp_path)
     log = _log(tmp_path, t_s=1.7e15 + np.arange(200) * 2e4)
     _refused(capsys, ["estimate", str(log), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")],
-             "not a time in seconds", "microseconds")
+             "microseconds")
     assert not (tmp_path / "o").exists()
+    log = _log(tmp_path, t_s=1.7e15 + np.arange(200) * 0.02)  # seconds, but a clock no int64 of ns holds
+    _refused(capsys, ["estimate", str(log), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")],
+             "not a time in seconds")
 
 
 def test_csv_of_a_million_columns_reads_without_allocating_for_them(tmp_path):
@@ -128,3 +131,10 @@ def test_wpilog_negative_timestamps_are_read_as_wpilib_reads_them(tmp_path):
     path = tmp_path / "early.wpilog"
     path.write_bytes(b"WPILOG" + struct.pack("<HI", 0x0100, 0) + body)
     assert main(["estimate", str(path), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")]) == 0
+
+
+def test_csv_robot_clock_microseconds_are_refused_by_their_period(tmp_path, capsys):
+    robot = _robot(tmp_path)
+    log = _log(tmp_path, t_s=np.arange(200) * 2e4)  # µs of the robot clock: 20,000 "s" apart
+    _refused(capsys, ["estimate", str(log), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")],
+             "20000 s apart", "microseconds")
