@@ -133,6 +133,27 @@ _YAW_FLAGS = {"wpilog": "pass --yaw-entry NAME (the gyro's heading entry: a numb
               "ros": "pass --yaw-topic TOPIC (a sensor_msgs/Imu topic or a pose topic)"}
 
 
+#: IT's mean qua while moving [%] below which the report suggests raw angles that need their offsets
+_RAW_HINT_QUA = 90.0
+#: a share of stale samples, and a gap between samples [s], worth a line of the diagnosis
+_STALE_SHARE = 0.2
+_GAP_S = 1.0
+
+
+def _sampling_lines(sm: dict) -> list[str]:
+    """Lines on samples the estimate did not see: skipped as stale, or a long gap."""
+    out = []
+    stale = next((c for why, c in sm["skipped"].items() if "older than the maximum age" in why), 0)
+    if sm["read"] and stale > _STALE_SHARE * sm["read"]:
+        out.append(f"{100 * stale / sm['read']:.0f}% of the samples read ({stale} of {sm['read']}) were skipped as "
+                   "stale: a signal logged on change that stopped, or one logged far less often than the others "
+                   "(--max-age sets how old a held value may be).")
+    if sm["max_period_s"] == sm["max_period_s"] and sm["max_period_s"] > _GAP_S:
+        out.append(f"The log has a gap of {sm['max_period_s']:.1f} s without a sample: what the robot did there is "
+                   "not seen (a clock entry logged only on change?).")
+    return out
+
+
 def diagnosis_lines(s: dict) -> list[str]:
     """The diagnosis in plain words, one sentence per finding of the :func:`summary` ``s``, in the
     findings' order; every number comes from the log."""
@@ -152,13 +173,16 @@ def diagnosis_lines(s: dict) -> list[str]:
             out.append(f"Moving {100 * f['moving_fraction']:.0f}% of the log ({f['moving_s']:.0f} s); standing "
                        f"{f['standing_s']:.0f} s{stand}, set apart below. Moving: a wheel faster than "
                        f"{100 * f['moving_speed_m_s']:.0f} cm/s by the wheels' own odometry.")
+            out += _sampling_lines(s["samples"])
         elif k == "quality":
             how = ("agree well" if f["qua_p5"] >= 97 else "mostly agree" if f["qua_mean"] >= th["fight_qua"] * 100
                    else "often disagree")
             rms = s["moving"]["departure"]["median_rms_deg"]
             out.append(f"While moving, the wheels {how}: {f['method']}'s quality {f['qua_mean']:.1f}% on average, "
                        f"at least {f['qua_p5']:.1f}% in 95% of the moving samples (lowest {f['qua_min']:.0f}%); "
-                       f"typically the steering is {rms:.1f}° RMS off one common turning centre.")
+                       f"typically the steering is {rms:.1f}° RMS off one common turning centre."
+                       + (" If these are raw absolute-encoder angles (before your code's offsets), `azimut calibrate` "
+                          "fits the offsets." if f["qua_mean"] < _RAW_HINT_QUA else ""))
         elif k == "module_offset":
             out.append(f"Module {f['module']} reads {f['offset_deg']:+.1f}° off the others while moving (that one "
                        f"offset explains the steering departure: {f['rms_deg']:.2f}° RMS → "
@@ -245,9 +269,10 @@ def _moving_sections(s: dict) -> list[str]:
     dep = mv["departure"]
     lines += ["", f"Steering departure while moving: each module's measured angle minus the constraining surface's "
                   f"at {dep['method']}'s λ̂ [deg]. Offset alone: the one constant correction of that module alone "
-                  "that best explains the departures, and the RMS departure it leaves (of "
-                  f"{_fmt(dep['rms_deg'], '.3f')}° as measured), over the {dep['samples_offset_fit']} moving samples "
-                  f"where the wheels do not fight (quality at least {100 * s['thresholds']['fight_qua']:.0f}%).", "",
+                  "that best explains the departures, and the RMS departure it leaves"
+                  + (f" (of {_fmt(dep['rms_deg'], '.3f')}° as measured), over the {dep['samples_offset_fit']} moving "
+                     "samples" if dep["samples_offset_fit"] else ": not fitted, no moving sample")
+                  + f" where the wheels do not fight (quality at least {100 * s['thresholds']['fight_qua']:.0f}%).", "",
               "| module | mean | median | mean abs | p95 abs | offset alone | RMS left |",
               "|---|---:|---:|---:|---:|---:|---:|"]
     for name, r in dep["modules"].items():
