@@ -370,6 +370,9 @@ class WpiLog(WpiLogFile):
         if self.states_type == "double[]" and angle_unit is None:
             raise self.error(f"entry {self.states_entry!r} is a double[] of [angle, speed] pairs, whose angle unit the "
                              "log does not say: give it (--angle-unit rad, deg or rot)")
+        if self.states_type != "double[]" and angle_unit is not None:
+            raise self.error(f"entry {self.states_entry!r} is a {self.states_type}, whose angles are Rotation2d in "
+                             "radians: an angle unit does not apply (--angle-unit)")
         self.angle_unit = angle_unit
         self._states = self._decode_states()
         self.n_samples = int(self._states[0].size)

@@ -138,3 +138,14 @@ def test_csv_robot_clock_microseconds_are_refused_by_their_period(tmp_path, caps
     log = _log(tmp_path, t_s=np.arange(200) * 2e4)  # µs of the robot clock: 20,000 "s" apart
     _refused(capsys, ["estimate", str(log), "--robot-file", str(robot), "--no-plots", "--out", str(tmp_path / "o")],
              "20000 s apart", "microseconds")
+
+
+def test_angle_unit_on_a_struct_state_array_is_refused(tmp_path, capsys):
+    robot = _robot(tmp_path)
+    states = np.column_stack([np.ones(4), np.zeros(4)]).astype("<f8").tobytes()
+    body = _record(0, 0, _start(1, "/states", "struct:SwerveModuleState[]"))
+    body += b"".join(_record(1, 20_000 * k, states) for k in range(5))
+    path = tmp_path / "s.wpilog"
+    path.write_bytes(b"WPILOG" + struct.pack("<HI", 0x0100, 0) + body)
+    _refused(capsys, ["estimate", str(path), "--robot-file", str(robot), "--angle-unit", "deg", "--no-plots",
+                      "--out", str(tmp_path / "o")], "'/states'", "does not apply")
