@@ -84,7 +84,7 @@ def _compile_notice(name: str, delay: float = 0.0) -> threading.Timer | None:
     unreachable Ray cluster), stays one line. Returns the timer (None: printed now, or warm)."""
     from estimation.numba_cache import CACHE_DIR
 
-    if CACHE_DIR is None or any(CACHE_DIR.glob("*.nbi")):
+    if CACHE_DIR is None or any(CACHE_DIR.rglob("*.nbi")):  # numba writes them in a folder per package
         return None
 
     def say() -> None:

@@ -205,6 +205,10 @@ def test_compile_notice_off_a_terminal_only_once_work_starts(tmp_path, monkeypat
     assert err.startswith("azimut eval: compiling the numba kernels") and err.count("\n") == 1
     code, _, err = cli(["eval", "--seed", "-1"], capsys)  # a refusal stays one line, without the notice
     assert code == 2 and err.count("\n") == 1 and "compiling" not in err
+    (tmp_path / "estimation_0123").mkdir()  # numba writes its index files in a folder per package
+    (tmp_path / "estimation_0123" / "kernel.nbi").write_bytes(b"")
+    assert cli_module._compile_notice("eval") is None
+    assert capsys.readouterr().err == ""  # compiled already: no notice (it printed on every run)
 
 
 # ---------------------------------------------------------------- 6. --version, --action icr_rate
