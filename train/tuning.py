@@ -215,7 +215,6 @@ def make_objective(algo: str, action: str, track: str, seed: int, steps: int, ou
 
     def objective(trial) -> float:
         trial.set_user_attr("process", process_tag())
-        raise_if_requested()  # a signal between two trials: this one does not start
         hp = sample_hyperparams(trial, algo, num_robots)
         trial.set_user_attr("hyperparams", hp)
 
@@ -225,6 +224,7 @@ def make_objective(algo: str, action: str, track: str, seed: int, steps: int, ou
 
         folder = Path(out) / "trials" / f"trial_{trial.number}"
         try:
+            raise_if_requested()  # a signal between two trials: this one does not start
             record = train(algo, action, track, seed, steps, folder, num_robots, tuple(eval_tracks), eval_every, 0,
                            overrides=hp, quiet=quiet, env_kwargs=env_kwargs, on_evaluation=report,
                            record_extra={**(record_extra or {}), "optuna_trial": trial.number})
