@@ -139,8 +139,16 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     notice = _compile_notice(name, NOTICE_DELAY_S)
+    from jobs.interrupts import EXIT_STATUS, signals_as_interrupts
+
     try:
-        return int(module.run(args) or 0)
+        with signals_as_interrupts() as state:
+            return int(module.run(args) or 0)
+    except KeyboardInterrupt:  # a command without its own handling (eval, train and tune have theirs)
+        sig = state["signal"]
+        print(f"azimut {name}: interrupted ({sig.name}) before it finished: any output it was writing is "
+              "incomplete; run it again", file=sys.stderr)
+        return EXIT_STATUS[sig]
     except ConnectionError as exc:
         from jobs.campaign.engine import ClusterUnreachable
         if not isinstance(exc, ClusterUnreachable):

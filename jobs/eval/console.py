@@ -7,16 +7,13 @@ from __future__ import annotations
 
 import math
 import re
-import signal
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
+
+from jobs.interrupts import EXIT_STATUS, signals_as_interrupts
 
 __all__ = ["progress_printer", "failure_text", "where_raised", "signals_as_interrupts", "EXIT_STATUS"]
 
-#: exit status of an interrupted campaign, by signal (128 + the signal's number, the shells' convention)
-EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 _FRAME = re.compile(r'^\s*File "(?P<file>[^"]+)", line (?P<line>\d+), in (?P<fn>\S+)', re.M)
 
@@ -73,31 +70,3 @@ def progress_printer(names: dict[str, str], stream, records_folder: Path) -> Cal
     return progress
 
 
-@contextmanager
-def signals_as_interrupts() -> Iterator[dict]:
-    """Within: SIGTERM raises ``KeyboardInterrupt`` in the main thread, as Ctrl-C does, so that
-    the campaign engine saves what finished and stops the workers; yields a dict whose ``signal``
-    is the signal that came (SIGINT when none was seen here). A further SIGTERM while the first is
-    being handled is ignored; a SIGTERM ignored by the caller (``SIG_IGN``) stays ignored; outside
-    the main thread nothing changes. The previous handlers are put back on exit."""
-    state = {"signal": signal.SIGINT}
-    if threading.current_thread() is not threading.main_thread():
-        yield state
-        return
-    previous = {signal.SIGTERM: signal.getsignal(signal.SIGTERM)}  # Ctrl-C keeps Python's own handler
-
-    def handler(signum, frame):
-        if state.get("fired"):
-            return
-        state["fired"], state["signal"] = True, signal.Signals(signum)
-        raise KeyboardInterrupt(signal.Signals(signum).name)
-
-    for sig, old in previous.items():
-        if old is not signal.SIG_IGN:
-            signal.signal(sig, handler)
-    try:
-        yield state
-    finally:
-        for sig, old in previous.items():
-            if old is not None:
-                signal.signal(sig, old)
