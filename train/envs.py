@@ -18,10 +18,17 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-__all__ = ["ACTIONS", "make_vector_env", "make_sb3_env"]
+__all__ = ["ACTIONS", "canonical_action", "make_vector_env", "make_sb3_env"]
 
 #: action space name (CLI spelling) -> VectorControllerAction kind (None: raw set-points)
 ACTIONS = {"raw": None, "residual": "residual", "icr-rate": "icr_rate"}
+
+
+def canonical_action(name: str) -> str:
+    """The :data:`ACTIONS` key of ``name``, also when written as the tables print it (``icr_rate``,
+    the action wrapper's name): ``--action``'s ``type=``. Other names are returned as given, for
+    argparse's choices to refuse."""
+    return name.replace("_", "-") if name.replace("_", "-") in ACTIONS else name
 
 
 def action_key(action: str) -> str:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
-from train.envs import ACTIONS
+from train.envs import ACTIONS, canonical_action
 from train.trainer import EVAL_TRACKS, RUN_ARGS
 
 __all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides", "ENGINES"]
@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--engine rllib: remote env runners of --num-robots robots each (default 1; 0: sample "
                              "in the driver)")
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="algorithm (default ppo)")
-    parser.add_argument("--action", choices=tuple(ACTIONS), default="raw",
+    parser.add_argument("--action", type=canonical_action, choices=tuple(ACTIONS), default="raw",
                         help="action space: raw set-points, residual on the ICR controller, or ICR rates (default raw)")
     parser.add_argument("--track", choices=TRACK_NAMES, default="random",
                         help="training track (default random: a new track per episode, so that the built-ins are "

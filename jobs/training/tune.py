@@ -23,7 +23,7 @@ from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
-from train.envs import ACTIONS
+from train.envs import ACTIONS, canonical_action
 from train.trainer import EVAL_TRACKS
 
 __all__ = ["add_arguments", "check_args", "run", "default_storage"]
@@ -31,7 +31,7 @@ __all__ = ["add_arguments", "check_args", "run", "default_storage"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="algorithm (default ppo)")
-    parser.add_argument("--action", choices=tuple(ACTIONS), default="residual",
+    parser.add_argument("--action", type=canonical_action, choices=tuple(ACTIONS), default="residual",
                         help="action space (default residual)")
     parser.add_argument("--track", choices=TRACK_NAMES, default="random",
                         help="training track (default random: the evaluation tracks are held out)")
