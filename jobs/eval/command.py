@@ -210,14 +210,6 @@ def _check_policy_robots(args: argparse.Namespace) -> None:
                              "--robot/--robot-file/--imperfections it learned")
 
 
-def _parse_list(text: str | list[str], allowed, what: str) -> list[str]:
-    items = list(text) if isinstance(text, list) else [x.strip() for x in text.split(",") if x.strip()]
-    bad = [x for x in items if x not in allowed]
-    if not items or bad:
-        raise ValueError(f"unknown {what} {bad or text!r}; choose from {', '.join(allowed)}")
-    return items
-
-
 def _kick_section(controllers: list[str], n_runs: int, seed: int, out: Path, run_kwargs: dict | None = None,
                   names: dict[str, str] | None = None) -> str:
     """Run the robustness study per controller (on the campaign's executor, ``run_kwargs`` of
