@@ -13,7 +13,7 @@ from estimation.calibration import apply_offsets, fit_calibration
 from estimation.estimate import estimate_eta
 from estimation.logs.calibrated import robot_record
 from estimation.logs.motion import window_rate
-from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, BAD_STALE, LogSource
+from estimation.logs.source import BAD_REASONS, BAD_STALE, LogSource, mark_bad_values
 
 __all__ = ["read_samples", "figures", "calibrate_source"]
 
@@ -32,8 +32,7 @@ def read_samples(source: LogSource, chunk: int = 50_000, progress: Callable | No
         if full.size > 1 and np.diff(full).min() <= 0:
             raise source.error("timestamps not strictly increasing; samples must be in time order")
         last = int(ch.t_ns[-1]) if ch.t_ns.size else last
-        bad = ch.bad.copy()
-        bad[(bad == 0) & ~(np.isfinite(ch.beta).all(1) & np.isfinite(ch.phidot).all(1))] = BAD_NONFINITE
+        bad = mark_bad_values(ch.bad, ch.beta, ch.phidot)
         for code in np.unique(bad[bad != 0]):
             skipped[int(code)] += int(np.sum(bad == code))
         good = bad == 0

@@ -37,7 +37,7 @@ from numba import njit
 from estimation.estimate import METHODS, estimate_eta
 from estimation.kinematics import integrate_pose, odometry_twist
 from estimation.logs.motion import MOVING_SPEED, contact_speeds, interp_on, twist_from_wheels_batch
-from estimation.logs.source import BAD_NONFINITE, BAD_REASONS, GroundTruth, LogSource, YawTrack
+from estimation.logs.source import BAD_REASONS, GroundTruth, LogSource, YawTrack, mark_bad_values
 
 __all__ = ["DEFAULT_METHODS", "LogEstimate", "estimate_log", "compose_increments", "compare_estimators",
            "odometry_drift"]
@@ -203,9 +203,7 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
     for ch in source.chunks(chunk_size):
         _check_time(ch.t_ns, last, n_read, source)
         last = int(ch.t_ns[-1]) if ch.t_ns.size else last
-        bad = ch.bad.copy()
-        finite = np.isfinite(ch.beta).all(axis=1) & np.isfinite(ch.phidot).all(axis=1)
-        bad[(bad == 0) & ~finite] = BAD_NONFINITE
+        bad = mark_bad_values(ch.bad, ch.beta, ch.phidot)
         for code in np.unique(bad[bad != 0]):
             skipped[int(code)] += int(np.sum(bad == code))
         good = bad == 0

@@ -19,8 +19,9 @@ import numpy as np
 from estimation.geometry import RobotGeometry
 
 __all__ = ["LogError", "SampleChunk", "GroundTruth", "YawTrack", "LogSource", "ArrayLog", "BAD_REASONS",
-           "BAD_NONFINITE", "BAD_MISSING_JOINT", "BAD_NO_VELOCITY", "BAD_WRONG_SIZE", "BAD_STALE", "STEER_CONVENTIONS",
-           "beta_from_heading", "fold_coaxial", "default_module_names", "check_module_names"]
+           "BAD_NONFINITE", "BAD_MISSING_JOINT", "BAD_NO_VELOCITY", "BAD_WRONG_SIZE", "BAD_STALE", "BAD_IMPLAUSIBLE",
+           "MAX_ANGLE_RAD", "MAX_WHEEL_RATE", "mark_bad_values", "STEER_CONVENTIONS", "beta_from_heading",
+           "fold_coaxial", "default_module_names", "check_module_names"]
 
 
 class LogError(ValueError):
@@ -35,6 +36,10 @@ BAD_MISSING_JOINT = 2
 BAD_NO_VELOCITY = 3
 BAD_WRONG_SIZE = 4
 BAD_STALE = 5
+BAD_IMPLAUSIBLE = 6
+#: beyond these a logged value is no measurement (a corrupt cell, a unit far off): skipped and counted
+MAX_ANGLE_RAD = 1e6
+MAX_WHEEL_RATE = 1e5
 BAD_REASONS = {
     BAD_NONFINITE: "a steering angle or wheel speed is NaN or infinite",
     BAD_MISSING_JOINT: "a module's steering or drive joint is missing from the message",
@@ -42,7 +47,22 @@ BAD_REASONS = {
     BAD_WRONG_SIZE: "the record does not hold one value per module",
     BAD_STALE: "a module's steering angle or wheel speed is older than the maximum age (a signal logged on change "
                "that stopped, or a gap)",
+    BAD_IMPLAUSIBLE: f"a steering angle beyond ±{MAX_ANGLE_RAD:g} rad or a wheel speed beyond "
+                     f"±{MAX_WHEEL_RATE:g} rad/s (no measurement: a corrupt value, or a unit far off)",
 }
+
+
+def mark_bad_values(bad: np.ndarray, beta: np.ndarray, phidot: np.ndarray) -> np.ndarray:
+    """``bad`` (m,) with the read samples (code 0) whose values are NaN or infinite marked
+    :data:`BAD_NONFINITE`, and those beyond :data:`MAX_ANGLE_RAD` or :data:`MAX_WHEEL_RATE`
+    :data:`BAD_IMPLAUSIBLE`: the one check of the pipeline and of calibration."""
+    bad = bad.copy()
+    with np.errstate(invalid="ignore"):
+        finite = np.isfinite(beta).all(axis=1) & np.isfinite(phidot).all(axis=1)
+        huge = (np.abs(beta) > MAX_ANGLE_RAD).any(axis=1) | (np.abs(phidot) > MAX_WHEEL_RATE).any(axis=1)
+    bad[(bad == 0) & ~finite] = BAD_NONFINITE
+    bad[(bad == 0) & huge] = BAD_IMPLAUSIBLE
+    return bad
 
 #: how a log gives steering angles: ``beta``, the paper's β_k (the propulsion axis at α_k + β_k
 #: from X_R); ``heading``, the module's rolling direction from X_R (WPILib's
@@ -90,7 +110,8 @@ def fold_coaxial(beta: np.ndarray, phidot: np.ndarray, geom: RobotGeometry) -> t
     if not coaxial.any():
         return beta, phidot
     with np.errstate(invalid="ignore"):
-        outside = ((beta > geom.steer_max) | (beta <= geom.steer_min)) & coaxial & np.isfinite(beta)
+        outside = (((beta > geom.steer_max) | (beta <= geom.steer_min)) & coaxial & np.isfinite(beta)
+                   & (np.abs(beta) <= MAX_ANGLE_RAD))  # beyond: no measurement, the pipeline skips it
     if outside.any():
         wrapped = geom.wrap_steering(beta[outside])
         turns = np.rint((beta[outside] - wrapped) / np.pi).astype(np.int64)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from estimation.logs.csv_log import write_csv_log
 from estimation.logs.wpistruct import StructRegistry
@@ -149,3 +151,35 @@ def test_angle_unit_on_a_struct_state_array_is_refused(tmp_path, capsys):
     path.write_bytes(b"WPILOG" + struct.pack("<HI", 0x0100, 0) + body)
     _refused(capsys, ["estimate", str(path), "--robot-file", str(robot), "--angle-unit", "deg", "--no-plots",
                       "--out", str(tmp_path / "o")], "'/states'", "does not apply")
+
+
+_values = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.integers(-10**20, 10**20),
+                    st.sampled_from(["x", "", "1e309", "0x10", "nan", " 3"]))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.lists(st.lists(_values, min_size=9, max_size=9), min_size=0, max_size=12),
+       times=st.one_of(st.none(), st.lists(st.floats(-1e20, 1e20), min_size=12, max_size=12)))
+def test_any_csv_is_refused_in_one_line_or_estimated_finite(tmp_path, capsys, rows, times):
+    """The class of CSV inputs (issue 31): whatever the cells hold, `azimut estimate` refuses the log
+    in one line naming it, or estimates it with finite angles, speeds and λ̂."""
+    robot = _robot(tmp_path)
+    path = tmp_path / "any.csv"
+    head = ["t"] + [f"steer_{m}" for m in MODULES] + [f"wheel_{m}" for m in MODULES]
+    lines = [",".join(head)]
+    for i, row in enumerate(rows):
+        if times is not None:
+            row = [times[i]] + row[1:]
+        lines.append(",".join(str(v) for v in row))
+    path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / f"o{len(list(tmp_path.iterdir()))}"
+    capsys.readouterr()
+    rc = main(["estimate", str(path), "--robot-file", str(robot), "--no-plots", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc in (0, 2), err
+    if rc == 2:
+        assert len(err.splitlines()) == 1 and str(path) in err, err
+        assert not out.exists()
+    else:
+        npz = np.load(out / "samples.npz")
+        assert all(np.isfinite(npz[k]).all() for k in ("t_s", "beta", "phidot", "lam_IT", "mu_IT"))
