@@ -75,21 +75,47 @@ def _version() -> str:
 NOTICE_DELAY_S = 5.0
 
 
-def _compile_notice(name: str, delay: float = 0.0) -> threading.Timer | None:
-    """One line on stderr when the numba kernels of these sources are not compiled yet (a first
-    run after an install or an update): the first progress line comes a minute or two later. On a
-    terminal and off one (CI, nohup, notebooks, where the silence was the longest). ``main``
-    starts it once every argument is checked, ``delay`` seconds into the work (a timer it cancels
-    when the command ends), so that a refusal, or an error that ends the work at once (an
-    unreachable Ray cluster), stays one line. Returns the timer (None: printed now, or warm)."""
+class _CompileCounter:
+    """Counts numba's compilations (its ``numba:compile`` events; a kernel loaded from the on-disk
+    cache raises none), so that the notice speaks only while kernels are really being compiled."""
+
+    def __init__(self) -> None:
+        import numba.core.event as numba_event
+
+        self.count = 0
+        counter = self
+
+        class _Listener(numba_event.Listener):
+            def on_start(self, event) -> None:
+                counter.count += 1
+
+            def on_end(self, event) -> None:
+                pass
+
+        self._event, self._listener = numba_event, _Listener()
+        numba_event.register("numba:compile", self._listener)
+
+    def close(self) -> None:
+        self._event.unregister("numba:compile", self._listener)
+
+
+def _compile_notice(name: str, delay: float = 0.0, compiles: _CompileCounter | None = None) -> threading.Timer | None:
+    """One line on stderr when numba compiles kernels (a first run after an install or an update):
+    the first progress line comes a minute or two later. On a terminal and off one (CI, nohup,
+    notebooks, where the silence was the longest). ``main`` starts it once every argument is
+    checked, ``delay`` seconds into the work (a timer it cancels when the command ends), and it
+    speaks only if numba has compiled something since ``compiles`` started counting (kernels loaded
+    from the cache do not count), so that a refusal, a quick error or a warm run stays silent.
+    Returns the timer (None: printed now, or nothing to say)."""
     from estimation.numba_cache import CACHE_DIR
 
-    if CACHE_DIR is None or any(CACHE_DIR.rglob("*.nbi")):  # numba writes them in a folder per package
+    if CACHE_DIR is None:
         return None
 
     def say() -> None:
-        print(f"azimut {name}: compiling the numba kernels (the first run of this version: a minute or two; "
-              f"cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+        if compiles is None or compiles.count:
+            print(f"azimut {name}: compiling the numba kernels (the first run of this version: a minute or two; "
+                  f"cached in {CACHE_DIR})", file=sys.stderr, flush=True)
 
     if delay <= 0:
         say()
@@ -122,6 +148,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     name = argv[0]
+    compiles = _CompileCounter()  # before the command's import: importing compiles some kernels
+    try:
+        return _run_command(name, commands, argv, compiles)
+    finally:
+        compiles.close()
+
+
+def _run_command(name: str, commands: dict, argv: list[str], compiles: _CompileCounter) -> int:
     module = importlib.import_module(commands[name][0])
     cmd_parser = CommandParser(prog=f"azimut {name}", description=commands[name][1])
     module.add_arguments(cmd_parser)
@@ -138,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                 cmd_parser.error(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except SystemExit as exc:  # --help (0) or a refused argument (2): a return code, as for run()
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    notice = _compile_notice(name, NOTICE_DELAY_S)
+    notice = _compile_notice(name, NOTICE_DELAY_S, compiles)
     from jobs.interrupts import EXIT_STATUS, signals_as_interrupts
 
     try:

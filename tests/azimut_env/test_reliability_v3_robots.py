@@ -191,24 +191,42 @@ def test_absurd_kick_refused_at_reset_and_safe_in_the_physics():
 # ---------------------------------------------------------------- 5. the compile notice off a terminal
 
 
-def test_compile_notice_off_a_terminal_only_once_work_starts(tmp_path, monkeypatch, capsys):
-    import estimation.numba_cache as cache
+def test_compile_notice_speaks_only_while_numba_compiles(capsys):
+    """Off a terminal too, once work starts, and only if numba compiled something in this process
+    (a kernel loaded from the cache raises no compile event): a warm run and a refusal stay silent."""
+    from types import SimpleNamespace
+
     from jobs import cli as cli_module
 
-    monkeypatch.setattr(cache, "CACHE_DIR", tmp_path)  # an empty cache: the first run of a version
-    timer = cli_module._compile_notice("eval", 60.0)  # main's form: a timer, cancelled when the work ends
+    timer = cli_module._compile_notice("eval", 60.0, SimpleNamespace(count=3))  # main's form: cancelled at the end
     assert timer is not None and timer.daemon
     timer.cancel()
     assert capsys.readouterr().err == ""
-    cli_module._compile_notice("eval")
+    cli_module._compile_notice("eval", 0.0, SimpleNamespace(count=0))  # warm: nothing compiled
+    assert capsys.readouterr().err == ""
+    cli_module._compile_notice("eval", 0.0, SimpleNamespace(count=2))
     err = capsys.readouterr().err
     assert err.startswith("azimut eval: compiling the numba kernels") and err.count("\n") == 1
     code, _, err = cli(["eval", "--seed", "-1"], capsys)  # a refusal stays one line, without the notice
     assert code == 2 and err.count("\n") == 1 and "compiling" not in err
-    (tmp_path / "estimation_0123").mkdir()  # numba writes its index files in a folder per package
-    (tmp_path / "estimation_0123" / "kernel.nbi").write_bytes(b"")
-    assert cli_module._compile_notice("eval") is None
-    assert capsys.readouterr().err == ""  # compiled already: no notice (it printed on every run)
+
+
+def test_compile_notice_counts_real_compilations():
+    """The counter sees numba compile a new kernel, and not a cached one loaded again."""
+    import numba
+
+    from jobs import cli as cli_module
+
+    counter = cli_module._CompileCounter()
+    try:
+        @numba.njit
+        def add_one(x):
+            return x + 1
+
+        add_one(1)
+        assert counter.count >= 1
+    finally:
+        counter.close()
 
 
 # ---------------------------------------------------------------- 6. --version, --action icr_rate
