@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from control.icr.config import Mode
+
 __all__ = ["WheelCommand", "checked_command"]
 
 
@@ -56,6 +58,8 @@ class WheelCommand:
 ARRAY_FIELDS = ("beta", "phidot", "beta_rate", "beta_accel", "phiddot")
 #: the declared rates among them (optional)
 RATE_FIELDS = frozenset({"beta_rate", "beta_accel", "phiddot"})
+#: the values a command's ``mode`` may take
+_MODES = np.array([int(m) for m in Mode])
 
 
 def _real_array(value, controller: str, key: str) -> np.ndarray:
@@ -121,9 +125,28 @@ def checked_command(cmd, controller: str, num: int, n: int) -> WheelCommand:
                              f"got {arr.shape}")
         if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
             raise ValueError(f"controller {controller!r} returned action with NaN or inf")
+    elif out["beta"] is None or out["phidot"] is None:
+        missing = "beta" if out["beta"] is None else "phidot"
+        raise TypeError(f"controller {controller!r} returned {missing} None: a WheelCommand needs beta and phidot "
+                        "(or an action)")
+    ints = {}
     for key in ("mode", "events"):
         value = getattr(cmd, key)
-        if value is not None and np.shape(value) != (num,):
-            raise ValueError(f"controller {controller!r}: command {key} must have shape ({num},), "
-                             f"got {np.shape(value)}")
-    return WheelCommand(info=cmd.info, action=cmd.action, mode=cmd.mode, events=cmd.events, **out)
+        if value is None:
+            ints[key] = None
+            continue
+        try:
+            arr = np.asarray(value)
+        except (TypeError, ValueError):
+            arr = np.asarray(value, dtype=object)
+        if arr.dtype.kind not in "iu":
+            raise TypeError(f"controller {controller!r} returned {key} of dtype {arr.dtype}, not integers")
+        if arr.shape != (num,):
+            raise ValueError(f"controller {controller!r}: command {key} must have shape ({num},), got {arr.shape}")
+        valid = np.isin(arr, _MODES) if key == "mode" else arr >= 0
+        if not valid.all():
+            i = int(np.flatnonzero(~valid)[0])
+            what = f"one of {', '.join(f'{int(m)} ({m.name})' for m in Mode)}" if key == "mode" else "a count >= 0"
+            raise ValueError(f"controller {controller!r} returned {key} {arr[i]} at robot {i}, not {what}")
+        ints[key] = arr.astype(np.int64)
+    return WheelCommand(info=cmd.info, action=cmd.action, **ints, **out)

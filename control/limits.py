@@ -116,9 +116,10 @@ class SetpointLimitCheck:
         dbeta = beta - self.beta
         if lim.unlimited_steering:
             dbeta = np.mod(dbeta + np.pi, 2 * np.pi) - np.pi
-        rate = dbeta / dt
-        accel = (rate - self.rate) / dt
-        phiddot = (phidot - self.phidot) / dt
+        with np.errstate(over="ignore", invalid="ignore"):  # set-points near 1e308: inf rates, counted as over
+            rate = dbeta / dt
+            accel = (rate - self.rate) / dt
+            phiddot = (phidot - self.phidot) / dt
         q_beta, q_phi = (ACTION_QUANTUM * s for s in self._scales) if from_action else (0.0, 0.0)
         slack = 1.0 + RTOL
         flags = np.stack([

@@ -408,3 +408,23 @@ def test_check_batch_independence_checks_its_arguments():
         check_batch_independence("feedforward", tracks=("paper",), seeds=(0,))
     with pytest.raises(ValueError, match="atol"):
         check_batch_independence("feedforward", atol=math.nan)
+
+
+def test_mode_events_and_missing_setpoints_refused_naming_controller_and_field():
+    """Found by the repeated review: NaN events printed as -9223372036854775808 stops, a mode of 99
+    was accepted, and beta=None failed later without naming the controller."""
+    from control.commands import WheelCommand, checked_command
+
+    ok = dict(beta=np.zeros((2, 4)), phidot=np.zeros((2, 4)))
+    got = checked_command(WheelCommand(**ok, mode=np.array([0, 2]), events=np.array([0, 3])), "mine", 2, 4)
+    assert got.mode.dtype == np.int64 and got.events.tolist() == [0, 3]
+    for bad, err, words in (
+            (dict(events=np.array([np.nan, 0.0])), TypeError, "events of dtype float64"),
+            (dict(events=np.array(["7", "0"])), TypeError, "events of dtype"),
+            (dict(events=np.array([-5, 0])), ValueError, "events -5 at robot 0"),
+            (dict(mode=np.array([0, 99])), ValueError, "mode 99 at robot 1"),
+            (dict(mode=np.array([0.0, 1.0])), TypeError, "mode of dtype float64")):
+        with pytest.raises(err, match=words):
+            checked_command(WheelCommand(**ok, **bad), "mine", 2, 4)
+    with pytest.raises(TypeError, match="'mine' returned beta None"):
+        checked_command(WheelCommand(beta=None, phidot=np.zeros((2, 4))), "mine", 2, 4)
