@@ -146,7 +146,9 @@ class _Index:
         beyond = (self.ts > _MAX_TIMESTAMP_US) | (self.ts < -_MAX_TIMESTAMP_US)
         if beyond.any():
             i = int(np.flatnonzero(beyond)[0])
-            raise ValueError(f"record {i} has the timestamp {int(self.ts[i])} µs, beyond the ±{_MAX_TIMESTAMP_US} µs "
+            stamp = (int(self.ts[i]) if self.ts[i] > 0
+                     else f"{int(self.ts[i])} (or {int(self.ts[i].view(np.uint64))} unsigned)")
+            raise ValueError(f"record {i} has the timestamp {stamp} µs, beyond the ±{_MAX_TIMESTAMP_US} µs "
                              "(292 years) a nanosecond clock holds: a corrupt file?")
         self.spans: list[tuple[str, str, int, int, int]] = []  # name, type, id, first record, end record
         open_: dict[int, int] = {}

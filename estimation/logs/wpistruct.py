@@ -45,6 +45,15 @@ def _wpilib_dtype(type_name: str) -> np.dtype:
 _WPILIB_DTYPES: dict[str, np.dtype] = {}
 
 
+def _lies(registry: StructRegistry, type_name: str) -> bool:
+    """The log's own schema of WPILib type ``type_name`` (its parts by WPILib's) differs from WPILib's."""
+    try:
+        own = StructRegistry({**WPILIB_SCHEMAS, type_name: registry.schemas[type_name]})._build(type_name, ())
+    except (KeyError, ValueError, NotImplementedError):
+        return True
+    return own != _wpilib_dtype(type_name)
+
+
 class StructRegistry:
     """Struct schemas by type name -> packed little-endian NumPy dtypes (nested structs nest)."""
 
@@ -64,8 +73,11 @@ class StructRegistry:
         decode as nonsense), ``NotImplementedError`` for bit-fields."""
         dt = self._build(type_name, _seen)
         if not _seen and type_name in WPILIB_SCHEMAS and dt != _wpilib_dtype(type_name):
-            raise ValueError(f"the log's schema of {type_name} ({self.schemas[type_name]!r}, its parts included) is "
-                             f"not WPILib's ({WPILIB_SCHEMAS[type_name]!r}): its values would be misread")
+            liars = [t for t in WPILIB_SCHEMAS if t in self.schemas and _lies(self, t)] or [type_name]
+            part = liars[0]
+            holds = f", and {type_name} holds it" if part != type_name else ""
+            raise ValueError(f"the log's schema of {part} ({self.schemas[part]!r}) is not WPILib's "
+                             f"({WPILIB_SCHEMAS[part]!r}){holds}: its values would be misread")
         return dt
 
     def _build(self, type_name: str, _seen: tuple) -> np.dtype:

@@ -374,6 +374,9 @@ def write_outputs(result: LogEstimate, source: LogSource, out: Path, *, elapsed_
                   csv: bool = False) -> list[str]:
     """Write everything to ``out`` (created); returns the file names."""
     out.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUT_NAMES:  # an earlier run's files go first: an interrupted write never mixes two runs
+        if (out / name).is_file():
+            (out / name).unlink()
     diag = diagnose(result, source.geom, source.modules)
     cols = sample_columns(result, diag)
     np.savez(out / "samples.npz", **cols)
@@ -389,8 +392,4 @@ def write_outputs(result: LogEstimate, source: LogSource, out: Path, *, elapsed_
     s = summary(result, source, elapsed_s, diag)
     (out / "summary.json").write_text(json.dumps(s, indent=2, allow_nan=True))
     (out / "report.md").write_text(report_markdown(s, pngs))
-    written = files + pngs + ["summary.json", "report.md"]
-    for name in OUTPUT_NAMES:  # an earlier run's file that this run did not write would be stale beside it
-        if name not in written and (out / name).is_file():
-            (out / name).unlink()
-    return written
+    return files + pngs + ["summary.json", "report.md"]
