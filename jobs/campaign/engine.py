@@ -118,7 +118,8 @@ def _execute(fn: str, key: Mapping[str, Any], extra: Mapping[str, Any], threads:
         if not isinstance(result, dict):
             raise TypeError(f"task function {fn} returned {type(result).__name__}, expected dict")
         rec = {"status": "ok", "result": result}
-    except Exception as exc:  # noqa: BLE001 - a task's failure is data, not a crash of the campaign
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - a task's failure is data, not a crash of the campaign
+        # (SystemExit too: a controller's sys.exit() fails its episode, it does not end the campaign)
         rec = _failure(exc)
     rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker)
     return rec
@@ -140,7 +141,7 @@ def _execute_unit(fn: str, batch: str, keys: list, extras: list, threads: int | 
                                                                                   for r in results):
             raise TypeError(f"batch function {batch} must return a list of {len(keys)} dicts")
         recs = [{"status": "ok", "result": r} for r in results]
-    except Exception as exc:  # noqa: BLE001 - as _execute: data, run again task by task
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - as _execute: data, run again task by task
         recs = [dict(_failure(exc), isolate=True) for _ in keys]
     for rec in recs:
         rec.update(elapsed_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu, worker=worker,

@@ -297,7 +297,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     stream = stream if stream is not None else sys.stdout
     from azimut_env.env import AzimutEnv
     from jobs.args import robot_env_kwargs, robot_label
-    from jobs.eval.console import EXIT_STATUS, progress_printer, signals_as_interrupts
+    from jobs.eval.console import EXIT_STATUS, progress_printer, say, signals_as_interrupts
     from jobs.eval.results import export_episode, save_trace, write_results
     from jobs.eval.robots import controller_robots
 
@@ -313,7 +313,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
     imperfections = getattr(args, "imperfections", None)
     campaign_kw = robot_env_kwargs(robot, robot_file, imperfections)
-    robots = controller_robots(controllers, names, args.speed_scale, campaign_kw, robot_label(args))
+    robots = controller_robots(controllers, names, args.speed_scale, campaign_kw, robot_label(args),
+                               campaign_set=("domain_randomization",) if args.domain_randomization else ())
     tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=seeds[0], robot=robot, robot_file=robot_file, names=names, all_logs=True,
@@ -371,15 +372,17 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                   file=sys.stderr, flush=True)
             return EXIT_STATUS.get(sig, 130)
     wall = time.perf_counter() - start
+    by_controller = {name: limits_text(env_of(name).limits) for name in robots}  # each controller's robot's
+    limits: str | dict = (next(iter(by_controller.values())) if len(set(by_controller.values())) == 1
+                          else by_controller) if by_controller else limits_text(env0.limits)
     campaign = {"speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
-                "limits": limits_text(env0.limits), "executor": executor, "workers": args.workers, "level": 0.95,
+                "limits": limits, "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
                 "computed": len(tasks) - n_before, "resumed": n_before}
     n_ok, n_all = write_results(out, records, tasks, controllers, tracks, seeds, names, robots, campaign, store.folder,
                                 n_resamples=args.bootstrap, video=bool(video), compare=plot_seed is not None)
     n_failed = n_all - n_ok
-    print(f"{n_ok} of {n_all} episodes ok" + (f", {n_failed} failed" if n_failed else "")
-          + f" in {wall:.1f} s ({executor}, {args.workers} worker(s)); report written to {out}/report.md",
-          file=stream, flush=True)
+    say(f"{n_ok} of {n_all} episodes ok" + (f", {n_failed} failed" if n_failed else "")
+        + f" in {wall:.1f} s ({executor}, {args.workers} worker(s)); report written to {out}/report.md", stream)
     return 0 if n_failed == 0 else 1

@@ -12,7 +12,30 @@ from pathlib import Path
 
 from jobs.interrupts import EXIT_STATUS, signals_as_interrupts
 
-__all__ = ["progress_printer", "failure_text", "where_raised", "signals_as_interrupts", "EXIT_STATUS"]
+__all__ = ["progress_printer", "failure_text", "where_raised", "signals_as_interrupts", "EXIT_STATUS", "say"]
+
+
+def say(text: str, stream) -> bool:
+    """Print a line on ``stream``; False, quietly, when its reader went away (``azimut eval ... |
+    head -1``: a BrokenPipeError), the stream then pointed at the null device so that nothing more
+    is written there, nor at exit (Python's flush of a closed pipe)."""
+    if getattr(stream, "_azimut_closed", False):
+        return False
+    try:
+        print(text, file=stream, flush=True)
+        return True
+    except BrokenPipeError:
+        import os
+
+        try:
+            stream._azimut_closed = True
+        except AttributeError:
+            pass
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+        return False
 
 
 _FRAME = re.compile(r'^\s*File "(?P<file>[^"]+)", line (?P<line>\d+), in (?P<fn>\S+)', re.M)
@@ -64,8 +87,7 @@ def progress_printer(names: dict[str, str], stream, records_folder: Path) -> Cal
         else:
             msg = failure_text(rec, records_folder / f"{task.id}.json")
         name = names.get(k["controller"], k["controller"])
-        print(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}",
-              file=stream, flush=True)
+        say(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}", stream)
 
     return progress
 

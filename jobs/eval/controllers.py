@@ -110,11 +110,15 @@ def check_controllers(specs: list[str], speed_scale: float = 1.0) -> dict[str, s
     names: dict[str, str] = {}
     for spec in specs:
         try:
-            names[spec] = build_controller(spec, speed_scale).name
+            controller = build_controller(spec, speed_scale)
+            names[spec] = controller.name
         except ControllerSpecError as exc:
             if is_policy(spec):
                 raise ValueError(f"argument --controllers: {spec}: cannot load the model ({exc.detail})") from None
             raise ValueError(f"argument --controllers: {exc}") from None
+        from jobs.eval.robots import check_env_kwargs
+
+        check_env_kwargs(spec, controller)  # a dict without the keys the eval sets itself
     seen: dict[str, str] = {}
     for spec, name in names.items():
         if name in seen:

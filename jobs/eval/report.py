@@ -149,6 +149,7 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
     specs = campaign.get("controller_specs") or {}
     named = "".join(f"; {name} = {spec}" for name, spec in specs.items())
+    from jobs.eval.robots import env_kwargs_sentence, limits_sentence
     from jobs.eval.verdict import verdict_lines
 
     lines = ["# azimut eval", "", "## Verdict", "",
@@ -163,7 +164,8 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
              (campaign.get("robot_sentence") or f"Robot {campaign.get('robot', 'azimut3')}"
               + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else ""))
              + f"; control period {campaign['control_period']} s; "
-             f"{campaign['limits']}.",
+             f"{limits_sentence(campaign['limits'])}.",
+             *([text] if (text := env_kwargs_sentence(campaign.get("env_kwargs") or {})) else []),
              f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
              f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
              f"Produced by {provenance_text(prov)}.", "",

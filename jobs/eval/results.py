@@ -134,6 +134,7 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
                 "robots": {name: {"robot": r["robot"], "imperfections": r["imperfections"]}
                            for name, r in robots.items()},
                 "robot_sentence": robot_sentence(robots),
+                "env_kwargs": {name: r.get("other", {}) for name, r in robots.items()},
                 "controller_specs": {names.get(c, c): c for c in specs if names.get(c, c) != c},
                 "exports": exports, "provenance": provenance()}
     write_campaign_report(out, rows, full, campaign, plots, comparisons)

@@ -4,12 +4,13 @@
 
 The format (``docs/control.md``, "A path of your own"): one waypoint per line, ``x,y`` in metres,
 optionally ``heading`` [rad] (the chassis orientation to hold there; default 0 everywhere, the
-omnidirectional robot keeps its orientation) and ``speed`` [m/s] (the progress speed; default
-:data:`DEFAULT_SPEED`), in that order; or a first line naming the columns (``x``, ``y``,
-``heading``, ``speed``, in any order; ``theta`` and ``v`` are taken for ``heading`` and ``speed``).
-Lines starting with ``#`` and blank lines are skipped. The waypoints are joined by straight
-segments (sampled every 2 cm); a last waypoint within 1 mm of the first closes the loop (a closed
-track), otherwise the track is open and its speed ramps up from and down to rest over 0.3 m.
+omnidirectional robot keeps its orientation) and ``speed`` [m/s] (the progress speed, 0 to
+:data:`MAX_SPEED` and above 0 somewhere; default :data:`DEFAULT_SPEED`), in that order; or a first
+line naming the columns (``x``, ``y``, ``heading``, ``speed``, in any order; ``theta`` and ``v``
+are taken for ``heading`` and ``speed``). Lines starting with ``#`` and blank lines are skipped.
+The waypoints are joined by straight segments (sampled every 2 cm); a last waypoint within 1 mm of
+the first closes the loop (a closed track), otherwise the track is open and its speed ramps up from
+and down to rest over 0.3 m.
 
 In a campaign the track is named by the path as given on the command line, and its content is in
 each episode's key (``track_file``: the absolute path and the file's digest), so an edited file is
@@ -34,6 +35,8 @@ COLUMNS = ("x", "y", "heading", "speed")
 _ALIASES = {"theta": "heading", "v": "speed"}
 #: the progress speed [m/s] of a file without a speed column
 DEFAULT_SPEED = 0.5
+#: the highest progress speed [m/s] a track file may ask for
+MAX_SPEED = 20.0
 #: a last waypoint this close to the first [m] closes the track
 CLOSE_TOLERANCE = 1e-3
 
@@ -98,6 +101,19 @@ def read_track_file(path: str | Path, name: str | None = None):
     if len(values) < 2:
         raise ValueError(f"{path}: {len(values)} waypoint(s); a track needs at least 2")
     table = np.array(values, dtype=np.float64)
+    if "speed" in columns:
+        lines = [k for k, _ in rows]
+        speeds = table[:, columns.index("speed")]
+        fast = np.flatnonzero(speeds > MAX_SPEED)
+        if fast.size:
+            raise ValueError(f"{path}: line {lines[fast[0]]}: speed {speeds[fast[0]]:g} m/s is above "
+                             f"{MAX_SPEED:g} m/s (the speed column is in m/s)")
+        slow = np.flatnonzero(speeds < 0.0)
+        if slow.size:
+            raise ValueError(f"{path}: line {lines[slow[0]]}: speed {speeds[slow[0]]:g} m/s is negative")
+        if not np.any(speeds > 0.0):
+            raise ValueError(f"{path}: line {lines[0]}: the speed is 0 at every waypoint (the robot would never "
+                             "move; give a speed > 0 m/s somewhere)")
     cols = {c: table[:, j] for j, c in enumerate(columns[:table.shape[1]])}
     xy = np.stack([cols["x"], cols["y"]], axis=1)
     heading = cols.get("heading", 0.0)

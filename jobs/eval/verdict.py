@@ -1,9 +1,9 @@
 """The opening of ``azimut eval``'s report: which controller is best at what, in a few lines,
 computed from the summary cells (mean over seeds per controller × track).
 
-Per track: the fastest finisher (the least completion time among the controllers that finished
-every episode on it), the least slip energy and the least RMS lateral error (among the controllers
-with a value); with several seeds, a best whose 95% interval overlaps the runner-up's is said to be
+Per track, among the controllers that finished every episode on it (one that never moves has no
+slip and must not win): the fastest finisher (the least completion time), the least slip energy and
+the least RMS lateral error; with several seeds, a best whose 95% interval overlaps the runner-up's is said to be
 not separated from it. With several tracks, a last line counts the tracks each controller is best
 on, per criterion.
 """
@@ -41,9 +41,12 @@ def _overlap(a: dict, b: dict, metric: str) -> bool:
 
 def _best(cells: list[dict], metric: str, words: str, unit: str, scale: float, fmt: str) -> tuple[str, str | None]:
     """``(clause, winner)`` of one criterion on one track's cells."""
-    pool = [c for c in cells if _mean(c, metric) is not None and (metric != "completion_time_s" or _finished_all(c))]
+    # every criterion among the controllers that finished every episode: one that never moves has no slip
+    # and, on a straight path, no lateral error, and must not win them
+    finishers = [c for c in cells if _finished_all(c)]
+    pool = [c for c in finishers if _mean(c, metric) is not None]
     if not pool:
-        return (f"{words}: none (no controller finished every episode)" if metric == "completion_time_s"
+        return (f"{words}: none (no controller finished every episode)" if not finishers
                 else f"{words}: no value"), None
     pool.sort(key=lambda c: _mean(c, metric))
     best = pool[0]
@@ -54,7 +57,9 @@ def _best(cells: list[dict], metric: str, words: str, unit: str, scale: float, f
         if _overlap(best, second, metric):
             text += ", not separated by the 95% intervals"
     elif len(cells) > 1:
-        text += "; the only one" + (" to finish every episode" if metric == "completion_time_s" else " with a value")
+        text += "; the only one to finish every episode" if len(finishers) == 1 else "; the only one with a value"
+    if metric != "completion_time_s" and len(finishers) < len(cells) and not (len(pool) == 1 and len(finishers) == 1):
+        text += "; among those that finished every episode"
     return text + ")", best["controller"]
 
 

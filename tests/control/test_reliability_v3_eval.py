@@ -55,6 +55,29 @@ class Buggy(Ideal):
 
     def act(self, env, obs):
         raise RuntimeError("my bug in act")
+
+
+class Swerve(Ideal):
+    """Another robot and a randomised one, by its env_kwargs."""
+    name = "swerve"
+    env_kwargs = {"robot": "swerve", "domain_randomization": 0.5}
+
+
+class Exits(Ideal):
+    name = "exits"
+
+    def act(self, env, obs):
+        raise SystemExit(3)
+
+
+class ListKw(Ideal):
+    name = "listkw"
+    env_kwargs = ["robot", "swerve"]
+
+
+class TrackKw(Ideal):
+    name = "trackkw"
+    env_kwargs = {"track": "paper"}
 '''
 
 
@@ -132,10 +155,14 @@ def test_the_report_opens_with_a_verdict_computed_from_the_metrics(mine):
     report = (out / "report.md").read_text()
     assert report.index("## Verdict") < report.index("## Summary")
     line = next(s for s in report.splitlines() if s.startswith(f"- **{track}**"))
-    cells = {c["controller"]: c["metrics"] for c in json.loads((out / "metrics.json").read_text())["summary"]}
-    least = {key: min(cells, key=lambda c: cells[c][key]["mean"]) for key in ("slip_energy_J", "rms_lateral_m")}
-    assert f"least slip **{least['slip_energy_J']}**" in line
-    assert f"least lateral error **{least['rms_lateral_m']}**" in line
+    cells = {c["controller"]: c["metrics"] for c in json.loads((out / "metrics.json").read_text())["summary"]
+             if c["metrics"]["completed"]["mean"] == 1.0}  # ranked among those that finished every episode
+    if cells:
+        least = {key: min(cells, key=lambda c: cells[c][key]["mean"]) for key in ("slip_energy_J", "rms_lateral_m")}
+        assert f"least slip **{least['slip_energy_J']}**" in line
+        assert f"least lateral error **{least['rms_lateral_m']}**" in line
+    else:
+        assert "least slip: none (no controller finished every episode)" in line
     assert "fastest finisher" in line
 
 
@@ -262,3 +289,97 @@ def test_sigterm_stops_eval_as_ctrl_c_does_and_resume_finishes(user, tmp_path):
     assert main(argv + ["--resume"]) == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["campaign"]["computed"] + m["campaign"]["resumed"] == 2 and m["campaign"]["computed"] >= 1
+
+
+# ----------------------------------------------------------------- review of azimut eval (issue 31, round 2)
+
+
+def test_each_controllers_robot_limits_and_env_kwargs_are_reported(user, tmp_path):
+    """A controller's env_kwargs robot='swerve': the limits line showed azimut3's limits for all, and
+    its domain_randomization=0.5 was said nowhere."""
+    out = tmp_path / "out"
+    assert main(["eval", "--controllers", "twist,v3ctl.ctl:Swerve", "--tracks", str(user / "line.csv"),
+                 "--max-time", "1", "--no-plots", "--out", str(out)]) in (0, 1)
+    m = json.loads((out / "metrics.json").read_text())
+    limits = m["campaign"]["limits"]
+    assert isinstance(limits, dict) and set(limits) == {"twist", "swerve"} and limits["twist"] != limits["swerve"]
+    assert m["campaign"]["env_kwargs"] == {"twist": {}, "swerve": {"domain_randomization": 0.5}}
+    assert m["campaign"]["robots"]["swerve"]["robot"] == "swerve"
+    report = (out / "report.md").read_text()
+    assert "swerve ran with env_kwargs domain_randomization=0.5" in report
+    assert f"limits for twist: {limits['twist']}" in report and f"limits for swerve: {limits['swerve']}" in report
+
+
+def test_params_of_no_preset_is_its_own_robot():
+    import dataclasses
+
+    from azimut_env.params import RobotParams
+    from jobs.eval.robots import robot_text
+
+    p = RobotParams.preset("swerve")
+    assert robot_text({"params": p})[0] == "swerve"
+    assert robot_text({"params": dataclasses.replace(p, gravity=2 * p.gravity)})[0] == "its own robot"
+
+
+@pytest.mark.parametrize("cls, message", [
+    ("ListKw", "controller 'v3ctl.ctl:ListKw': env_kwargs must be a dict, got list"),
+    ("TrackKw", "controller 'v3ctl.ctl:TrackKw': env_kwargs may not set 'track'")])
+def test_bad_env_kwargs_are_refused_in_one_line(user, tmp_path, capsys, cls, message):
+    """env_kwargs = [...] was a traceback at start-up (robots.py: dict(list))."""
+    assert main(["eval", "--controllers", f"v3ctl.ctl:{cls}", "--tracks", "crab", "--no-plots",
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_controller_that_calls_sys_exit_fails_its_episode(user, tmp_path, capsys, workers):
+    """SystemExit(3) from act: eval exited with 3 and no report (serial), or left nothing (--workers 2)."""
+    out = tmp_path / "out"
+    assert main(["eval", "--controllers", "v3ctl.ctl:Exits", "--tracks", "crab", "--max-time", "0.5",
+                 "--no-plots", "--workers", str(workers), "--out", str(out)]) == 1
+    lines = [s for s in capsys.readouterr().out.splitlines() if "FAILED" in s]
+    assert len(lines) == 1 and "FAILED after 1 attempt(s): SystemExit: 3" in lines[0] and "not retried" in lines[0]
+    assert (out / "report.md").is_file()
+
+
+def test_the_verdict_ranks_only_the_controllers_that_finished():
+    """A controller that never moves had the least slip and lateral error."""
+    from jobs.eval.verdict import verdict_lines
+
+    def cell(name, done, slip, lat, time_s):
+        stats = {"completed": done, "slip_energy_J": slip, "rms_lateral_m": lat, "completion_time_s": time_s}
+        return {"controller": name, "track": "line", "n": 1, "ok": 1, "failed": 0,
+                "metrics": {k: {"mean": v, "lo": v, "hi": v, "n": 1} for k, v in stats.items()}}
+
+    line = verdict_lines([cell("still", 0.0, 0.0, 0.0, float("nan")), cell("mover", 1.0, 2.0, 0.01, 5.0)],
+                         ["line"], ["still", "mover"])[0]
+    assert "least slip **mover**" in line and "least lateral error **mover**" in line
+    none = verdict_lines([cell("still", 0.0, 0.0, 0.0, float("nan"))] * 1, ["line"], ["still"])[0]
+    assert "least slip: none" in none
+
+
+def test_a_closed_stdout_stops_the_progress_quietly():
+    """azimut eval ... | head -1: a BrokenPipeError traceback."""
+    from jobs.eval.console import say
+
+    r, w = os.pipe()
+    os.close(r)
+    stream = os.fdopen(w, "w")
+    try:
+        assert say("one", stream) is False and say("two", stream) is False
+    finally:
+        stream.close()
+
+
+@pytest.mark.parametrize("speeds, message", [("0,0", "line 2: the speed is 0 at every waypoint"),
+                                              ("0.5,25", "line 3: speed 25 m/s is above 20 m/s")])
+def test_a_track_file_speed_that_never_finishes_or_is_too_fast_is_refused(tmp_path, speeds, message):
+    from jobs.eval.track_files import read_track_file
+
+    a, b = speeds.split(",")
+    path = tmp_path / "p.csv"
+    path.write_text(f"x,y,speed\n0,0,{a}\n1,0,{b}\n")
+    with pytest.raises(ValueError, match=message.replace(".", r"\.")) as exc:
+        read_track_file(path)
+    assert str(path) in str(exc.value)
