@@ -89,19 +89,24 @@ def _declared(cmd: WheelCommand, limits) -> np.ndarray:
     return limit_violations(*vals, limits)
 
 
-def _limit_flags(cmd: WheelCommand, env, check: SetpointLimitCheck) -> np.ndarray:
-    """(N, 5) bool, the :data:`~control.limits.LIMIT_KINDS` exceeded this period: by the set-points
-    themselves (those the env applies, read back from the command's action if it has one;
-    :class:`~control.limits.SetpointLimitCheck`), or by a rate the controller declares."""
+def _applied(cmd: WheelCommand, env) -> tuple[np.ndarray, np.ndarray]:
+    """(β, φ̇) (N, n) the set-points the env applies: the command's, or those read back from its
+    action when it gives one (what the limits are counted on and the episode records)."""
     if cmd.action is None:
-        flags = check.step(cmd.beta, cmd.phidot)
-    else:
-        flags = check.step(*env.setpoints_from_action(cmd.action), from_action=True)
+        return cmd.beta, cmd.phidot
+    return env.setpoints_from_action(cmd.action)
+
+
+def _limit_flags(cmd: WheelCommand, env, check: SetpointLimitCheck, applied) -> np.ndarray:
+    """(N, 5) bool, the :data:`~control.limits.LIMIT_KINDS` exceeded this period: by the set-points
+    themselves (``applied``: :func:`_applied`; :class:`~control.limits.SetpointLimitCheck`), or by a
+    rate the controller declares."""
+    flags = check.step(*applied, from_action=cmd.action is not None)
     flags[:, :4] |= _declared(cmd, env.limits)
     return flags
 
 
-def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, beta_meas: np.ndarray,
+def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, applied, eta_hat: tuple, beta_meas: np.ndarray,
             phidot_meas: np.ndarray, motor: np.ndarray, flags: np.ndarray) -> None:
     """Append robot i's row (the keys of :class:`EpisodeLog`) after a step, from the env's info
     (the vector env's batched info, whose row i is the single env's info of that robot)."""
@@ -110,8 +115,8 @@ def _record(rec: dict, info: dict, i: int, cmd: WheelCommand, eta_hat: tuple, be
            ("antagonism", info["antagonism"][i]), ("qua", info["qua"][i]), ("beta_meas", beta_meas[i]),
            ("phidot_meas", phidot_meas[i]),
            ("beta_true", info["beta_true"][i]), ("motor_true", motor[i]),
-           ("beta_cmd", np.array(cmd.beta[i], dtype=np.float64)),
-           ("phidot_cmd", np.array(cmd.phidot[i], dtype=np.float64)),
+           ("beta_cmd", np.array(applied[0][i], dtype=np.float64)),
+           ("phidot_cmd", np.array(applied[1][i], dtype=np.float64)),
            ("lam_hat", eta_hat[0][i]), ("mu_hat", float(eta_hat[1][i])),
            ("mu_true", abs(float(info["eta_true"][1][i]))),
            ("twist_true", np.array(info["twist"][i], dtype=np.float64)),
@@ -218,7 +223,8 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
         eta_hat = env.estimated_eta  # (λ̂, μ̂) the controller reads
         cmd = checked_command(controller.act(env, obs), name, num, n)
         action = cmd.action if cmd.action is not None else env.action_from_setpoints(cmd.beta, cmd.phidot)
-        flags = _limit_flags(cmd, env, check)
+        applied = _applied(cmd, env)
+        flags = _limit_flags(cmd, env, check, applied)
         obs, reward, terminated, truncated, info = env.step(action)
         if cmd.events is not None:
             events = np.asarray(cmd.events, dtype=np.int64)
@@ -232,7 +238,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
                 logs[i].error = str(errors[i])
                 ended.append(i)
                 continue
-            _record(recs[i], info, i, cmd, eta_hat, beta_meas, phidot_meas, motor, flags[i])
+            _record(recs[i], info, i, cmd, applied, eta_hat, beta_meas, phidot_meas, motor, flags[i])
             end = _end_of(info, i, lengths[i], terminated, truncated)
             if end is None and k + 1 >= horizons[i]:
                 end = (False, None)

@@ -150,6 +150,9 @@ def test_a_controller_that_sends_its_own_action_is_checked_on_what_the_env_appli
     assert flags[:, LIMIT_KINDS.index("steer_rate")].all() and flags[:, LIMIT_KINDS.index("wheel_accel")].all()
     assert not flags[:, LIMIT_KINDS.index("wheel_speed")].any()  # read back from the action: within [−1, 1]
     assert not flags[:, LIMIT_KINDS.index("steer_range")].any()
+    # the trace records what the env applied (read back from the action), not the claimed set-points
+    # (found by the repeated review: the trace held 0 while the env steered to ±β_max)
+    assert np.abs(log.beta_cmd).max() > 1.0 and np.abs(log.phidot_cmd).min() > 1.0
 
 
 class HoldMeasured:
