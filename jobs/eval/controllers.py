@@ -30,12 +30,32 @@ from control.controller import (
 from train.policy import model_file, policy_controller, policy_files, policy_name
 
 __all__ = ["POLICY_PREFIXES", "is_policy", "arg_controllers", "controller_options", "build_controller",
-           "check_controllers", "controller_files"]
+           "check_controllers", "controller_files", "check_env_kwargs", "RESERVED_KEYS"]
 
 #: prefixes of trained policies in ``--controllers``
 POLICY_PREFIXES = ("ppo", "sac")
 for _algo in POLICY_PREFIXES:
     register_controller(_algo, functools.partial(policy_controller, _algo), prefix=True)
+
+
+#: the env keyword arguments the episode loop passes itself: a controller's ``env_kwargs`` may not
+#: (its ``time_limit_factor`` is replaced by the loop's, as a trained policy's env_kwargs carry one)
+RESERVED_KEYS = ("track", "num_envs", "autoreset_mode")
+
+
+def check_env_kwargs(spec: str, controller) -> dict:
+    """A controller's ``env_kwargs`` (``{}`` without): ``ValueError`` (one line naming the
+    controller) when it is not a dict or holds a key the eval sets itself (:data:`RESERVED_KEYS`)."""
+    kw = getattr(controller, "env_kwargs", None)
+    if kw is None:
+        return {}
+    if not isinstance(kw, dict):
+        raise ValueError(f"controller {spec!r}: env_kwargs must be a dict, got {type(kw).__name__}")
+    bad = [k for k in kw if not isinstance(k, str) or k in RESERVED_KEYS]
+    if bad:
+        raise ValueError(f"controller {spec!r}: env_kwargs may not set {bad[0]!r} (the eval sets "
+                         f"{', '.join(RESERVED_KEYS)} itself)")
+    return dict(kw)
 
 
 def is_policy(spec: str) -> bool:
@@ -116,8 +136,6 @@ def check_controllers(specs: list[str], speed_scale: float = 1.0) -> dict[str, s
             if is_policy(spec):
                 raise ValueError(f"argument --controllers: {spec}: cannot load the model ({exc.detail})") from None
             raise ValueError(f"argument --controllers: {exc}") from None
-        from jobs.eval.robots import check_env_kwargs
-
         check_env_kwargs(spec, controller)  # a dict without the keys the eval sets itself
     seen: dict[str, str] = {}
     for spec, name in names.items():

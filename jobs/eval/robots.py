@@ -12,30 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["ROBOT_KEYS", "RESERVED_KEYS", "check_env_kwargs", "robot_text", "controller_robots",
+__all__ = ["ROBOT_KEYS", "robot_text", "controller_robots",
            "robot_sentence", "env_kwargs_sentence", "limits_sentence"]
 
 #: the env keyword arguments that make the robot (the report's robot label)
 ROBOT_KEYS = ("robot", "imperfections", "params")
-#: the env keyword arguments the eval sets itself: a controller's ``env_kwargs`` may not
-RESERVED_KEYS = ("track", "num_envs", "autoreset_mode", "time_limit_factor", "render_mode", "render_index")
-
-
-def check_env_kwargs(spec: str, controller) -> dict:
-    """A controller's ``env_kwargs`` (``{}`` without): ``ValueError`` (one line naming the
-    controller) when it is not a dict or holds a key the eval sets itself (:data:`RESERVED_KEYS`)."""
-    kw = getattr(controller, "env_kwargs", None)
-    if kw is None:
-        return {}
-    if not isinstance(kw, dict):
-        raise ValueError(f"controller {spec!r}: env_kwargs must be a dict, got {type(kw).__name__}")
-    bad = [k for k in kw if not isinstance(k, str) or k in RESERVED_KEYS]
-    if bad:
-        raise ValueError(f"controller {spec!r}: env_kwargs may not set {bad[0]!r} (the eval sets "
-                         f"{', '.join(RESERVED_KEYS)} itself)")
-    return dict(kw)
-
-
 def robot_text(env_kwargs: dict) -> tuple[str, str]:
     """``(robot, imperfections)`` in words of an env's keyword arguments: the preset's name, ``file
     PATH`` or ``azimut3``; the imperfections preset the robot carries (``paper``, ``ideal``) or
@@ -99,7 +80,7 @@ def controller_robots(specs: Sequence[str], names: dict[str, str], speed_scale: 
     campaign's, ``its own robot`` for ``params`` of no preset; ``imperfections``) and its other
     env keyword arguments that took effect (``other``: those neither of the robot nor set by the
     campaign, ``campaign_set``; values as JSON, or their repr)."""
-    from jobs.eval.controllers import build_controller
+    from jobs.eval.controllers import build_controller, check_env_kwargs
 
     out = {}
     for spec in specs:
