@@ -83,7 +83,7 @@ spread, ``numpy.random.default_rng(2010)``). A robot description file names the 
 (``[imperfections]`` ``preset = "paper"``: the shipped ``azimut3`` does, so the preset ``azimut3``
 and its file are the Azimut-v2 default robot; the other shipped robots name ``"ideal"``) and sets
 its own values in its ``[steering]``, ``[wheel]``, ``[sensors]`` and ``[imperfections]`` tables
-(they override the preset's: :func:`azimut_env.robot_file.params_from_description`); the envs'
+(they override the preset's: :func:`azimut_env.robot_file.read_robot`); the envs'
 and the command line's ``imperfections`` apply a preset on top of the robot
 (:func:`azimut_env.task.config.resolve_params`).
 

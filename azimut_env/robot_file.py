@@ -1,12 +1,14 @@
-"""Robots for the simulator: a description file (:func:`params_from_file`) or a preset by name
-(:func:`preset_params`, :data:`PRESET_NAMES`), both as :class:`~azimut_env.params.RobotParams`.
+"""The one reader of robot description files: a file or a preset by name, read whole
+(:func:`read_robot`), each package handed its part (:class:`RobotDescription`: the geometry and
+the module names for estimation and the log readers, the ``RobotParams`` for the simulator).
 
 A preset *is* a description file: ``azimut_env/robots/NAME.toml``, shipped in the package and
 read by the same reader as a user's file. The file format (schema 1) is described in
-``docs/robots.md`` and :mod:`estimation.robot_file`, which reads the ``[geometry]`` table; this
-module reads the parameter tables, one per group of ``RobotParams`` (``[chassis]``,
-``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``, ``[sensors]``,
-``[imperfections]``), whose
+``docs/robots.md``. :mod:`estimation.robot_file` reads the TOML, the header and the
+``[geometry]`` table (the part it owns; it knows nothing of the simulator's tables); this module
+names the rest and reads it: the parameter tables, one per group of ``RobotParams``
+(``[chassis]``, ``[steering]``, ``[steer_motor]``, ``[wheel]``, ``[tire]``, ``[limits]``,
+``[sensors]``, ``[imperfections]``: :func:`parameter_tables`, the fields of the class), whose
 keys are the fields of the group's dataclass in its units (SI; angles in radians), and the
 top-level ``gravity`` [m/s²]. ``[imperfections]`` may also name the imperfections preset the
 robot carries, ``preset = "paper"`` or ``"ideal"`` (:mod:`azimut_env.imperfections`): the preset
@@ -26,7 +28,7 @@ from __future__ import annotations
 import functools
 import math
 import os
-from dataclasses import MISSING, Field, fields, is_dataclass, replace
+from dataclasses import MISSING, Field, dataclass, fields, is_dataclass, replace
 from importlib import resources
 from typing import Any
 
@@ -35,7 +37,6 @@ import numpy as np
 from azimut_env.imperfections import IMPERFECTION_PRESETS, with_imperfections
 from estimation.geometry import RobotGeometry
 from estimation.robot_file import (
-    PARAMETER_TABLES,
     RobotFileError,
     module_names,
     number,
@@ -45,8 +46,9 @@ from estimation.robot_file import (
     where,
 )
 
-__all__ = ["PRESET_NAMES", "DEFAULT_PRESET", "PRESET_KEY", "RobotFileError", "params_from_file",
-           "params_from_description", "preset_params", "preset_source", "check_preset_name", "resolve_robot"]
+__all__ = ["PRESET_NAMES", "DEFAULT_PRESET", "PRESET_KEY", "GRAVITY_KEY", "RobotFileError", "RobotDescription",
+           "read_robot", "parameter_tables", "params_from_file", "preset_params", "preset_source",
+           "check_preset_name", "resolve_robot"]
 
 #: the robots shipped with the package (``azimut_env/robots/NAME.toml``)
 PRESET_NAMES = ("azimut3", "swerve", "tri", "hex")
@@ -55,6 +57,8 @@ PRESET_NAMES = ("azimut3", "swerve", "tri", "hex")
 DEFAULT_PRESET = "azimut3"
 #: the key of ``[imperfections]`` that names the robot's imperfections preset
 PRESET_KEY = "preset"
+#: the top-level key of the simulator's gravity [m/s²]
+GRAVITY_KEY = "gravity"
 #: plausibility bounds of parameter keys, ``(table, key): (bound, unit, what a value past it
 #: likely is)``: a file past one is refused with the likely mistake (``docs/robots.md``)
 PLAUSIBLE = {("chassis", "mass"): (2000.0, "kilograms", "grams"),
@@ -138,16 +142,70 @@ def _imperfections_preset(data: dict, source: str) -> str | None:
     return name
 
 
-def params_from_description(data: dict, params_cls: type) -> Any:
-    """The ``params_cls`` (``RobotParams``) of a parsed description
-    (:func:`estimation.robot_file.read_robot_file`)."""
-    source = data.get("_source", "<description>")
+@dataclass(frozen=True)
+class RobotDescription:
+    """A robot description read whole (:func:`read_robot`): each package's part of it."""
+
+    #: how messages name the description: the file's path, or ``preset 'NAME' (...)``
+    source: str
+    #: estimation's part: the ``[geometry]`` table
+    geometry: RobotGeometry
+    #: the modules' names in module order (``module_k`` where unnamed): the log readers' and the
+    #: bag exporter's
+    module_names: tuple[str, ...]
+    #: the simulator's part: the ``RobotParams`` (the geometry above included)
+    params: Any
+
+
+def parameter_tables(params_cls: type) -> tuple[str, ...]:
+    """The parameter tables a file may hold: the fields of ``params_cls`` (``RobotParams``) other
+    than ``geometry`` and ``gravity``, in their order."""
+    return tuple(f.name for f in fields(params_cls) if f.name not in ("geometry", GRAVITY_KEY))
+
+
+def read_robot(robot: str | os.PathLike, params_cls: type) -> RobotDescription:
+    """The robot ``robot`` names, read whole: a preset's name (:data:`PRESET_NAMES`; read once,
+    then cached: the parts are frozen) or the path of a description file (an ``os.PathLike``, or a
+    ``str`` ending in ``.toml``). ``params_cls`` is ``RobotParams``. Every refusal of a file is a
+    :class:`RobotFileError` naming the file, the key and the value."""
+    if _is_file(robot):
+        return _read_file(robot, params_cls)
+    return _preset(check_preset_name(robot), params_cls)
+
+
+def _read_file(path: str | os.PathLike, params_cls: type) -> RobotDescription:
+    return _describe(read_robot_file(path, _others(params_cls)), params_cls)
+
+
+def _is_file(robot: Any) -> bool:
+    return isinstance(robot, os.PathLike) or (isinstance(robot, str) and robot.endswith(".toml"))
+
+
+def _others(params_cls: type) -> tuple[str, ...]:
+    """The top-level keys this module reads (``estimation.robot_file`` refuses any key that is
+    neither these nor its own)."""
+    return (GRAVITY_KEY,) + parameter_tables(params_cls)
+
+
+def _describe(data: dict, params_cls: type) -> RobotDescription:
+    """The parts of a description whose header :mod:`estimation.robot_file` has checked."""
+    source = data["_source"]
+    tables = parameter_tables(params_cls)
+    if GRAVITY_KEY in data and not number(data[GRAVITY_KEY], source, GRAVITY_KEY) > 0:
+        raise RobotFileError(f"{where(source, GRAVITY_KEY)} = {data[GRAVITY_KEY]!r}: must be > 0 [m/s²]")
+    for key in tables:
+        if key in data and not isinstance(data[key], dict):
+            raise RobotFileError(f"{where(source, key)} = {data[key]!r}: must be a table ([{key}])")
     geometry = RobotGeometry.from_description(data)
-    groups = {f.name: f for f in fields(params_cls) if f.name not in ("geometry", "gravity")}
-    missing = sorted(set(groups) - set(PARAMETER_TABLES))
-    if missing:  # a group added to RobotParams without its table in estimation.robot_file
-        raise RuntimeError(f"RobotParams groups {missing} are not tables of the robot file format "
-                           "(add them to estimation.robot_file.PARAMETER_TABLES)")
+    return RobotDescription(source=source, geometry=geometry, module_names=module_names(data),
+                            params=_params(data, geometry, tables, params_cls))
+
+
+def _params(data: dict, geometry: RobotGeometry, tables: tuple[str, ...], params_cls: type) -> Any:
+    """The ``params_cls`` (``RobotParams``) of a description: its tables over the defaults (or
+    over the imperfections preset it names)."""
+    source = data["_source"]
+    groups = {f.name: f for f in fields(params_cls) if f.name in tables}
     preset = _imperfections_preset(data, source)
     steer = (-math.inf, math.inf) if geometry.unlimited_steering else (geometry.steer_min, geometry.steer_max)
     limits = replace(_default(groups["limits"]), steer_min=steer[0], steer_max=steer[1])
@@ -159,8 +217,8 @@ def params_from_description(data: dict, params_cls: type) -> Any:
         base = with_imperfections(base, preset)
     kwargs: dict[str, Any] = {name: _group(getattr(base, name), data[name], source, name)
                               for name in groups if name in data}
-    if "gravity" in data:
-        kwargs["gravity"] = number(data["gravity"], source, "gravity")
+    if GRAVITY_KEY in data:
+        kwargs[GRAVITY_KEY] = number(data[GRAVITY_KEY], source, GRAVITY_KEY)
     table = data.get("chassis", {})
     kwargs["chassis"] = _outline(kwargs.get("chassis", base.chassis), table, geometry, source)
     try:
@@ -211,8 +269,9 @@ def _check_support(params: Any, data: dict, source: str) -> None:
 
 
 def params_from_file(path, params_cls: type) -> Any:
-    """:func:`estimation.robot_file.read_robot_file` then :func:`params_from_description`."""
-    return params_from_description(read_robot_file(path), params_cls)
+    """The ``params_cls`` (``RobotParams``) of a description file (whatever its suffix):
+    :func:`read_robot`'s ``params``."""
+    return _read_file(path, params_cls).params
 
 
 def check_preset_name(name: Any) -> str:
@@ -229,15 +288,15 @@ def preset_source(name: str) -> str:
 
 
 @functools.cache
-def _preset(name: str, params_cls: type) -> Any:
-    data = parse_robot_text(preset_source(name), f"preset {name!r} (azimut_env/robots/{name}.toml)")
-    return params_from_description(data, params_cls)
+def _preset(name: str, params_cls: type) -> RobotDescription:
+    source = f"preset {name!r} (azimut_env/robots/{name}.toml)"
+    return _describe(parse_robot_text(preset_source(name), source, _others(params_cls)), params_cls)
 
 
 def preset_params(name: str, params_cls: type) -> Any:
     """The ``params_cls`` (``RobotParams``) of preset ``name`` (read once, then cached: the
     parameters are frozen)."""
-    return _preset(check_preset_name(name), params_cls)
+    return _preset(check_preset_name(name), params_cls).params
 
 
 def resolve_robot(robot: Any, params: Any, params_cls: type) -> Any:
@@ -248,7 +307,7 @@ def resolve_robot(robot: Any, params: Any, params_cls: type) -> Any:
     JSON (campaign keys, ``run.json``) as it is."""
     if robot is None:
         return params
-    is_file = isinstance(robot, os.PathLike) or (isinstance(robot, str) and robot.endswith(".toml"))
+    is_file = _is_file(robot)
     if not is_file:
         if not isinstance(robot, str) or robot not in PRESET_NAMES:
             raise ValueError(f"unknown robot {robot!r}; choose from {', '.join(PRESET_NAMES)} or give the path of a "
@@ -256,4 +315,4 @@ def resolve_robot(robot: Any, params: Any, params_cls: type) -> Any:
     if params is not None:
         raise ValueError(f"robot={robot!r} and params= both given: choose one (start from RobotParams.preset(...) or "
                          "RobotParams.from_file(...) and change it with dataclasses.replace)")
-    return params_from_file(robot, params_cls) if is_file else preset_params(robot, params_cls)
+    return read_robot(robot, params_cls).params

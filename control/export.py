@@ -42,14 +42,11 @@ EXPORT_FORMATS = ("mcap", "sqlite3")
 
 def robot_description(robot: str = "azimut3") -> tuple[RobotGeometry, tuple[str, ...]]:
     """The geometry and module names of a preset's name or a robot file's path (``.toml``)."""
-    from azimut_env.robot_file import preset_source
-    from estimation.robot_file import module_names, parse_robot_text, read_robot_file
+    from azimut_env.params import RobotParams
+    from azimut_env.robot_file import read_robot
 
-    if str(robot).endswith(".toml"):
-        data = read_robot_file(robot)
-    else:
-        data = parse_robot_text(preset_source(robot), f"preset {robot!r}")
-    return RobotGeometry.from_description(data), module_names(data)
+    description = read_robot(robot, RobotParams)
+    return description.geometry, description.module_names
 
 
 def episode_stamps(log: EpisodeLog) -> np.ndarray:

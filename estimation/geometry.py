@@ -161,10 +161,11 @@ class RobotGeometry:
     @classmethod
     def from_file(cls, path) -> RobotGeometry:
         """The geometry of a robot description file (TOML; the schema is in ``docs/robots.md`` and
-        :mod:`estimation.robot_file`). Only the ``[geometry]`` table is read into the result; the
-        rest of the file is checked for its structure (unknown tables refused) and left to
-        ``azimut_env.params.RobotParams.from_file``. Raises :class:`~estimation.robot_file.RobotFileError`
-        (a ``ValueError``) naming the file, the key and the value."""
+        :mod:`estimation.robot_file`). Only the header and the ``[geometry]`` table are read and
+        checked; the rest of the file is the simulator's, read and checked by
+        ``azimut_env.robot_file.read_robot`` (``RobotParams.from_file``). Raises
+        :class:`~estimation.robot_file.RobotFileError` (a ``ValueError``) naming the file, the key and
+        the value."""
         from estimation.robot_file import read_robot_file
 
         return cls.from_description(read_robot_file(path))

@@ -1,5 +1,5 @@
-"""Robot description files: a robot's geometry (and, for the simulator, its physical parameters)
-in one TOML file.
+"""Robot description files: the file format's header and its ``[geometry]`` table, the part
+:mod:`estimation` owns.
 
 The schema (``docs/robots.md`` shows it whole, with examples)::
 
@@ -21,10 +21,10 @@ The schema (``docs/robots.md`` shows it whole, with examples)::
     # ... or alpha_deg = 45.0 and l_m = 0.30 (the paper's α_k [deg] and l_k [m])
     # b_m, r_m: this module's own values (override the [geometry] ones)
 
-Further tables hold the simulator's parameter groups (``azimut_env.params``: the table names in
-:data:`PARAMETER_TABLES`, their keys the fields of the group's dataclass in SI units) and a
-top-level ``gravity`` [m/s²]; :func:`read_robot_file` checks that no other key is present, and
-``azimut_env.params.RobotParams.from_file`` reads them. This module reads the geometry
+The file's other keys belong to the packages that read them (the simulator's parameter tables
+and ``gravity``: ``azimut_env.robot_file``, the one reader of a whole file, which names them
+here as ``others``); this module knows none of them. It reads the TOML and checks the header
+(:func:`read_robot_file`, :func:`parse_robot_text`) and reads the geometry
 (:func:`geometry_kwargs`, which ``RobotGeometry.from_file`` and ``RobotGeometry.from_description``
 call; this module does not import the geometry, so that the geometry can import it).
 
@@ -46,17 +46,16 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10: the tomli backport (a core dependency there)
     import tomli as tomllib
 
-__all__ = ["SCHEMA_VERSION", "PARAMETER_TABLES", "TOP_LEVEL_KEYS", "RobotFileError", "read_robot_file",
+__all__ = ["SCHEMA_VERSION", "HEADER_KEYS", "GEOMETRY_TABLE", "RobotFileError", "read_robot_file",
            "check_description", "parse_robot_text", "geometry_kwargs", "module_names", "number", "where",
            "MAX_LENGTH_M", "MAX_RADIUS_M", "MAX_OFFSET_M", "unit_hint"]
 
 #: the version of the file format this code reads (the ``schema`` key)
 SCHEMA_VERSION = 1
-#: the tables of the simulator's parameter groups (the fields of ``azimut_env.params.RobotParams``
-#: other than ``geometry`` and ``gravity``); a test checks the two lists agree
-PARAMETER_TABLES = ("chassis", "steering", "steer_motor", "wheel", "tire", "limits", "sensors", "imperfections")
-#: the top-level keys that are not tables
-TOP_LEVEL_KEYS = ("schema", "name", "description", "sources", "gravity")
+#: the file's header: the top-level keys that describe the file, not the robot
+HEADER_KEYS = ("schema", "name", "description", "sources")
+#: the table this module reads
+GEOMETRY_TABLE = "geometry"
 
 #: plausibility bounds of the geometry (a robot file in millimetres, not metres, is refused by
 #: them with a hint): |x|, |y|, l of a steering axis [m], the wheel radius r [m], |b| [m]
@@ -109,12 +108,10 @@ def _check_keys(table: Any, allowed: tuple[str, ...], source: str, key: str) -> 
     return table
 
 
-def read_robot_file(path) -> dict:
-    """Parse and check the structure of a robot description file: TOML, ``schema`` =
-    :data:`SCHEMA_VERSION`, only the known top-level keys and tables (:data:`TOP_LEVEL_KEYS`,
-    ``geometry``, :data:`PARAMETER_TABLES`), a ``[geometry]`` table. Returns the parsed dict with
-    the file's path as a string under ``"_source"``. The tables' contents are checked by the
-    readers of each part (:func:`geometry_from_description`, ``RobotParams.from_file``)."""
+def read_robot_file(path, others: tuple[str, ...] | None = None) -> dict:
+    """Parse a robot description file and check its header (:func:`check_description`).
+    Returns the parsed dict with the file's path as a string under ``"_source"``; the geometry is
+    read by :func:`geometry_kwargs`, the other tables by their own readers."""
     p = Path(path)
     source = str(path)
     try:
@@ -130,24 +127,30 @@ def read_robot_file(path) -> dict:
         raise RobotFileError(f"robot file {source}: not valid TOML ({exc})") from None
     except UnicodeDecodeError as exc:
         raise RobotFileError(f"robot file {source}: not UTF-8 text ({exc.reason})") from None
-    return check_description(data, source)
+    return check_description(data, source, others)
 
 
-def parse_robot_text(text: str, source: str) -> dict:
+def parse_robot_text(text: str, source: str, others: tuple[str, ...] | None = None) -> dict:
     """:func:`read_robot_file` on the text of a description (``source`` names it in messages)."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RobotFileError(f"robot file {source}: not valid TOML ({exc})") from None
-    return check_description(data, source)
+    return check_description(data, source, others)
 
 
-def check_description(data: dict, source: str) -> dict:
-    """The structural checks of :func:`read_robot_file` on an already parsed dict."""
-    allowed = TOP_LEVEL_KEYS + ("geometry",) + PARAMETER_TABLES
-    unknown = [k for k in data if k not in allowed]
-    if unknown:
-        raise RobotFileError(f"robot file {source}: unknown key {unknown[0]!r} (known: {', '.join(allowed)})")
+def check_description(data: dict, source: str, others: tuple[str, ...] | None = None) -> dict:
+    """The header of a parsed description: ``schema`` = :data:`SCHEMA_VERSION`, ``name``,
+    ``description`` and ``sources`` of their kinds, a ``[geometry]`` table. ``others``: the
+    top-level keys the caller reads besides these (the simulator's: ``azimut_env.robot_file``),
+    any other key refused; None: the keys outside the header and ``[geometry]`` are left unchecked
+    (``RobotGeometry.from_file`` reads the geometry of a file whose other tables are the
+    simulator's). Returns a copy of ``data`` with ``"_source"``."""
+    if others is not None:
+        allowed = HEADER_KEYS + (GEOMETRY_TABLE,) + tuple(others)
+        unknown = [k for k in data if k not in allowed]
+        if unknown:
+            raise RobotFileError(f"robot file {source}: unknown key {unknown[0]!r} (known: {', '.join(allowed)})")
     if "schema" not in data:
         raise RobotFileError(f"robot file {source}: missing key 'schema' (this reader reads schema = {SCHEMA_VERSION})")
     if isinstance(data["schema"], bool) or data["schema"] != SCHEMA_VERSION:
@@ -159,13 +162,11 @@ def check_description(data: dict, source: str) -> dict:
     sources = data.get("sources", [])
     if not (isinstance(sources, list) and all(isinstance(x, str) for x in sources)):
         raise RobotFileError(f"{where(source, 'sources')} = {data['sources']!r}: must be a list of strings")
-    if "gravity" in data and not number(data["gravity"], source, "gravity") > 0:
-        raise RobotFileError(f"{where(source, 'gravity')} = {data['gravity']!r}: must be > 0 [m/s²]")
-    if "geometry" not in data:
+    if GEOMETRY_TABLE not in data:
         raise RobotFileError(f"robot file {source}: missing table [geometry]")
-    for key in ("geometry",) + PARAMETER_TABLES:
-        if key in data and not isinstance(data[key], dict):
-            raise RobotFileError(f"{where(source, key)} = {data[key]!r}: must be a table ([{key}])")
+    if not isinstance(data[GEOMETRY_TABLE], dict):
+        raise RobotFileError(f"{where(source, GEOMETRY_TABLE)} = {data[GEOMETRY_TABLE]!r}: must be a table "
+                             "([geometry])")
     out = dict(data)
     out["_source"] = source
     return out

@@ -20,8 +20,8 @@ from collections.abc import Callable, Mapping, Sequence
 from azimut_env.validation import check_range
 
 __all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_output_layout",
-           "require_module",
-           "arg_robot", "arg_robot_file", "arg_imperfections", "add_robot_arguments", "robot_params",
+           "require_module", "arg_robot", "arg_robot_file", "arg_imperfections", "add_robot_arguments",
+           "robot_description", "robot_params",
            "robot_env_kwargs", "robot_args_kwargs", "robot_label", "check_robot_stability", "arg_name_list"]
 
 
@@ -324,6 +324,21 @@ def robot_args_kwargs(args: argparse.Namespace) -> dict:
     value = getattr(args, "imperfections", None)
     return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None),
                             value[0] if isinstance(value, list) else value)
+
+
+def robot_description(args: argparse.Namespace):
+    """The robot of ``--robot``/``--robot-file`` read whole, each package's part
+    (``azimut_env.robot_file.read_robot``: the geometry, the module names, the ``RobotParams`` as
+    the file gives them, without ``--imperfections``); the default robot when none is given."""
+    from pathlib import Path
+
+    from azimut_env.params import RobotParams
+    from azimut_env.robot_file import DEFAULT_PRESET, read_robot
+
+    path = getattr(args, "robot_file", None)
+    if path:  # a file whatever its suffix; the path as given names it in messages
+        return read_robot(path if str(path).endswith(".toml") else Path(path), RobotParams)
+    return read_robot(getattr(args, "robot", None) or DEFAULT_PRESET, RobotParams)
 
 
 def robot_params(args: argparse.Namespace):

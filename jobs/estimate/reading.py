@@ -12,7 +12,7 @@ import argparse
 import sys
 import time
 
-from jobs.args import add_robot_arguments
+from jobs.args import add_robot_arguments, robot_description
 
 __all__ = ["LogProgress", "run_on_log", "add_reading_arguments", "open_source", "robot_geometry", "reader_options",
            "ROS_OPTIONS", "WPILOG_OPTIONS", "WPILOG_MODULE_OPTIONS"]
@@ -118,24 +118,17 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
 def robot_geometry(args: argparse.Namespace):
     """The geometry and module names of ``--robot-file`` or ``--robot`` (default: the azimut3 preset),
     the names replaced by ``--module-names`` when given."""
-    from azimut_env.robot_file import DEFAULT_PRESET, preset_source
-    from estimation.geometry import RobotGeometry
     from estimation.logs.source import check_module_names
-    from estimation.robot_file import module_names, parse_robot_text, read_robot_file
 
-    if getattr(args, "robot_file", None):
-        data = read_robot_file(args.robot_file)
-    else:
-        name = getattr(args, "robot", None) or DEFAULT_PRESET
-        data = parse_robot_text(preset_source(name), f"preset {name!r}")
-    geom = RobotGeometry.from_description(data)
+    robot = robot_description(args)
+    geom = robot.geometry
     names = getattr(args, "module_names", None)
     if names is not None:
         try:
             return geom, check_module_names(names, geom)
         except ValueError as exc:
             raise ValueError(f"argument --module-names: {exc}") from None
-    return geom, module_names(data)
+    return geom, robot.module_names
 
 
 def reader_options(args: argparse.Namespace, fmt: str) -> dict:

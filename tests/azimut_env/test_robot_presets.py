@@ -153,6 +153,25 @@ def test_bad_parameters_refused(tmp_path, extra, needle):
     assert needle in str(exc.value) and str(path) in str(exc.value)
 
 
+@pytest.mark.parametrize("top, needle", [
+    ("nmae = 'r'\n", "unknown key 'nmae' (known: schema, name, description, sources, geometry, gravity, chassis"),
+    ("chassis = 3\n", "chassis = 3: must be a table ([chassis])"),
+    ("gravity = 0\n", "gravity = 0: must be > 0"),
+])
+def test_bad_top_level_keys_refused(tmp_path, top, needle):
+    """The keys outside the header and [geometry] are this layer's: estimation.robot_file does not
+    know them, the whole file is checked here."""
+    path = tmp_path / "r.toml"
+    path.write_text(top + preset_source("tri"))
+    with pytest.raises(RobotFileError) as exc:
+        RobotParams.from_file(path)
+    assert needle in str(exc.value) and str(path) in str(exc.value) and "\n" not in str(exc.value)
+    path.write_text(preset_source("tri") + "\n[chasis]\nmass = 3.0\n")
+    with pytest.raises(RobotFileError, match="unknown key 'chasis'"):
+        RobotParams.from_file(path)
+    assert RobotGeometry.from_file(path) == RobotParams.preset("tri").geometry  # the geometry alone: read
+
+
 def test_unlimited_geometry_needs_unlimited_limits():
     g = RobotGeometry.regular(4, unlimited_steering=True)
     with pytest.raises(ValueError, match="unlimited steering"):

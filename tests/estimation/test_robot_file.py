@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from estimation.geometry import RobotGeometry
-from estimation.robot_file import PARAMETER_TABLES, RobotFileError, read_robot_file
+from estimation.robot_file import RobotFileError, parse_robot_text, read_robot_file
 
 SQUARE = """
 schema = 1
@@ -66,8 +66,7 @@ r_m = 0.08
 @pytest.mark.parametrize("edit, needle", [
     (lambda t: t.replace("schema = 1", "schema = 2"), "schema"),
     (lambda t: t.replace("schema = 1\n", ""), "missing key 'schema'"),
-    (lambda t: t.replace('name = "test"', 'nmae = "test"'), "unknown key 'nmae'"),
-    (lambda t: t + "\n[chasis]\nmass = 3.0\n", "unknown key 'chasis'"),
+    (lambda t: t.replace('name = "test"', 'name = 3'), "name = 3: must be a string"),
     (lambda t: t.replace("y_m = 0.2\n", "y_m = 0.2\nz_m = 1.0\n", 1), "[geometry.modules][0]: unknown key 'z_m'"),
     (lambda t: t.replace("x_m = 0.3", "x_m = 'a'", 1), "[geometry.modules][0].x_m = 'a'"),
     (lambda t: t.replace("x_m = 0.3", "x_m = nan", 1), "must be finite"),
@@ -106,10 +105,13 @@ def test_duplicate_module_names_refused(tmp_path):
         RobotGeometry.from_file(_write(tmp_path, text))
 
 
-def test_parameter_tables_are_the_robot_params_groups():
-    from dataclasses import fields
-
-    from azimut_env.params import RobotParams
-
-    groups = tuple(f.name for f in fields(RobotParams) if f.name not in ("geometry", "gravity"))
-    assert set(groups) == set(PARAMETER_TABLES)
+def test_other_keys_are_the_callers():
+    """The header and [geometry] are this layer's; any other key is the caller's to name (the
+    simulator's tables: azimut_env.robot_file), refused only against the list it gives."""
+    text = SQUARE.format(steering="limited").replace('name = "test"', 'name = "test"\ngravity = 9.81') + \
+        "\n[chassis]\nmass = 3.0\n"
+    assert parse_robot_text(text, "t")["chassis"] == {"mass": 3.0}  # geometry alone: left to its reader
+    assert parse_robot_text(text, "t", others=("gravity", "chassis"))["gravity"] == 9.81
+    with pytest.raises(RobotFileError, match=r"robot file t: unknown key 'chassis' \(known: schema, name, "
+                                             r"description, sources, geometry, gravity\)"):
+        parse_robot_text(text, "t", others=("gravity",))
