@@ -15,15 +15,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
 
-from azimut_env.physics.layout import CMD
 from azimut_env.validation import check_fields
 from azimut_env.validation import check_positive_fields as _check_positive
 
-__all__ = ["ActuatorLimits", "setpoints_from_action", "action_from_setpoints", "setpoints_row"]
+__all__ = ["CMD", "ActuatorLimits", "setpoints_from_action", "action_from_setpoints", "setpoints_row"]
+
+
+class CMD(IntEnum):
+    """Columns of the per-wheel set-points ``commands`` (N, n, len(CMD)) this map writes and the
+    physics reads: the steering angle β_cmd [rad] and the wheel spin rate φ̇_cmd [rad/s]
+    (:mod:`azimut_env.physics.layout` names it with the physics' own columns)."""
+
+    BETA, PHIDOT = range(2)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,8 @@ Every array of :class:`~azimut_env.physics.engine.AzimutPhysics` with a trailing
 (the per-wheel parameters, joint and motor states, the force accumulator, the robot and wheel
 summaries) is indexed through the :class:`~enum.IntEnum` of this module, in Python and in the
 compiled kernels alike (numba folds ``IntEnum`` members into integer constants, so a named index
-costs nothing). The array of ``n_columns`` columns has ``len(Enum)`` columns. The tire state's
+costs nothing). The array of ``n_columns`` columns has ``len(Enum)`` columns. The set-points' columns
+:class:`CMD` are the action map's (:mod:`azimut_env.action_map`), re-exported here. The tire state's
 columns are :class:`azimut_env.physics.tire.TS`, next to the tire model.
 
 Multi-column reads have named selections: :data:`RS_POSE`, :data:`RS_VEL_WORLD`,
@@ -14,6 +15,10 @@ Multi-column reads have named selections: :data:`RS_POSE`, :data:`RS_VEL_WORLD`,
 from __future__ import annotations
 
 from enum import IntEnum
+
+# the set-points' columns, the physics' input: defined by the action map that writes them, a floor
+# below the physics (azimut_env.params imports it), and named here with the physics' own columns
+from azimut_env.action_map import CMD
 
 __all__ = ["CS", "FT", "BODY", "CMD", "WP", "JS", "MS", "ACC", "RS", "WS", "RS_POSE", "RS_VEL_WORLD",
            "RS_TWIST_BODY", "WS_FORCE", "WS_CONTACT"]
@@ -39,13 +44,6 @@ class BODY(IntEnum):
     I [kg·m²] about the centre (the modules' masses at their steering axes)."""
 
     MASS, MOMENT = range(2)
-
-
-class CMD(IntEnum):
-    """Columns of the per-wheel set-points ``commands`` (N, n, len(CMD)): the steering angle
-    β_cmd [rad] and the wheel spin rate φ̇_cmd [rad/s]."""
-
-    BETA, PHIDOT = range(2)
 
 
 class WP(IntEnum):

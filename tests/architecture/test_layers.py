@@ -2,7 +2,8 @@
 
 Every ``import`` statement of every module is read from its source (lazy imports inside functions
 included): a module may import its own package and the packages below it, never one above, and
-the modules' import graph has no cycle.
+the modules' import graph has no cycle. Inside ``azimut_env``, the ground floor (parameters, the
+action map) imports none of the subpackages built on it (physics, task, tracks).
 """
 
 from __future__ import annotations
@@ -63,6 +64,20 @@ def test_no_upward_import(name):
     upward = [f"line {line}: {mod}" for mod, line in _imports(name, MODULES[name])
               if LAYERS.index(mod.split(".")[0]) > rank]
     assert not upward, f"{name} imports a layer above it: {'; '.join(upward)}"
+
+
+#: azimut_env's ground floor, the modules its subpackages import (parameters, the action map, the
+#: input checks, the robot files), and the subpackages above it (ARCHITECTURE.md)
+ENV_GROUND = ("azimut_env.action_map", "azimut_env.params", "azimut_env.validation", "azimut_env.imperfections",
+              "azimut_env.robot_file", "azimut_env.typed_lists")
+ENV_UPPER = ("azimut_env.physics", "azimut_env.task", "azimut_env.tracks")
+
+
+@pytest.mark.parametrize("name", ENV_GROUND)
+def test_env_ground_floor_imports_no_subpackage(name):
+    upward = [f"line {line}: {mod}" for mod, line in _imports(name, MODULES[name])
+              if mod.startswith(tuple(f"{pkg}." for pkg in ENV_UPPER)) or mod in ENV_UPPER]
+    assert not upward, f"{name} imports a floor of azimut_env above it: {'; '.join(upward)}"
 
 
 def test_no_import_cycle():
