@@ -149,8 +149,8 @@ class ActionController:
         lam_d, mu_d, held = np.empty((M, 3)), np.empty(M), np.zeros(M, dtype=np.bool_)
         shape = (geom.a_minus_l, geom.a_perp, float(geom.steer_max), geom.s_unit, self._cos_margin,
                  bool(geom.unlimited_steering))
-        if self.kind == "residual":
-            twists = self.follower.step(env.true_pose, rows)
+        if self.kind == "residual":  # the pose the observation saw, as every controller (true_pose: evaluation only)
+            twists = self.follower.step(env.estimated_pose, rows)
             residual_targets(twists, a, self.residual_angle, self.residual_mu, *shape, lam_d, mu_d, held)
             return lam_d, mu_d, held
         idx = rows.astype(np.int64)

@@ -91,30 +91,20 @@ def test_residual_zero_action_matches_azimut_eval_reference():
     np.testing.assert_allclose(np.array(poses), log.pose, atol=1e-9)
 
 
-def test_mu_own_scale_lets_mu_ramp_while_lambda_turns(geom, limits):
-    """``mu_own_scale``: when the steering limits slow a quick turn of λ (κ < 1), μ still takes
-    its ramp step as far as the wheel speed and acceleration limits allow; the commands stay
-    within every limit and λ moves exactly as without it."""
-    from control.icr.config import ICRControllerConfig
-    from control.icr.motion import coordinated_step
-    from control.limits import limit_violations
-    from estimation.kinematics import steering_from_lambda, wheel_speed_coefficients
+def test_residual_follows_the_estimated_pose_as_azimut_eval_does():
+    """The residual's path follower reads the pose the observation was computed from, as every
+    controller does (the true pose is for evaluation only): with odometry, the zero residual still
+    follows ``azimut eval``'s ICR run (which steered on the true pose before, and drifted apart)."""
+    from control.rollout import run_episode
 
-    lam = np.array([[1.0, 0.0, 0.0], [0.6, 0.0, 0.8]])
-    lam_d = np.array([[0.0, 1.0, 0.0], [0.0, 0.6, 0.8]])
-    mu = np.array([0.2, 0.3])
-    beta = steering_from_lambda(lam, geom)
-    phidot = mu[:, None] * wheel_speed_coefficients(lam, geom, beta) / geom.r
-    args = (lam, mu, np.zeros((2, 3)), beta, np.zeros_like(beta), phidot, lam_d, np.array([1.0, 1.0]),
-            np.zeros(2, dtype=bool), geom, limits)
-    dt = 0.02
-    off = coordinated_step(*args, ICRControllerConfig(), dt)
-    on = coordinated_step(*args, ICRControllerConfig(mu_own_scale=True), dt)
-    assert np.all(off[6] < 1.0)  # κ: the steering limits slow the turn
-    np.testing.assert_array_equal(on[0], off[0])  # λ moves the same
-    assert np.all(on[1] > off[1] + 1e-3)  # μ further toward μ_d
-    rate_c, phidot_c = on[4], on[5]
-    assert not limit_violations(rate_c, rate_c / dt, phidot_c, (phidot_c - phidot) / dt, limits).any()
+    kwargs = dict(pose_source="odometry")
+    log = run_episode("icr", "circle", seed=5, max_time=2.0, env_kwargs=kwargs)
+    venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None, **kwargs),
+                                  action="residual")
+    venv.reset(seed=5)
+    poses = [venv.step(np.zeros((1, 3)))[4]["pose"][0] for _ in range(len(log.t))]
+    assert not np.array_equal(venv.unwrapped.estimated_pose, venv.unwrapped.true_pose)  # odometry drifted
+    np.testing.assert_allclose(np.array(poses), log.pose, atol=1e-9)
 
 
 def test_signed_icr_targets_barely_move_under_random_actions():
