@@ -17,13 +17,17 @@ import numpy as np
 
 from azimut_env.tracks import Track
 from control.icr.config import Mode
+from estimation.libm import hypot
 
-__all__ = ["MOVING_MU", "EpisodeLog", "moving_mask", "episode_metrics", "scenario_metrics", "SCENARIO_METRICS",
-           "progress_bar"]
+__all__ = ["MOVING_MU", "MIN_DISTANCE_M", "EpisodeLog", "moving_mask", "chassis_speed", "distance_metrics",
+           "episode_metrics", "scenario_metrics", "SCENARIO_METRICS", "progress_bar"]
 
 #: |μ| [m/s] of the true chassis motion above which a step counts as moving (5% of the paper
 #: track's nominal 1 m/s; μ = ‖ξ̇‖ of the twist, ξ̇ = μ (v, −u, w)).
 MOVING_MU = 0.05
+#: [m] the least distance the chassis centre must travel for the per-metre metrics
+#: (:func:`distance_metrics`) to be defined: below it they are None, with the reason
+MIN_DISTANCE_M = 0.01
 
 
 @dataclass
@@ -104,8 +108,66 @@ def moving_mask(log: EpisodeLog, min_mu: float = MOVING_MU) -> np.ndarray:
     return (log.mode == int(Mode.RUNNING)) & (log.mu_true > min_mu)
 
 
+def chassis_speed(log: EpisodeLog) -> np.ndarray | None:
+    """(T,) the speed |v| = ‖(ẋ, ẏ)‖ [m/s] of the true chassis centre at each logged step (the
+    linear part of ``twist_true``, whichever frame it is written in); None when the log has no
+    true twist."""
+    if log.twist_true.ndim != 2 or log.twist_true.shape[0] != log.slip_power.shape[0] \
+            or log.twist_true.shape[1] < 2:
+        return None
+    return hypot(log.twist_true[:, 0], log.twist_true[:, 1])  # the C library's: the same bits on every CPU
+
+
+def distance_metrics(log: EpisodeLog) -> dict:
+    """The metrics that weigh slip and antagonism by the distance travelled, and those of the
+    standstill apart (keys of :func:`episode_metrics`'s row):
+
+    * ``distance_m`` [m]: the path length of the true chassis centre, ∫ |v| dt = Σ_k |v_k| dt with
+      |v_k| its speed at the end of control step k (:func:`chassis_speed`), the same samples and
+      rectangle rule as the slip energy Σ_k P_k dt; None when the log has no true twist;
+    * ``slip_energy_per_m`` [J/m]: the slip energy (all steps) divided by ``distance_m``;
+    * ``antagonism_distance_weighted_N`` [N]: ∫ A |v| dt / ∫ |v| dt = Σ A_k |v_k| / Σ |v_k|, the
+      antagonism A averaged over the distance instead of the time (a step at rest weighs nothing);
+    * ``per_m_reason``: None, or why the two above are None: the chassis travelled less than
+      :data:`MIN_DISTANCE_M` (a standstill-only episode), the log has no true twist, or a value
+      is not finite; they are never NaN or infinity;
+    * ``standstill_slip_energy_J`` [J] and ``standstill_mean_antagonism_N`` [N]: the slip energy
+      and the mean antagonism over the standstill steps, those that are not moving steps
+      (:func:`moving_mask`, the same steps as ``standstill_share``); 0 J and None without
+      standstill steps.
+    """
+    dt = log.dt
+    standstill = ~moving_mask(log)
+    out: dict = {}
+    speed = chassis_speed(log)
+    distance = float(np.sum(speed) * dt) if speed is not None else None
+    out["distance_m"] = distance
+    if distance is None:
+        reason = "the log has no true chassis twist to measure the distance travelled"
+    elif not (np.isfinite(distance) and np.all(np.isfinite(log.slip_power))):
+        reason = "the distance or the slip power is not finite"
+    elif not distance >= MIN_DISTANCE_M:
+        reason = f"the chassis travelled {distance:.4f} m, less than {MIN_DISTANCE_M} m"
+    else:
+        reason = None
+    if reason is None:
+        out["slip_energy_per_m"] = float(np.sum(log.slip_power) * dt) / distance
+        weighted = (float(np.sum(log.antagonism * speed) / np.sum(speed))
+                    if log.antagonism.shape == speed.shape else float("nan"))
+        out["antagonism_distance_weighted_N"] = weighted if np.isfinite(weighted) else None
+    else:
+        out["slip_energy_per_m"] = out["antagonism_distance_weighted_N"] = None
+    out["per_m_reason"] = reason
+    still = standstill if standstill.shape == log.slip_power.shape else np.zeros(log.slip_power.shape, dtype=bool)
+    out["standstill_slip_energy_J"] = float(np.sum(log.slip_power[still]) * dt)
+    still = standstill if standstill.shape == log.antagonism.shape else np.zeros(log.antagonism.shape, dtype=bool)
+    out["standstill_mean_antagonism_N"] = float(np.mean(log.antagonism[still])) if still.any() else None
+    return out
+
+
 def episode_metrics(log: EpisodeLog) -> dict:
-    """The metrics table row of one run (see the module docstring); NaN where undefined."""
+    """The metrics table row of one run (see the module docstring); NaN where undefined, but
+    None for the per-metre and standstill metrics (:func:`distance_metrics`)."""
     t_end = float(log.t[-1]) if log.t.size else float("nan")
     lat = log.lateral if log.lateral.size else np.array([np.nan])
     head = log.heading if log.heading.size else np.array([np.nan])
@@ -127,6 +189,7 @@ def episode_metrics(log: EpisodeLog) -> dict:
         "mean_qua_moving": float(np.mean(log.qua[moving])) if moving.any() else float("nan"),
         "min_qua_moving": float(np.min(log.qua[moving])) if moving.any() else float("nan"),
         "standstill_share": float(1.0 - np.mean(moving)) if log.qua.size else float("nan"),
+        **distance_metrics(log),
         "limit_violation_steps": int(np.sum(log.violations)),
         "reconfigure_events": int(log.events),
         "return": float(log.ret),
