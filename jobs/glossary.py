@@ -14,6 +14,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import NamedTuple
 
+from control.episode import MIN_DISTANCE_M
+
 __all__ = ["Column", "GLOSSARY", "KICK_GLOSSARY", "COUNT_METRICS", "glossary_lines"]
 
 
@@ -71,6 +73,28 @@ GLOSSARY: dict[str, Column] = {
                                "rolling speed): forces of wheels that push against each other; 0 when every wheel "
                                "is on the constraining surface and at its speed, whatever the loads, the rolling "
                                "speeds and the acceleration (docs/physics.md, Antagonism)"),
+    "distance_m": Column("distance [m]", "the path length of the true chassis centre, ∫ |v| dt: its speed |v| = "
+                                         "‖(ẋ, ẏ)‖ at the end of each control step times the control period, summed "
+                                         "(the same samples and rule as the slip energy)"),
+    "slip_energy_per_m": Column(
+        "slip per m [J/m]", "the slip energy divided by the distance the chassis centre travelled (distance [m]): what "
+                            "the tires dissipate per metre of path, which a controller does not lower by crawling or "
+                            f"standing still; - when the chassis travelled less than {100 * MIN_DISTANCE_M:g} cm "
+                            "(metrics.json: null, and per_m_reason says why)"),
+    "antagonism_distance_weighted_N": Column(
+        "antagonism over distance [N]", "the antagonism averaged over the distance instead of the time, ∫ A |v| dt / "
+                                        "∫ |v| dt with |v| the chassis centre's speed: a step at rest weighs nothing, "
+                                        "so time spent standing still does not dilute the fighting while moving; - "
+                                        "as for slip per m"),
+    "standstill_slip_energy_J": Column(
+        "standstill slip [J]", "the slip energy over the standstill steps alone (the steps that are not moving steps, "
+                               "as in standstill share): the tires' fighting while the robot stops or turns its wheels "
+                               "in place; 0 without such steps"),
+    "standstill_mean_antagonism_N": Column(
+        "standstill antagonism [N]", "the mean antagonism over the standstill steps alone (as in standstill share); "
+                                     "- without such steps"),
+    "speed_scale": Column("speed ×", "the factor the track's speed profile was multiplied by (--speed-scale; "
+                                     "--speed-scales runs each controller at several)"),
     "mean_nullspace_force_N": Column(
         "mean null-space force [N]", "the mean over steps of the minimum-norm null-space force (the internal force of "
                                      "earlier reports): the norm of the tire forces minus the least-norm forces giving "

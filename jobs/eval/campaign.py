@@ -2,7 +2,9 @@
 :mod:`jobs.campaign.engine`, statistics over seeds, and one report to open.
 
 An episode is defined by its key, ``(controller, track, seed, speed_scale, domain_randomization,
-kicks, max_time)``, ``inputs`` (the content digests of the code and files it runs: the azimut
+kicks, max_time)`` (``--speed-scales`` runs every episode at each scale, one key each, so
+``--resume`` reuses the episodes of any scale run before, by ``--speed-scale`` or
+``--speed-scales``), ``inputs`` (the content digests of the code and files it runs: the azimut
 sources, a user controller's modules, a policy's files, a robot file; :mod:`jobs.eval.fingerprint`),
 ``track_file`` for a track read from a file (:mod:`jobs.eval.track_files`) and, when they are not
 the default, the robot (``robot`` or ``robot_file``) and its ``imperfections`` preset: the env
@@ -13,9 +15,11 @@ one controller with the same options (all but track and seed) run as one batch o
 (:func:`episode_batch`, one per worker), with the metrics each gets alone, bit for bit.
 
 The report folder holds ``report.md`` (the summary table, mean and 95% bootstrap interval over
-seeds per controller × track × metric; then per track the plots that overlay the controllers,
+seeds per controller × track × metric; with several speed scales the fronts, :mod:`jobs.eval.fronts`;
+then per track the plots that overlay the controllers,
 and per controller × track its row with its plots embedded; then the per-seed rows),
-``metrics.json`` (``campaign``, ``summary``, ``episodes``: the per-seed rows), ``plots/`` and
+``metrics.json`` (``campaign``, with ``speed_scales``; ``summary``, one cell per controller × track ×
+speed scale; ``episodes``: the per-seed rows, each with its ``speed_scale``), ``plots/`` and
 ``episodes/`` (one record per finished episode, what ``--resume`` reads, and its trace
 ``<id>.npz``: :func:`jobs.eval.results.save_trace`).
 """
@@ -41,12 +45,13 @@ from jobs.campaign.args import add_executor_arguments, arg_seeds, check_executor
 from jobs.campaign.engine import CampaignInterrupted, Task, TaskStore, resolve_executor, run_tasks
 from jobs.campaign.task import canonical, file_digest
 from jobs.eval.controllers import build_controller, check_controllers
-from jobs.eval.outputs import episode_label, is_own_plot, output_layout
+from jobs.eval.outputs import episode_label, is_own_plot, output_layout, speed_scales_of
 from jobs.eval.plots import comparison_plots, write_plots
 from jobs.eval.report import SUMMARY_COLUMNS, limits_text, write_campaign_report
 from jobs.eval.track_files import episode_track, track_file_entry
 
-__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "run_kwargs", "episode_task", "episode_batch",
+__all__ = ["DEFAULT_DT", "add_arguments", "check_args", "seeds_of", "speed_scales_of", "reference_scale", "run_kwargs",
+           "episode_task", "episode_batch",
            "draw_kick",
            "episode_tasks", "run_eval_campaign", "write_campaign_report", "comparison_plots"]
 
@@ -189,8 +194,10 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                   speed_scale: float = 1.0, domain_randomization: float = 0.0, kicks: bool = False,
                   max_time: float | None = None, plot_seed: int | None = None, robot: str | None = None,
                   robot_file: str | None = None, names: dict[str, str] | None = None,
-                  all_logs: bool = False, imperfections: str | None = None) -> list[Task]:
-    """The campaign's tasks, track-major (the report's order); every episode returns its log with
+                  all_logs: bool = False, imperfections: str | None = None,
+                  speed_scales: Sequence[float] | None = None) -> list[Task]:
+    """The campaign's tasks, track-major, then speed scale (``speed_scales``, else ``speed_scale``
+    alone), controller and seed (the report's order); every episode returns its log with
     ``all_logs`` (``azimut eval``: each episode's trace, the export), else ``plot_seed``'s only;
     ``names`` (spec -> name) labels them. The robot (``robot``, ``robot_file``) and the
     ``imperfections`` preset are in each task's key only when they are given (``--resume`` never
@@ -205,11 +212,13 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
     # statistics or robot file) is a new episode, not a stale record reused
     inputs = {c: controller_inputs(c) for c in controllers}
     robot_digest = {"robot_file": file_digest(robot_file)} if robot_file else {}
+    scales = [float(s) for s in speed_scales] if speed_scales is not None else [float(speed_scale)]
     for track in tracks:
         params = _robot_params(str(Path(robot_file).resolve()) if robot_file else robot, imperfections)
         track_file = track_file_entry(track)
-        nominal = nominal_duration(episode_track(track, params, 0, track_file), speed_scale)
-        for controller in controllers:
+        path = episode_track(track, params, 0, track_file)
+        for speed_scale, controller in ((s, c) for s in scales for c in controllers):
+            nominal = nominal_duration(path, speed_scale)
             for seed in seeds:
                 key = {"controller": controller, "track": track, "seed": int(seed), "speed_scale": float(speed_scale),
                        "domain_randomization": float(domain_randomization), "kicks": bool(kicks),
@@ -229,7 +238,8 @@ def episode_tasks(controllers: Sequence[str], tracks: Sequence[str], seeds: Sequ
                 group = {k: v for k, v in key.items() if k not in ("track", "seed", "track_file")}
                 tasks.append(Task("jobs.eval.campaign:episode_task", key,
                                   extra={"return_log": all_logs or (plot_seed is not None and seed == plot_seed)},
-                                  label=episode_label(names.get(controller, controller), track, seed), cost=cost,
+                                  label=episode_label(names.get(controller, controller), track, seed, speed_scale),
+                                  cost=cost,
                                   check="jobs.eval.campaign:check_episode_result",
                                   batch="jobs.eval.campaign:episode_batch", group=canonical(group)))
     return tasks
@@ -283,6 +293,12 @@ def seeds_of(args: argparse.Namespace) -> list[int]:
     return list(args.seeds) if args.seeds is not None else [int(args.seed or 0)]
 
 
+def reference_scale(scales: Sequence[float]) -> float:
+    """The speed scale of the per-run plots, comparisons, videos and the agents' table: the one
+    nearest 1 (the tracks' nominal speed; of two as near, the slower)."""
+    return min(scales, key=lambda s: (abs(s - 1.0), s))
+
+
 # ------------------------------------------------------------------------------------- run
 
 
@@ -301,7 +317,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     from jobs.eval.results import export_episode, save_trace, write_results
     from jobs.eval.robots import controller_robots
 
-    names = getattr(args, "controller_names", None) or check_controllers(list(controllers), args.speed_scale)
+    scales = speed_scales_of(args)
+    reference = reference_scale(scales)  # the per-run plots, comparisons and videos are of this scale
+    names = getattr(args, "controller_names", None) or check_controllers(list(controllers), scales[0])
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -313,9 +331,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
     imperfections = getattr(args, "imperfections", None)
     campaign_kw = robot_env_kwargs(robot, robot_file, imperfections)
-    robots = controller_robots(controllers, names, args.speed_scale, campaign_kw, robot_label(args),
+    robots = controller_robots(controllers, names, scales[0], campaign_kw, robot_label(args),
                                campaign_set=("domain_randomization",) if args.domain_randomization else ())
-    tasks = episode_tasks(controllers, tracks, seeds, speed_scale=args.speed_scale,
+    tasks = episode_tasks(controllers, tracks, seeds, speed_scales=scales,
                           domain_randomization=args.domain_randomization, kicks=args.kicks, max_time=args.max_time,
                           plot_seed=seeds[0], robot=robot, robot_file=robot_file, names=names, all_logs=True,
                           imperfections=imperfections)
@@ -340,7 +358,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
         art = (rec.get("result") or {}).get("artifacts")
         if not art or "log" not in art:
             return
-        log, first = art["log"], task.key["seed"] == seeds[0]
+        log = art["log"]
+        first = task.key["seed"] == seeds[0] and task.key["speed_scale"] == reference
         store.folder.mkdir(parents=True, exist_ok=True)
         save_trace(store.folder / f"{task.id}.npz", log)  # every episode's, plots or not
         rec["result"]["trace"] = f"episodes/{task.id}.npz"
@@ -364,7 +383,7 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     with signals_as_interrupts() as caught:
         try:
             records = run_tasks(tasks, store, **run_kwargs(args), retry="transient", on_result=on_result,
-                                progress=progress_printer(names, stream, store.folder))
+                                progress=progress_printer(names, stream, store.folder, show_scale=len(scales) > 1))
         except CampaignInterrupted as exc:
             sig = caught["signal"]
             print(f"azimut eval: {'terminated (SIGTERM)' if sig == signal.SIGTERM else 'interrupted'}: {exc.done} of "
@@ -375,7 +394,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     by_controller = {name: limits_text(env_of(name).limits) for name in robots}  # each controller's robot's
     limits: str | dict = (next(iter(by_controller.values())) if len(set(by_controller.values())) == 1
                           else by_controller) if by_controller else limits_text(env0.limits)
-    campaign = {"speed_scale": args.speed_scale, "domain_randomization": args.domain_randomization,
+    campaign = {"speed_scale": scales[0] if len(scales) == 1 else None, "speed_scales": scales,
+                "reference_scale": reference, "domain_randomization": args.domain_randomization,
                 "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
                 "limits": limits, "executor": executor, "workers": args.workers, "level": 0.95,
                 "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,

@@ -20,8 +20,10 @@ All run with the same actuator limits and control period, through the one episod
 Per controller and track (and seed: ``azimut eval`` runs a campaign of (controller, track, seed)
 episodes, see :mod:`jobs.eval.campaign`, whose ``report.md`` and ``metrics.json`` give the
 mean and a bootstrap interval over seeds of each metric) the report has: RMS and max lateral
-error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt, mean antagonism and mean
-null-space force of the tire forces (:mod:`azimut_env.physics.antagonism`), mean
+error, RMS heading error, completion time, slip energy ∫ Σ|F·v_slip| dt and per metre travelled,
+mean antagonism (and weighted by distance, ∫ A|v| dt / ∫ |v| dt) and mean null-space force of the
+tire forces (:mod:`azimut_env.physics.antagonism`), slip and antagonism at standstill
+(:func:`control.episode.distance_metrics`), mean
 and min qua of the measured steering configuration (eq. 28–29) over all steps and **while moving**
 (see :func:`moving_mask`: the controller in its RUNNING mode and the true |μ| above
 :data:`MOVING_MU`; stops and in-place reconfigurations, where the wheels turn with the chassis at
@@ -29,9 +31,10 @@ rest, are left out), the standstill share (the other steps), the number of steps
 commanded limit was exceeded, and the number of stop-and-reconfigure events; and PNG plots: the
 trajectory over the track (the paper's Fig. 9), pairwise β projections against the constraining
 surface (Fig. 10), qua over time (Fig. 11), the ICR's path on the sphere, and the wheel commands
-against their limits. ``--video`` adds a video (GIF, or MP4 with ffmpeg) of each (controller,
-track) episode of the first seed, the env's top-down view redrawn from the episode's log
-(:mod:`jobs.eval.video`).
+against their limits. ``--speed-scales`` runs every controller at several speed scales and adds the
+fronts, lap time against slip per metre per track (:mod:`jobs.eval.fronts`). ``--video`` adds a
+video (GIF, or MP4 with ffmpeg) of each (controller, track) episode of the first seed, the env's
+top-down view redrawn from the episode's log (:mod:`jobs.eval.video`).
 """
 
 from __future__ import annotations
@@ -88,11 +91,35 @@ def arg_tracks(text: str) -> list[str]:
     return [t for t in expanded if t in files or t in names]
 
 
+def arg_speed_scales(text: str) -> list[float]:
+    """``type=`` of ``--speed-scales``: comma-separated speed scales, each what ``--speed-scale``
+    takes (a number in ]0, 10]), order kept, no repeats (1 and 1.0 are one), at least one."""
+    items = [t.strip() for t in text.split(",")]
+    if not any(items):
+        raise argparse.ArgumentTypeError(f"give at least one speed scale, got {text!r}")
+    if not all(items):
+        raise argparse.ArgumentTypeError(f"an empty entry in {text!r}")
+    one = arg_float(0.0, 10.0, lo_open=True)
+    scales = []
+    for item in items:
+        try:
+            scales.append(one(item))
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{exc} (in {text!r})") from None
+    if len(set(scales)) != len(scales):
+        raise argparse.ArgumentTypeError(f"repeated speed scales in {text!r}")
+    return scales
+
+
+arg_speed_scales.__name__ = "speed scales"
+
+
 _COLUMNS = [("controller", "controller", "{}"), ("track", "track", "{}"), ("completed", "done", "{}"),
             ("rms_lateral_m", "RMS lat [cm]", "{:.2f}", 100), ("max_lateral_m", "max lat [cm]", "{:.2f}", 100),
             ("rms_heading_rad", "RMS head [deg]", "{:.2f}", 180 / math.pi),
             ("completion_time_s", "time [s]", "{:.1f}"), ("slip_energy_J", "slip energy [J]", "{:.2f}"),
-            ("mean_antagonism_N", "mean antagonism [N]", "{:.2f}"),
+            ("slip_energy_per_m", "slip per m [J/m]", "{:.2f}"), ("mean_antagonism_N", "mean antagonism [N]", "{:.2f}"),
+            ("antagonism_distance_weighted_N", "antagonism over distance [N]", "{:.2f}"),
             ("mean_nullspace_force_N", "mean null-space force [N]", "{:.2f}"), ("mean_qua", "mean qua (all)", "{:.4f}"),
             ("min_qua", "min qua (all)", "{:.4f}"), ("mean_qua_moving", "mean qua moving", "{:.4f}"),
             ("min_qua_moving", "min qua moving", "{:.4f}"), ("standstill_share", "standstill share", "{:.2f}"),
@@ -137,8 +164,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=arg_int(0, 2**32 - 1), default=0,
                         help="env seed (noise, start, random track); default 0")
     add_robot_arguments(parser, imperfections=True)
-    parser.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
-                        help="multiply every track's speed profile (default 1: the track's nominal speed)")
+    speed = parser.add_mutually_exclusive_group()
+    speed.add_argument("--speed-scale", type=arg_float(0.0, 10.0, lo_open=True), default=1.0,
+                       help="multiply every track's speed profile (default 1: the track's nominal speed)")
+    speed.add_argument("--speed-scales", type=arg_speed_scales, default=None, metavar="SCALES",
+                       help="run each controller at each of these speed scales (comma-separated, e.g. "
+                            "0.6,0.8,1.0,1.2,1.4; each as --speed-scale): the report adds the fronts, lap time "
+                            "against slip per metre per track; not with --speed-scale")
     parser.add_argument("--max-time", type=arg_float(0.0, 3600.0, lo_open=True), default=None, metavar="SECONDS",
                         help="end each episode after this simulated time (default: 3 x the track's nominal "
                              "duration + 10 s); a short value gives a quick smoke run")
@@ -182,7 +214,11 @@ def check_args(args: argparse.Namespace) -> None:
     if args.kick_runs > 0 and other_robot:
         raise ValueError("--kick-runs: the robustness study runs on the default robot (azimut3, paper imperfections) "
                          "only")
-    args.controller_names = check_controllers(list(args.controllers), args.speed_scale)
+    scales = campaign.speed_scales_of(args)
+    args.controller_names = check_controllers(list(args.controllers), scales[0])
+    # a controller is made with speed_scale only when it is not 1 (controller_options): try the other kind too
+    for other in [s for s in scales[1:] if (s == 1.0) != (scales[0] == 1.0)][:1]:
+        check_controllers(list(args.controllers), other)
     _check_policy_robots(args)
     campaign.check_args(args)
 
@@ -203,7 +239,7 @@ def _check_policy_robots(args: argparse.Namespace) -> None:
                             getattr(args, "imperfections", None))
     evaluated = robot_of(want)
     for spec in policies:
-        trained = dict(getattr(build_controller(spec, args.speed_scale), "env_kwargs", None) or {})
+        trained = dict(getattr(build_controller(spec, campaign.speed_scales_of(args)[0]), "env_kwargs", None) or {})
         if robot_of(trained) != evaluated:
             raise ValueError(f"argument --controllers: {spec}: trained on the robot {robot_label(trained)}, not on "
                              f"the evaluated {robot_label(want)}; evaluate it with the "
@@ -259,9 +295,14 @@ def run(args: argparse.Namespace) -> int:
         tracks = list(args.tracks) if isinstance(args.tracks, list) else arg_tracks(args.tracks)
         if not (math.isfinite(args.speed_scale) and args.speed_scale > 0):
             raise ValueError(f"--speed-scale must be > 0, got {args.speed_scale}")
+        scales = campaign.speed_scales_of(args)
+        if getattr(args, "speed_scales", None) is not None:
+            bad = [s for s in scales if not (isinstance(s, (int, float)) and math.isfinite(s) and 0 < s <= 10)]
+            if bad or not scales or len(set(scales)) != len(scales):
+                raise ValueError(f"--speed-scales must be distinct numbers in ]0, 10], got {args.speed_scales}")
         if args.kick_runs < 0:
             raise ValueError(f"--kick-runs must be >= 0, got {args.kick_runs}")
-        names = getattr(args, "controller_names", None) or check_controllers(controllers, args.speed_scale)
+        names = getattr(args, "controller_names", None) or check_controllers(controllers, scales[0])
     except (ValueError, argparse.ArgumentTypeError) as exc:
         print(f"azimut eval: error: {exc}", file=sys.stderr)
         return 2

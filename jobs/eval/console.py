@@ -67,9 +67,10 @@ def failure_text(rec: dict, record_path: Path | str) -> str:
     return text
 
 
-def progress_printer(names: dict[str, str], stream, records_folder: Path) -> Callable:
+def progress_printer(names: dict[str, str], stream, records_folder: Path, show_scale: bool = False) -> Callable:
     """The ``progress(done, total, task, rec)`` callback of :func:`jobs.campaign.engine.run_tasks`
-    that prints one line per finished episode on ``stream``."""
+    that prints one line per finished episode on ``stream`` (with its speed scale, ``×0.8``, when
+    ``show_scale``: a campaign of several)."""
     width = max(len(n) for n in names.values()) if names else 6
 
     def progress(done: int, total: int, task, rec: dict) -> None:
@@ -80,14 +81,17 @@ def progress_printer(names: dict[str, str], stream, records_folder: Path) -> Cal
             qua = f"{qua:.4f}" if qua is not None and math.isfinite(qua) else "- (no moving step)"
             took = (f"batch of {rec['batch']}: {rec['elapsed_s']:.1f} s" if rec.get("batch")
                     else f"{rec['elapsed_s']:.1f} s")
-            msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J, "
+            per_m = m.get("slip_energy_per_m")
+            per_m = f" ({per_m:.2f} J/m)" if isinstance(per_m, (int, float)) and math.isfinite(per_m) else ""
+            msg = (f"RMS lat {100 * m['rms_lateral_m']:.2f} cm, slip {m['slip_energy_J']:.2f} J{per_m}, "
                    f"antagonism {m['mean_antagonism_N']:.2f} N, null-space force {m['mean_nullspace_force_N']:.2f} N, "
                    f"qua moving {qua}, limit-exceeded steps {m['limit_violation_steps']}, "
                    f"stop+reconfig {m['reconfigure_events']}, {took}")
         else:
             msg = failure_text(rec, records_folder / f"{task.id}.json")
         name = names.get(k["controller"], k["controller"])
-        say(f"[{done}/{total}] {name:<{width}} {k['track']:<8} seed {k['seed']:<3} {msg}", stream)
+        scale = f"×{k.get('speed_scale', 1.0):<4g} " if show_scale else ""
+        say(f"[{done}/{total}] {name:<{width}} {k['track']:<8} {scale}seed {k['seed']:<3} {msg}", stream)
 
     return progress
 

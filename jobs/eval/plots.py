@@ -1,6 +1,7 @@
-"""The PNG plots of ``azimut eval``: each run's five plots (:func:`write_plots`) and the
-per-track overlays of the controllers (:func:`comparison_plots`). Needs matplotlib (the ``plot``
-extra); imported only when plots are written.
+"""The PNG plots of ``azimut eval``: each run's five plots (:func:`write_plots`), the
+per-track overlays of the controllers (:func:`comparison_plots`) and, with ``--speed-scales``, the
+per-track fronts (:func:`fronts_plot`). Needs matplotlib (the ``plot`` extra); imported only when
+plots are written.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from control.episode import EpisodeLog
 from control.icr.config import Mode
 from jobs.eval.outputs import PLOT_ENDING
 
-__all__ = ["write_plots", "comparison_plots"]
+__all__ = ["write_plots", "comparison_plots", "fronts_plot"]
 
 
 def _pyplot():
@@ -177,4 +178,44 @@ def comparison_plots(track: str, traces: dict[str, Any], out: Path) -> list[str]
     return files
 
 
-# ----------------------------------------------------------------------------------- report
+def fronts_plot(track: str, cells: list[dict], controllers: list[str], out: Path) -> list[str]:
+    """The fronts of one track (``cells``: its summary cells, one per controller and speed scale):
+    lap time against slip energy per metre (left) and against RMS lateral error (right), one line
+    per controller through its speed scales (each point labelled ×scale; hollow where the
+    controller did not finish every episode). Returns the file name, or nothing when no cell has a
+    lap time."""
+    from jobs.eval.verdict import finished_all, mean_of
+
+    plt = _pyplot()
+    panels = (("slip_energy_per_m", 1.0, "slip energy per metre [J/m]"), ("rms_lateral_m", 100.0, "RMS lateral [cm]"))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    drawn = False
+    for i, controller in enumerate(controllers):
+        mine = sorted((c for c in cells if c["controller"] == controller), key=lambda c: c["speed_scale"])
+        for ax, (metric, factor, _) in zip(axes, panels):
+            pts = [(mean_of(c, "completion_time_s"), factor * mean_of(c, metric), c) for c in mine
+                   if mean_of(c, "completion_time_s") is not None and mean_of(c, metric) is not None]
+            if not pts:
+                continue
+            drawn = True
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "-", color=f"C{i}", lw=1.2, label=controller)
+            for x, y, c in pts:
+                full = finished_all(c)
+                ax.plot([x], [y], "o", color=f"C{i}", mfc=f"C{i}" if full else "none", ms=6)
+                ax.annotate(f"×{c['speed_scale']:g}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7,
+                            color=f"C{i}")
+    if not drawn:
+        _pyplot().close(fig)
+        return []
+    for ax, (_, _, label) in zip(axes, panels):
+        ax.set_xlabel("lap time [s]")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="best")
+    axes[0].set_title(f"fronts on {track}: lower left dominates", fontsize=9)
+    axes[1].set_title("RMS lateral error (hollow: not every episode finished)", fontsize=9)
+    fig.tight_layout()
+    files: list[str] = []
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", track)  # a file name (a track may be a path)
+    _save(fig, out, stem + PLOT_ENDING["fronts"], files, 100)
+    return files

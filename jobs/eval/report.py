@@ -1,10 +1,11 @@
 """``azimut eval``'s report: ``report.md`` and ``metrics.json``, readable without the README.
 
-``report.md`` opens with a verdict (per track, the fastest finisher, the least slip and the least
-lateral error: :mod:`jobs.eval.verdict`), then says what ran (controllers, tracks, seeds, the robot
-each controller drove, limits in words), which code ran it (package version and git commit,
-:func:`jobs.records.provenance`), the summary table (mean
-over seeds, with the bootstrap interval in brackets only where one is shown), the plots per track
+``report.md`` opens with a verdict (per track and speed scale, the fastest finisher, the least slip
+per metre and the least lateral error: :mod:`jobs.eval.verdict`), then says what ran (controllers,
+tracks, seeds, speed scales, the robot each controller drove, limits in words), which code ran it
+(package version and git commit, :func:`jobs.records.provenance`), the summary table (mean
+over seeds, with the bootstrap interval in brackets only where one is shown), with several speed
+scales the fronts (:mod:`jobs.eval.fronts`), the plots per track
 and controller, the per-seed rows when there are several seeds, and a "Columns" section that
 defines every column (:mod:`jobs.glossary`). Counts print as integers. ``metrics.json`` holds the
 same as strict JSON (``null`` for undefined values; :func:`jobs.records.write_json`).
@@ -20,8 +21,8 @@ from jobs.glossary import COUNT_METRICS, GLOSSARY
 from jobs.glossary import glossary_lines as _glossary_lines
 from jobs.records import provenance_text, write_json
 
-__all__ = ["SUMMARY_COLUMNS", "SCENARIO_COLUMNS", "write_campaign_report", "limits_text", "format_value",
-           "interval_shown"]
+__all__ = ["SUMMARY_COLUMNS", "SCENARIO_COLUMNS", "FRONT_COLUMNS", "write_campaign_report", "limits_text",
+           "format_value", "interval_shown", "summary_cell"]
 
 #: the metrics of the summary table, in order: (key, format, scale); headers from jobs.glossary
 SUMMARY_COLUMNS = [
@@ -31,16 +32,24 @@ SUMMARY_COLUMNS = [
     ("rms_heading_rad", "{:.2f}", 180.0 / math.pi),
     ("completion_time_s", "{:.1f}", 1.0),
     ("slip_energy_J", "{:.2f}", 1.0),
+    ("slip_energy_per_m", "{:.2f}", 1.0),
     ("mean_antagonism_N", "{:.2f}", 1.0),
+    ("antagonism_distance_weighted_N", "{:.2f}", 1.0),
     ("mean_nullspace_force_N", "{:.2f}", 1.0),
     ("mean_qua", "{:.4f}", 1.0),
     ("mean_qua_moving", "{:.4f}", 1.0),
     ("min_qua_moving", "{:.4f}", 1.0),
     ("standstill_share", "{:.2f}", 1.0),
+    ("standstill_slip_energy_J", "{:.2f}", 1.0),
+    ("standstill_mean_antagonism_N", "{:.2f}", 1.0),
     ("limit_violation_steps", "{:.1f}", 1.0),
     ("reconfigure_events", "{:.1f}", 1.0),
     ("return", "{:.1f}", 1.0),
 ]
+#: the columns of a track's fronts table (``--speed-scales``, :mod:`jobs.eval.fronts`), after the
+#: controller and the speed scale
+FRONT_COLUMNS = [("completed", "{:.2f}", 1.0), ("completion_time_s", "{:.1f}", 1.0),
+                 ("slip_energy_per_m", "{:.2f}", 1.0), ("rms_lateral_m", "{:.2f}", 100.0)]
 #: the scenarios' own columns (``control.episode.scenario_metrics``), shown when a scenario ran
 SCENARIO_COLUMNS = [
     ("peak_steer_rate_cmd", "{:.2f}", 1.0),
@@ -73,7 +82,8 @@ def interval_shown(stats: dict) -> bool:
             and stats["lo"] != stats["hi"])
 
 
-def _cell(key: str, stats: dict, fmt: str, scale: float) -> str:
+def summary_cell(key: str, stats: dict, fmt: str, scale: float) -> str:
+    """A summary table cell: the mean over seeds, and its interval in brackets where one is shown."""
     if not stats or stats.get("n", 0) == 0 or not math.isfinite(stats["mean"]):
         return "-"
     mean = format_value(key, stats["mean"], fmt, scale)
@@ -82,29 +92,37 @@ def _cell(key: str, stats: dict, fmt: str, scale: float) -> str:
     return f"{mean} [{format_value(key, stats['lo'], fmt, scale)}, {format_value(key, stats['hi'], fmt, scale)}]"
 
 
-def _summary_table(cells: list[dict], columns: list = SUMMARY_COLUMNS) -> list[str]:
+def _where(item: dict, scales: bool) -> str:
+    """The leading cells of a row: controller, track and, with ``scales``, the speed scale."""
+    return f"| {item['controller']} | {item['track']} | " + (f"{item.get('speed_scale', 1.0):g} | " if scales else "")
+
+
+def _summary_table(cells: list[dict], columns: list = SUMMARY_COLUMNS, scales: bool = False) -> list[str]:
     heads = [GLOSSARY[k].header for k, _, _ in columns]
-    lines = ["| controller | track | episodes ok/failed | " + " | ".join(heads) + " |",
-             "|---|---|---|" + "---|" * len(columns)]
+    speed = f"{GLOSSARY['speed_scale'].header} | " if scales else ""
+    lines = [f"| controller | track | {speed}episodes ok/failed | " + " | ".join(heads) + " |",
+             "|---|---|---|" + "---|" * (len(columns) + scales)]
     for cell in cells:
         stats = cell["metrics"]
-        lines.append(f"| {cell['controller']} | {cell['track']} | {cell['ok']}/{cell['failed']} | "
-                     + " | ".join(_cell(k, stats.get(k, {}), fmt, scale) for k, fmt, scale in columns) + " |")
+        lines.append(f"{_where(cell, scales)}{cell['ok']}/{cell['failed']} | "
+                     + " | ".join(summary_cell(k, stats.get(k, {}), fmt, scale) for k, fmt, scale in columns) + " |")
     return lines
 
 
-def _seed_table(rows: list[dict], columns: list = SUMMARY_COLUMNS) -> list[str]:
+def _seed_table(rows: list[dict], columns: list = SUMMARY_COLUMNS, scales: bool = False) -> list[str]:
     cols = [c for c in columns if c[0] != "completed"]
-    lines = ["| controller | track | seed | status | done | " + " | ".join(GLOSSARY[k].header for k, _, _ in cols)
-             + " |", "|---|---|---|---|---|" + "---|" * len(cols)]
+    speed = f"{GLOSSARY['speed_scale'].header} | " if scales else ""
+    lines = [f"| controller | track | {speed}seed | status | done | "
+             + " | ".join(GLOSSARY[k].header for k, _, _ in cols) + " |",
+             "|---|---|---|---|---|" + "---|" * (len(cols) + scales)]
     for r in rows:
         if r.get("status") != "ok":
-            lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | failed: {str(r.get('error', ''))[:80]} "
+            lines.append(f"{_where(r, scales)}{r['seed']} | failed: {str(r.get('error', ''))[:80]} "
                          "| - | " + " | ".join("-" for _ in cols) + " |")
             continue
         vals = [format_value(k, r.get(k), fmt, scale) for k, fmt, scale in cols]
         done = format_value("done", r.get("completed"), "{}")
-        lines.append(f"| {r['controller']} | {r['track']} | {r['seed']} | ok | {done} | " + " | ".join(vals) + " |")
+        lines.append(f"{_where(r, scales)}{r['seed']} | ok | {done} | " + " | ".join(vals) + " |")
     return lines
 
 
@@ -139,8 +157,12 @@ _PLOT_GUIDE = ("Per track, the controllers overlaid: their trajectories, and the
 
 
 def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
-                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]]) -> None:
-    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``)."""
+                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]],
+                          fronts: Sequence[str] = ()) -> None:
+    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``; the plots
+    of a (controller, track) and the comparisons are of the reference speed scale; ``fronts``: the
+    Markdown lines of the fronts section, :func:`jobs.eval.fronts.fronts_lines`, with several
+    speed scales)."""
     write_json(out / "metrics.json", {"campaign": campaign, "summary": cells, "episodes": rows})
     seeds = campaign["seeds"]
     prov = campaign.get("provenance") or {}
@@ -152,13 +174,19 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
     from jobs.eval.robots import env_kwargs_sentence, limits_sentence
     from jobs.eval.verdict import verdict_lines
 
+    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
+    several = len(scales) > 1
+    reference = campaign.get("reference_scale", scales[0])
     lines = ["# azimut eval", "", "## Verdict", "",
-             f"Best per track (means over {'the seeds' if len(seeds) > 1 else 'one seed'}, "
-             "from the summary table below):", ""]
+             f"Best per track{' and speed scale' if several else ''} (means over "
+             f"{'the seeds' if len(seeds) > 1 else 'one seed'}, from the summary table below; the least slip is "
+             "ranked by the slip energy per metre travelled, which crawling or standing still does not lower):", ""]
     lines += verdict_lines(cells, list(campaign["tracks"]), list(campaign["controllers"]))
     lines += ["", "## What ran", "",
              f"Controllers {', '.join(campaign['controllers'])}{named}; tracks {', '.join(campaign['tracks'])}; "
-             f"seeds {_seed_text(seeds)} ({len(seeds)}); speed scale {campaign['speed_scale']}; domain randomisation "
+             f"seeds {_seed_text(seeds)} ({len(seeds)}); "
+             + (f"speed scales {', '.join(f'{x:g}' for x in scales)} (the fronts below; plots of ×{reference:g})"
+                if several else f"speed scale {scales[0]}") + "; domain randomisation "
              f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
              + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
              (campaign.get("robot_sentence") or f"Robot {campaign.get('robot', 'azimut3')}"
@@ -170,17 +198,24 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
              f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
              f"Produced by {provenance_text(prov)}.", "",
              "## Summary", "", _statistics_sentence(cells, campaign), ""]
-    lines += _summary_table(cells, table)
+    lines += _summary_table(cells, table, several)
+    undefined = sorted({f"{r['controller']} on {r['track']}" + (f" ×{r['speed_scale']:g}" if several else "")
+                        + f", seed {r['seed']}: {r['per_m_reason']}" for r in rows if r.get("per_m_reason")})
+    if undefined:
+        lines += ["", "Per-metre metrics undefined (left out of their means):", ""] + [f"- {u}" for u in undefined]
     failed = [r for r in rows if r.get("status") != "ok"]
     if failed:
         lines += ["", "Failed episodes (an error of the episode's own code is not retried; its traceback is in "
                   "the episode's record):", ""]
-        lines += [f"- {r['controller']} on {r['track']}, seed {r['seed']}: {r.get('error')} (after "
+        lines += [f"- {r['controller']} on {r['track']}" + (f" ×{r.get('speed_scale', 1.0):g}" if several else "")
+                  + f", seed {r['seed']}: {r.get('error')} (after "
                   f"{r.get('attempts', 1)} attempt(s))" + (f"; traceback in `{r['record']}`" if r.get("record") else "")
                   for r in failed]
-    by_cell = {(c["controller"], c["track"]): c for c in cells}
+    lines += list(fronts)
+    by_cell = {(c["controller"], c["track"]): c for c in cells if c.get("speed_scale", reference) == reference}
+    at = f" at speed scale ×{reference:g}" if several else ""
     if plots or compare:
-        lines += ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}. {_PLOT_GUIDE}"]
+        lines += ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}{at}. {_PLOT_GUIDE}"]
         for track in campaign["tracks"]:
             lines += ["", f"### {track}", ""]
             for f in compare.get(track, []):
@@ -189,21 +224,21 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
                 cell = by_cell.get((controller, track))
                 lines += ["", f"#### {controller} on {track}", ""]
                 if cell is not None:
-                    lines += _summary_table([cell], table)
+                    lines += _summary_table([cell], table, several)
                 lines.append("")
                 for f in plots.get((controller, track), []):
                     lines.append(f"![{Path(f).stem}]({f})")
     if campaign.get("videos"):
-        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}, the env's top-down view of each episode "
+        lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}{at}, the env's top-down view of each episode "
                   "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
         lines += [f"- {what}: [{f}]({f})" for what, f in campaign["videos"].items()]
     if campaign.get("exports"):
         lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
                   "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
         lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
-    columns = ["controller", "track", "episodes"] + [k for k, _, _ in table]
+    columns = ["controller", "track"] + (["speed_scale"] if several else []) + ["episodes"] + [k for k, _, _ in table]
     if len(seeds) > 1:
-        lines += ["", "## Per-seed rows", ""] + _seed_table(rows, table)
+        lines += ["", "## Per-seed rows", ""] + _seed_table(rows, table, several)
         columns += ["seed", "status", "done"]
     lines += [""] + _glossary_lines(columns) + [""]
     (out / "report.md").write_text("\n".join(lines))

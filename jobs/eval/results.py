@@ -67,6 +67,7 @@ def row_of(record: dict, names: dict[str, str], records_folder: Path | None = No
                "error": record.get("error")}
         if records_folder is not None:
             row["record"] = str(records_folder / f"{record['id']}.json")
+    row["speed_scale"] = float(key.get("speed_scale", 1.0))  # from the key: a record of any version has it
     row["attempts"] = record.get("attempts", 1)
     return row
 
@@ -74,11 +75,15 @@ def row_of(record: dict, names: dict[str, str], records_folder: Path | None = No
 def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequence[str], tracks: Sequence[str],
                   seeds: Sequence[int], names: dict[str, str], robots: dict[str, dict], campaign: dict,
                   records_folder: Path, *, n_resamples: int, video: bool, compare: bool) -> tuple[int, int]:
-    """The rows, the summary cells (mean and interval over seeds), the comparison plots of the
-    first seed and ``report.md``/``metrics.json`` (:func:`jobs.eval.report.write_campaign_report`);
-    ``campaign``: the run's facts so far (completed here). Returns (episodes ok, episodes)."""
+    """The rows, the summary cells (mean and interval over seeds per controller × track × speed
+    scale), the comparison plots of the first seed (at the reference speed scale,
+    ``campaign["reference_scale"]``), the fronts with several speed scales
+    (:mod:`jobs.eval.fronts`) and ``report.md``/``metrics.json``
+    (:func:`jobs.eval.report.write_campaign_report`); ``campaign``: the run's facts so far
+    (completed here). Returns (episodes ok, episodes)."""
     from jobs.eval.agents import write_agents
-    from jobs.eval.plots import comparison_plots
+    from jobs.eval.fronts import fronts_lines
+    from jobs.eval.plots import comparison_plots, fronts_plot
     from jobs.eval.robots import robot_sentence
     from jobs.records import provenance
 
@@ -89,40 +94,52 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
             row["robot"], row["imperfections"] = r["robot"], r["imperfections"]
     controllers = [names.get(c, c) for c in specs]  # the report speaks of names
     ok_rows = [r for r in rows if r["status"] == "ok"]
-    skip = ("controller", "track", "seed", "status", "error", "attempts", "kick", "robot", "imperfections", "record")
+    skip = ("controller", "track", "seed", "status", "error", "attempts", "kick", "robot", "imperfections", "record",
+            "speed_scale")
     metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
                                                  if k not in {c[0] for c in SUMMARY_COLUMNS} and k not in skip
                                                  and isinstance(ok_rows[0][k], (int, float))]
     metrics += [c[0] for c in SCENARIO_COLUMNS if c[0] not in metrics and any(c[0] in r for r in ok_rows)]
-    cells = summarize(ok_rows, ("controller", "track"), metrics, n_resamples=n_resamples)
-    by = {(c["controller"], c["track"]): c for c in cells}
+    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
+    reference = campaign.get("reference_scale", scales[0])
+    several = len(scales) > 1
+    # grouped by speed scale only when there are several: a campaign of one keeps its cells' bootstrap seeds
+    # (a hash of the group) and so its intervals
+    cells = summarize(ok_rows, ("controller", "track") + (("speed_scale",) if several else ()), metrics,
+                      n_resamples=n_resamples)
+    for cell in cells:
+        cell.setdefault("speed_scale", scales[0])
+    by = {(c["controller"], c["track"], c["speed_scale"]): c for c in cells}
     full = []
-    for track in tracks:
-        for controller in controllers:
-            n_failed = sum(1 for r in rows if r["controller"] == controller and r["track"] == track
-                           and r["status"] != "ok")
-            cell = by.get((controller, track), {"controller": controller, "track": track, "n": 0, "metrics": {}})
-            cell["ok"], cell["failed"] = cell["n"], n_failed
-            if controller in robots:
-                cell["robot"], cell["imperfections"] = robots[controller]["robot"], robots[controller]["imperfections"]
-            full.append(cell)
+    for track, scale, controller in ((t, x, c) for t in tracks for x in scales for c in controllers):
+        n_failed = sum(1 for r in rows if r["controller"] == controller and r["track"] == track
+                       and r["speed_scale"] == scale and r["status"] != "ok")
+        cell = by.get((controller, track, scale), {"controller": controller, "track": track, "speed_scale": scale,
+                                                   "n": 0, "metrics": {}})
+        cell["ok"], cell["failed"] = cell["n"], n_failed
+        if controller in robots:
+            cell["robot"], cell["imperfections"] = robots[controller]["robot"], robots[controller]["imperfections"]
+        full.append(cell)
     ok = [rec for rec in records if rec["status"] == "ok"]
+    at_reference = [rec for rec in ok if rec["key"].get("speed_scale", 1.0) == reference]
     videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
-              for rec in ok if video and rec["result"].get("video")}
-    exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}":
-               rec["result"]["export"] for rec in ok if rec["result"].get("export")}
+              for rec in at_reference if video and rec["result"].get("video")}
+    exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}"
+               + (f", speed ×{rec['key']['speed_scale']:g}" if several else ""): rec["result"]["export"]
+               for rec in ok if rec["result"].get("export")}
     plots: dict[tuple[str, str], list[str]] = {}
     comparisons: dict[str, list[str]] = {}
     plot_seed = seeds[0]
     if compare:
-        for rec in ok:
+        for rec in at_reference:
             if rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
                 plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
         for track in tracks:
             traces = {}
             for task in tasks:
                 npz = records_folder / f"{task.id}.npz"
-                if task.key["track"] == track and task.key["seed"] == plot_seed and npz.is_file():
+                if (task.key["track"] == track and task.key["seed"] == plot_seed
+                        and task.key.get("speed_scale", 1.0) == reference and npz.is_file()):
                     traces[names.get(task.key["controller"])] = dict(np.load(npz))
             if traces:
                 (out / "plots").mkdir(exist_ok=True)
@@ -137,6 +154,16 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
                 "env_kwargs": {name: r.get("other", {}) for name, r in robots.items()},
                 "controller_specs": {names.get(c, c): c for c in specs if names.get(c, c) != c},
                 "exports": exports, "provenance": provenance()}
-    write_campaign_report(out, rows, full, campaign, plots, comparisons)
-    write_agents(out, rows, controllers, list(tracks), n_resamples=n_resamples)  # agents over training seeds, if any
+    fronts: list[str] = []
+    if several:  # per track, each controller through its speed scales
+        pngs = None
+        if compare:
+            (out / "plots").mkdir(exist_ok=True)
+            pngs = {track: [f"plots/{f}" for f in fronts_plot(track, [c for c in full if c["track"] == track],
+                                                              controllers, out / "plots")] for track in tracks}
+        fronts = fronts_lines(full, list(tracks), controllers, scales, pngs)
+    write_campaign_report(out, rows, full, campaign, plots, comparisons, fronts=fronts)
+    # agents over training seeds, if any: at the reference speed scale (their statistics are over seeds alone)
+    write_agents(out, [r for r in rows if r["speed_scale"] == reference], controllers, list(tracks),
+                 n_resamples=n_resamples)
     return len(ok_rows), len(rows)

@@ -158,11 +158,12 @@ def test_the_report_opens_with_a_verdict_computed_from_the_metrics(mine):
     cells = {c["controller"]: c["metrics"] for c in json.loads((out / "metrics.json").read_text())["summary"]
              if c["metrics"]["completed"]["mean"] == 1.0}  # ranked among those that finished every episode
     if cells:
-        least = {key: min(cells, key=lambda c: cells[c][key]["mean"]) for key in ("slip_energy_J", "rms_lateral_m")}
-        assert f"least slip **{least['slip_energy_J']}**" in line
+        least = {key: min(cells, key=lambda c: cells[c][key]["mean"]) for key in ("slip_energy_per_m",
+                                                                                    "rms_lateral_m")}
+        assert f"least slip per metre **{least['slip_energy_per_m']}**" in line
         assert f"least lateral error **{least['rms_lateral_m']}**" in line
     else:
-        assert "least slip: none (no controller finished every episode)" in line
+        assert "least slip per metre: none (no controller finished every episode)" in line
     assert "fastest finisher" in line
 
 
@@ -348,15 +349,15 @@ def test_the_verdict_ranks_only_the_controllers_that_finished():
     from jobs.eval.verdict import verdict_lines
 
     def cell(name, done, slip, lat, time_s):
-        stats = {"completed": done, "slip_energy_J": slip, "rms_lateral_m": lat, "completion_time_s": time_s}
+        stats = {"completed": done, "slip_energy_per_m": slip, "rms_lateral_m": lat, "completion_time_s": time_s}
         return {"controller": name, "track": "line", "n": 1, "ok": 1, "failed": 0,
                 "metrics": {k: {"mean": v, "lo": v, "hi": v, "n": 1} for k, v in stats.items()}}
 
     line = verdict_lines([cell("still", 0.0, 0.0, 0.0, float("nan")), cell("mover", 1.0, 2.0, 0.01, 5.0)],
                          ["line"], ["still", "mover"])[0]
-    assert "least slip **mover**" in line and "least lateral error **mover**" in line
+    assert "least slip per metre **mover** (2.00 J/m" in line and "least lateral error **mover**" in line
     none = verdict_lines([cell("still", 0.0, 0.0, 0.0, float("nan"))] * 1, ["line"], ["still"])[0]
-    assert "least slip: none" in none
+    assert "least slip per metre: none" in none
 
 
 def test_a_closed_stdout_stops_the_progress_quietly():
