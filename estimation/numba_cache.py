@@ -95,11 +95,20 @@ def structref_constructor(struct_type, names, filename: str, module: str):
     """The cached compiled constructor of a numba ``StructRef`` type, ``new(*fields)`` with the
     fields ``names`` in order: its source is generated from the field table and compiled as if in
     ``filename`` (the caller's module ``module``), under a name that hashes the source, so that
-    numba's disk cache keys it by its fields (a kernel's struct and its table stay one concept)."""
+    numba's disk cache keys it by its fields (a kernel's struct and its table stay one concept).
+
+    With ``NUMBA_DISABLE_JIT=1`` (the kernels run as plain Python, as the tests that pin them do)
+    a StructRef cannot be built: ``new`` returns a named tuple of the same fields instead, which
+    the Python kernels read by the same names."""
     from numba import njit
+    from numba.core import config
     from numba.experimental import structref
 
     names = list(names)
+    if config.DISABLE_JIT:
+        from collections import namedtuple
+
+        return namedtuple(struct_type.__class__.__name__.removesuffix("Type"), names, module=module)
     src = (f"def _new({', '.join(names)}):\n    st = structref.new(_TYPE)\n"
            + "".join(f"    st.{name} = {name}\n" for name in names) + "    return st\n")
     name = "_new_" + hashlib.sha256(src.encode()).hexdigest()[:16]

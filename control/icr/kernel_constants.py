@@ -6,8 +6,8 @@ The struct holds the robot's geometry (the arrays of :class:`~estimation.geometr
 and its stop circles' normals), the limit constants and the tuning as float arrays (indices
 ``L_*`` and ``C_*`` of :mod:`control.icr.kernels`), the κ grid and the control period, so that the
 step and its motion primitives take one argument for all of them instead of a dozen positional
-ones. Every constant is computed here in Python floats, by the expressions the NumPy version
-uses, so with the same bits.
+ones. Every constant is computed here once, in Python floats. Without JIT
+(``NUMBA_DISABLE_JIT=1``) the struct is a named tuple of the same fields.
 
 The work space replaces the small arrays the row functions used to allocate for every robot and
 step: its rows are named (:class:`WS`), a function reads the rows it needs.
@@ -96,8 +96,8 @@ _NEW = structref_constructor(_TYPE, _NAMES, __file__, __name__)
 
 def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig,
                        dt: float) -> ICRConstants:
-    """The struct of (geom, limits, config, dt): every constant the NumPy version computes in
-    Python floats, by the same expressions (so with the same bits)."""
+    """The struct of (geom, limits, config, dt): every constant the step reads, computed in Python
+    floats."""
     sam, srm, wsm, wam = (float(limits.steer_accel_max), float(limits.steer_rate_max), float(limits.wheel_speed_max),
                           float(limits.wheel_accel_max))
     lim = np.zeros(N_LIM)
