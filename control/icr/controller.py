@@ -15,58 +15,54 @@ propulsion axes always concur (no actuator antagonism):
 * propulsion set-points r φ̇_c = μ (s⊥2 − b ẑ)·λ − b β̇_c, including the b/r steer-to-drive
   coupling of the sidewise wheel.
 
-One control period (:func:`icr_control_step_batch`, N robots at once):
+One control period (:func:`icr_control_step_batch`, N robots at once) is one call of the compiled
+step, :func:`control.icr.compiled.compiled_control_step_batch` (numba, row by row; its building
+blocks are in :mod:`control.icr.kernels` and :mod:`control.icr.kernels_motion`):
 
-1. the feasible target (:func:`control.icr.feasibility.feasible_target`): the representative of
-   (λ_d, μ_d) nearer to λ, moved out of the steering-axis caps, μ_d clamped to the wheel-speed
-   limits at λ_d;
-2. the mode transitions (:func:`control.icr.modes.mode_transitions`): RUNNING -> STOPPING ->
-   RECONFIGURING -> RUNNING when the great-circle arc λ -> λ_d crosses a steering axis, or a
-   steering stop farther than a hold takes, or a wheel is knocked out of place; a target beyond a
-   stop is held at the nearest point of the current configuration's cell
-   (:func:`control.icr.feasibility.stop_hold_point_batch`) until the hold has missed
-   ``stop_hold_distance`` of motion;
-3. the commands of each mode (:func:`control.icr.modes.mode_commands`): a time-scaled step of
-   (λ, μ) (:func:`control.icr.motion.coordinated_step`: the largest κ ∈ [0, 1] blending the previous
-   motion with the desired one for which every wheel's β̇, β̈, φ̇, φ̈ stays within
+1. the feasible target: the representative of (λ_d, μ_d) nearer to λ, moved out of the
+   steering-axis caps (:func:`control.icr.feasibility.project_off_axes`), μ_d clamped to the
+   wheel-speed limits at λ_d;
+2. the mode transitions: RUNNING -> STOPPING -> RECONFIGURING -> RUNNING when the great-circle arc
+   λ -> λ_d crosses a steering axis, or a steering stop farther than a hold takes, or a wheel is
+   knocked out of place; a target beyond a stop is held at the nearest point of the current
+   configuration's cell (:func:`control.icr.feasibility.stop_hold_point_batch`) until the hold has
+   missed ``stop_hold_distance`` of motion;
+3. the commands of each mode: a time-scaled step of (λ, μ) (the largest κ ∈ [0, 1] blending the
+   previous motion with the desired one for which every wheel's β̇, β̈, φ̇, φ̈ stays within
    :class:`azimut_env.params.ActuatorLimits`; per-wheel saturation if none is, flagged in
-   ``info["saturated"]``), or wheels turned in place (:func:`control.icr.motion.reconfigure_step`).
+   ``info["saturated"]``), or wheels turned in place.
 
 The commands are integrated from the previous *commands*, not from the measurements, so sensor
 noise does not reach the set-points; the measurements (β, φ̇, λ̂, μ̂) are used to start, to detect
 that the robot has stopped, and to detect a wheel knocked out of place.
 
-One robot is a batch of one: :func:`icr_control_step` runs :func:`icr_control_step_batch` on the
-one-row :class:`~control.icr.state.ICRBatchState` inside its :class:`ICRControllerState`.
+The compiled step is the only implementation: the tests' reference is the same code run as plain
+Python (``NUMBA_DISABLE_JIT=1``, ``tests/control/test_icr_compiled.py``). One robot is a batch of
+one: :func:`icr_control_step` runs :func:`icr_control_step_batch` on the one-row
+:class:`~control.icr.state.ICRBatchState` inside its :class:`ICRControllerState`.
 
-The building blocks live in their own modules and are importable from here as before:
-:mod:`control.icr.config` (modes, tuning), :mod:`control.icr.state` (state),
-:mod:`control.icr.feasibility` (speed bounds, axes, arcs, stops), :mod:`control.icr.motion` (motion
-primitives), :mod:`control.icr.modes` (state machine), :mod:`control.commands` (the command type
-shared with the twist baseline); the great-circle maths is in :mod:`estimation.hrep`.
+Their neighbours' names are importable from here too: :mod:`control.icr.config` (modes,
+tuning), :mod:`control.icr.state` (state), :mod:`control.icr.feasibility` (axes, arcs, stops, for
+planners and tests), :mod:`control.commands` (the command type shared with the twist baseline);
+the great-circle maths is in :mod:`estimation.hrep`.
 """
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 
 from control.checks import check_finite_array, check_unit, check_unit_batch
 from control.commands import WheelCommand
+from control.icr.compiled import compiled_control_step_batch
 from control.icr.config import Event, ICRControllerConfig, Mode
 from control.icr.feasibility import (
     arc_blocked,
     arc_check,
     arc_check_batch,
-    clamp_mu,
-    feasible_target,
-    mu_bounds,
     project_off_axes,
     project_off_axes_batch,
     reference_stop_mask,
 )
-from control.icr.modes import mode_commands, mode_transitions
 from control.icr.state import ICRBatchState, ICRControllerState, initial_state, initial_state_batch
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
@@ -86,8 +82,6 @@ __all__ = [
     "WheelCommand",
     "ICRController",
     "nearer_target",
-    "clamp_mu",
-    "mu_bounds",
     "project_off_axes",
     "arc_blocked",
     "arc_check",
@@ -108,7 +102,7 @@ def icr_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phi
     """One control period of N ICR controllers at once (pure: returns the new state and the commands).
 
     Row i is exactly what :func:`icr_control_step` does for robot i (that function is the N = 1
-    case of this one); the modes of the state machine are handled with per-row masks.
+    case of this one): the compiled step works row by row, no row reads another.
 
     Args:
         state: from :func:`initial_state_batch` or the previous step.
@@ -129,17 +123,12 @@ def icr_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phi
     mu_hat = check_finite_array(mu_hat, "mu_hat", (nrows,))
     beta_meas = check_finite_array(beta_meas, "beta_meas", (nrows, n))
     check_finite_array(phidot_meas, "phidot_meas", (nrows, n))
-    lam_d = check_unit_batch(lam_d, "lam_d")
-    if lam_d.shape[0] != nrows:
+    if check_unit_batch(lam_d, "lam_d").shape[0] != nrows:
         raise ValueError(f"lam_d must have shape ({nrows}, 3)")
     mu_d = check_finite_array(mu_d, "mu_d", (nrows,))
-    lam_d, mu_d, zero_cmd, axis_k = feasible_target(state.lam, lam_d, mu_d, geom, limits, config)
-    # feasible_target's arrays are new and mode_transitions works on copies: no copy for info
-    info: dict = {"lam_target": lam_d, "mu_target": mu_d, "axis_cap": axis_k}
-    upd = mode_transitions(state, mu_hat, beta_meas, lam_d, mu_d, zero_cmd, geom, config, dt)
-    new_state, cmd = mode_commands(state, upd, beta_meas, zero_cmd, geom, limits, config, dt)
-    info.update(cmd.info)
-    return new_state, replace(cmd, info=info)
+    # the compiled step normalises λ̂ and λ_d itself (once: normalising twice may change a bit)
+    return compiled_control_step_batch(state, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d, geom, limits,
+                                       config, dt)
 
 
 def icr_control_step(state: ICRControllerState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,

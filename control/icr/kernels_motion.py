@@ -1,18 +1,24 @@
-"""The ICR controller's motion primitives compiled, one robot at a time: the numba twins of
-:func:`control.icr.motion.coordinated_step` (with :func:`~control.icr.motion.mu_own_step`) and
-:func:`control.icr.motion.reconfigure_step`, with the same operations in the same order (see
-:mod:`control.icr.kernels`). The step that calls them is :mod:`control.icr.compiled`; the
-constants and the work space ``ws`` they read are :mod:`control.icr.kernel_constants`'.
+"""The ICR controller's two motion primitives, compiled, one robot at a time.
 
-The time scaling differs in how, not in what. The NumPy version evaluates every κ of the grid
-and takes the last feasible one, or, when none is, the smallest limit ratio (the lowest κ among
-equals, NumPy's ``argmin``). Here :func:`kappa_search` tries κ from 1 down and stops at the first
-feasible one, the largest; each candidate stops at its first limit term above the bound (the
-ratio, a maximum of terms, is above the bound exactly when one term is), starting with the
-wheel that ruled out the previous candidate and with the steering terms, which need no
-cos/sin. Only when no κ is feasible does :func:`kappa_fallback` compute the ratios, a candidate
-stopping once its wheels so far exceed the best ratio found. The chosen candidate is then
-computed in full (:func:`kappa_candidate`).
+* :func:`coordinated_row`: one time-scaled step of the H state (λ, μ) toward (λ_d, μ_d) with every
+  wheel on the constraining surface (RUNNING and STOPPING), with :func:`mu_own_row` for
+  ``ICRControllerConfig.mu_own_scale``;
+* :func:`reconfigure_row`: the wheels turned in place toward given steering angles with the
+  chassis at rest (RECONFIGURING).
+
+The step that calls them is :mod:`control.icr.compiled`; the constants and the work space ``ws``
+they read are :mod:`control.icr.kernel_constants`'. The derivations (the braking profile along
+the great circle, the discrete time scaling κ, the steer-to-drive coupling r φ̇ = −b β̇ of a
+sidewise-offset wheel) are in ``docs/icr-controller.md``.
+
+The time scaling takes the largest κ of the grid (``n_kappa`` values in [0, 1]) whose candidate
+is feasible, or, when none is, the candidate with the smallest limit ratio (the lowest κ among
+equals). :func:`kappa_search` tries κ from 1 down and stops at the first feasible one; each
+candidate stops at its first limit term above the bound (the ratio, a maximum of terms, is above
+the bound exactly when one term is), starting with the wheel that ruled out the previous
+candidate and with the steering terms, which need no cos/sin. Only when no κ is feasible does
+:func:`kappa_fallback` compute the ratios, a candidate stopping once its wheels so far exceed the
+best ratio found. The chosen candidate is then computed in full (:func:`kappa_candidate`).
 """
 
 from __future__ import annotations
@@ -68,8 +74,18 @@ FEASIBLE = 1.0 - 1e-9
 @njit(cache=True)
 def reconfigure_row(c, ws, beta0, rate0, phidot0, target, exact, measured_rate, use_measured, beta_out, rate_out,
                     phidot_out) -> None:
-    """:func:`control.icr.motion.reconfigure_step` of one robot (``c``: the constants, ``ws``: the
-    work space)."""
+    """Turn one robot's wheels in place toward ``target`` (μ = 0), rate- and accel-limited (``c``:
+    the constants, ``ws``: the work space).
+
+    With ``exact``, ``target`` is taken as the next set-point as it is (the caller made it
+    feasible). With ``use_measured``, the coupling uses the wheels' measured steering rate
+    ``measured_rate``: the compliant steering lags its set-point, and it is the actual contact
+    point that must roll. Each wheel follows a discrete trapezoidal profile planned with 0.85 of
+    the allowed deceleration (speeding up follows it; braking, less speed or a reversal, may use
+    0.95 of the limit, so a wheel still turning toward a stop when the reconfiguration starts stops
+    short of it); the propulsion set-point is the pure steer-to-drive coupling r φ̇ = −b β̇, so
+    the contact point rolls on its circle about A_k instead of scrubbing, and the chassis stays
+    put. Then :func:`~control.icr.kernels.saturate_row`."""
     n = beta0.shape[0]
     b, r, lim, dt, steer_max = c.b, c.r, c.lim, c.dt, c.steer_max
     want_phidot = ws[WS.WANT_PHIDOT, :n]
@@ -216,7 +232,7 @@ def kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_r
 @njit(cache=True)
 def kappa_candidate(c, ws, q, lam, mu, mu_des, mu_first, v_prev, v_des, beta, beta_rate, phidot, lam_new, v,
                     beta_new, b_rate, phid, coef) -> tuple[float, float, bool]:
-    """One κ of :func:`control.icr.motion.coordinated_step`: the candidate (λ, λ̇, β, β̇, φ̇, c
+    """One κ of :func:`coordinated_row`: the candidate (λ, λ̇, β, β̇, φ̇, c
     written into the arrays) and (μ, its limit ratio, flipped)."""
     E, P, b, r, lim, kappa = c.E, c.P, c.b, c.r, c.lim, c.kappa
     steer_min, steer_max, dt = c.steer_min, c.steer_max, c.dt
@@ -253,8 +269,15 @@ def kappa_candidate(c, ws, q, lam, mu, mu_des, mu_first, v_prev, v_des, beta, be
 @njit(cache=True)
 def coordinated_row(c, ws, lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu_d, mu_first, lam_out, lam_rate_out,
                     beta_out, rate_out, phidot_out):
-    """:func:`control.icr.motion.coordinated_step` of one robot (``c``: the constants, ``ws``: the
-    work space): writes λ, λ̇, β_c, β̇_c, φ̇_c; returns (μ, κ, saturated)."""
+    """One time-scaled step of one robot's (λ, μ) toward (λ_d, μ_d) with every wheel on the
+    surface (``c``: the constants, ``ws``: the work space): writes λ, λ̇, β_c, β̇_c, φ̇_c; returns
+    (μ, κ, saturated).
+
+    The desired λ̇ runs along the great circle toward λ_d, braking so that it can stop there; the
+    desired μ is a ramp toward μ_d at the acceleration every wheel can follow at λ. With
+    ``mu_first`` (STOPPING), μ takes its full ramp step whatever κ the λ motion gets, so the robot
+    brakes at once even while λ is still slowing down. When no κ is feasible the chosen candidate
+    is saturated wheel by wheel (:func:`~control.icr.kernels.saturate_row`)."""
     E, P, b, r, lim, tune, kappa, dt = c.E, c.P, c.b, c.r, c.lim, c.tune, c.kappa, c.dt
     n = beta.shape[0]
     theta = sphere_angle3(lam, lam_d)
@@ -301,7 +324,11 @@ def coordinated_row(c, ws, lam, mu, lam_rate, beta, beta_rate, phidot, lam_d, mu
 
 @njit(cache=True)
 def mu_own_row(mu, mu_des, c, beta_rate, phidot_prev, move, b, r, lim, phidot_out) -> float:
-    """:func:`control.icr.motion.mu_own_step` of one robot: returns μ, writes φ̇_c."""
+    """``ICRControllerConfig.mu_own_scale`` for one robot: move μ from its feasible value toward
+    ``mu_des`` as far as every wheel's |φ̇| and |φ̈| limits allow, λ fixed (so are the coefficients
+    c (n,) and the steering rates β̇ (n,)): r φ̇_k = μ c_k − b β̇_k is affine in μ, each wheel bounds
+    μ to an interval holding the feasible μ, and so does their intersection. Without ``move`` μ
+    stays. Returns μ, writes φ̇_c."""
     n = c.shape[0]
     mu_lo, mu_hi = -np.inf, np.inf
     for k in range(n):

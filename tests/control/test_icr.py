@@ -8,22 +8,25 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from control.icr.compiled import compiled_constants
 from control.icr.controller import (
     ICRController,
     ICRControllerConfig,
     Mode,
     arc_blocked,
-    clamp_mu,
+    icr_control_step,
     initial_state,
     nearer_target,
     project_off_axes,
 )
 from control.icr.feasibility import stop_hold_point_batch
+from control.icr.kernel_constants import N_WS
 from control.icr.kernels import stop_normals
+from control.icr.kernels_motion import coordinated_row
 from control.kinematic_model import KinematicRobot, twist_from_wheels
 from control.limits import ActuatorLimits, limit_violations
 from estimation import RobotGeometry, eta_from_twist, lambda_distance, steering_from_lambda, twist_from_eta
-from estimation.kinematics import s_perp, steering_path_derivatives, wheel_speeds
+from estimation.kinematics import s_perp, steering_path_derivatives, wheel_speed_coefficients, wheel_speeds
 
 GEOM = RobotGeometry.azimut3()
 LIM = ActuatorLimits()
@@ -114,12 +117,55 @@ def test_nearer_target_flips_both():
     assert mu == -0.5
 
 
-def test_clamp_mu_respects_every_wheel():
+def test_target_mu_is_clamped_to_every_wheels_speed_limit():
+    """μ_d is clamped at λ_d to the largest |μ| for which every wheel's |φ̇| stays within
+    ``mu_headroom`` of its limit (``info["mu_target"]``); a feasible μ_d passes as it is."""
     lam = _unit([0.2, 1.0, 0.3])
-    mu = clamp_mu(lam, 100.0, GEOM, LIM)
-    assert np.max(np.abs(wheel_speeds(lam, mu, GEOM))) == pytest.approx(LIM.wheel_speed_max)
-    assert clamp_mu(lam, -100.0, GEOM, LIM) == pytest.approx(-mu)
-    assert clamp_mu(lam, 0.1, GEOM, LIM) == 0.1
+    beta = steering_from_lambda(lam, GEOM)
+    st0 = initial_state(lam, beta, np.zeros(GEOM.n), GEOM)
+    cfg = ICRControllerConfig()
+
+    def target(mu_d):
+        return icr_control_step(st0, lam, 0.0, beta, np.zeros(GEOM.n), lam, mu_d, GEOM, LIM, cfg, DT)[1].info
+
+    info = target(100.0)
+    np.testing.assert_allclose(info["lam_target"], lam, rtol=0, atol=1e-15)  # the target as it is
+    mu = info["mu_target"]
+    assert np.max(np.abs(wheel_speeds(lam, mu, GEOM))) == pytest.approx(cfg.mu_headroom * LIM.wheel_speed_max)
+    assert target(-100.0)["mu_target"] == -mu
+    assert target(0.1)["mu_target"] == 0.1
+
+
+def _coordinated(lam, mu, lam_d, mu_d, config):
+    """:func:`control.icr.kernels_motion.coordinated_row` of each row, from rest in λ at μ (the
+    wheels at F(λ), rolling): (λ, μ, κ, β̇_c, φ̇_c, φ̇ before)."""
+    c = compiled_constants(GEOM, LIM, config, DT)
+    out = []
+    for lam_i, mu_i, lam_d_i, mu_d_i in zip(lam, mu, lam_d, mu_d):
+        beta = steering_from_lambda(lam_i, GEOM)
+        phidot = mu_i * wheel_speed_coefficients(lam_i, GEOM, beta) / GEOM.r
+        lam_o, lam_rate_o, beta_o, rate_o, phidot_o = np.empty(3), np.empty(3), *np.empty((3, GEOM.n))
+        mu_o, kappa, _ = coordinated_row(c, np.zeros((N_WS, max(GEOM.n, 3))), lam_i, mu_i, np.zeros(3), beta,
+                                         np.zeros(GEOM.n), phidot, lam_d_i, mu_d_i, False, lam_o, lam_rate_o, beta_o,
+                                         rate_o, phidot_o)
+        out.append((lam_o, mu_o, kappa, rate_o, phidot_o, phidot))
+    return [np.array(x) for x in zip(*out)]
+
+
+def test_mu_own_scale_lets_mu_ramp_while_lambda_turns():
+    """``mu_own_scale``: when the steering limits slow a quick turn of λ (κ < 1), μ still takes
+    its ramp step as far as the wheel speed and acceleration limits allow; the commands stay
+    within every limit and λ moves exactly as without it."""
+    lam = np.array([[1.0, 0.0, 0.0], [0.6, 0.0, 0.8]])
+    lam_d = np.array([[0.0, 1.0, 0.0], [0.0, 0.6, 0.8]])
+    mu, mu_d = np.array([0.2, 0.3]), np.array([1.0, 1.0])
+    off = _coordinated(lam, mu, lam_d, mu_d, ICRControllerConfig())
+    on = _coordinated(lam, mu, lam_d, mu_d, ICRControllerConfig(mu_own_scale=True))
+    assert np.all(off[2] < 1.0)  # κ: the steering limits slow the turn
+    np.testing.assert_array_equal(on[0], off[0])  # λ moves the same
+    assert np.all(on[1] > off[1] + 1e-3)  # μ further toward μ_d
+    rate_c, phidot_c, phidot = on[3], on[4], on[5]
+    assert not limit_violations(rate_c, rate_c / DT, phidot_c, (phidot_c - phidot) / DT, LIM).any()
 
 
 @pytest.mark.parametrize("k", range(4))
@@ -493,9 +539,13 @@ def test_reconfigurations_end_when_wheels_stop_where_stiction_holds_them():
     """On the default ("paper") robot the steering's stiction and the tread hold a wheel at rest
     up to a few degrees from its target, beyond reconfig_tol: the controller resumes once the
     measured wheels have stopped within reconfig_hold_tol instead of waiting for the timeout."""
+    from numba.core import config as numba_config
+
     from control.icr.config import ICRControllerConfig, Mode
     from control.rollout import run_episode
 
+    if numba_config.DISABLE_JIT:  # test_icr_compiled.py runs this file without JIT
+        pytest.skip("the env runs only compiled (its reward terms must be numba functions)")
     log = run_episode("icr", "paper", seed=0, max_time=40.0)  # figure8 now takes its stops without one
     recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
     edges = np.flatnonzero(np.diff(recon))
