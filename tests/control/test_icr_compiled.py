@@ -194,7 +194,7 @@ def test_coupling_from_measurement_mu_own_scale_and_stop_commands(monkeypatch, t
     cfg = ICRControllerConfig(coupling_from_measurement=True, mu_own_scale=True)
     rec = _path_episodes(monkeypatch, ["square", "figure8"], [4, 5], 6.0, controller_kwargs={"icr_config": cfg})
     seen = _compare(rec, tmp_path, edit=_stop_commands)
-    assert seen["steps"] == 300 and seen["modes"] == ALL_MODES
+    assert seen["steps"] == 300 and int(Mode.RECONFIGURING) in seen["modes"]
 
 
 @pytest.mark.slow
