@@ -2,8 +2,9 @@
 they made.
 
 The tests are grouped like the packages: ``tests/estimation``, ``tests/azimut_env``,
-``tests/control``, ``tests/train``. Long studies are marked ``slow`` (``pytest -m slow``; the
-default run leaves them out, see ``pyproject.toml``).
+``tests/control``, ``tests/train``, ``tests/jobs`` (and ``tests/logs``: robot logs in and out).
+Long studies are marked ``slow`` (``pytest -m slow``; the default run leaves them out, see
+``pyproject.toml``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Task functions for tests/control/test_campaign.py, importable by worker processes (spawned processes
+"""Task functions for tests/jobs/test_campaign.py, importable by worker processes (spawned processes
 and local Ray workers get the test process's import path)."""
 
 from __future__ import annotations
