@@ -26,11 +26,12 @@ from typing import Any
 from azimut_env import ENV_ID
 from train.envs import action_key
 
-__all__ = ["EVAL_TRACKS", "RUN_ARGS", "check_resume", "checkpoint_steps", "latest_checkpoint", "run_steps", "train",
-           "was_interrupted"]
+__all__ = ["DEFAULT_EVAL_TRACKS", "RUN_ARGS", "check_resume", "checkpoint_steps", "latest_checkpoint", "run_steps",
+           "train", "was_interrupted"]
 
-#: the built-in tracks a run can be evaluated on, the default two first
-EVAL_TRACKS = ("circle", "figure8", "square", "crab", "paper")
+#: the tracks of a run's periodic evaluations by default (any of ``azimut_env.tracks.TRACK_NAMES``
+#: may be chosen: that tuple is the one list of the built-in tracks)
+DEFAULT_EVAL_TRACKS = ("circle", "figure8")
 
 #: the file a new run writes in its folder before learning: what ``--resume`` must match
 RUN_ARGS = "train_args.json"
@@ -142,7 +143,8 @@ def _fused_adam(hp: dict) -> dict:
 
 
 def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
-          eval_tracks: tuple[str, ...] = EVAL_TRACKS[:2], eval_every: int = 200_000, checkpoint_every: int = 200_000,
+          eval_tracks: tuple[str, ...] = DEFAULT_EVAL_TRACKS, eval_every: int = 200_000,
+          checkpoint_every: int = 200_000,
           resume: bool = False, overrides: dict | None = None, progress_bar: bool = False, quiet: bool = False,
           env_kwargs: dict | None = None, time_limit_min: float = 0.0, eval_max_time: float | None = None,
           record_extra: dict[str, Any] | None = None, correction_cost: float = 0.0,

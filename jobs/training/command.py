@@ -27,7 +27,7 @@ from pathlib import Path
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
 from train.envs import ACTIONS, canonical_action
-from train.trainer import EVAL_TRACKS, RUN_ARGS
+from train.trainer import DEFAULT_EVAL_TRACKS, RUN_ARGS
 
 __all__ = ["add_arguments", "check_args", "run", "hyperparams_overrides", "ENGINES"]
 
@@ -54,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=arg_int(1), default=1_000_000, help="environment steps (default 1000000)")
     parser.add_argument("--out", type=arg_output_path(directory=True), required=True, help="run folder")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
-    parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(EVAL_TRACKS[:2]),
+    parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(DEFAULT_EVAL_TRACKS),
                         help="tracks of the periodic evaluation (default circle,figure8)")
     parser.add_argument("--eval-every", type=arg_int(0), default=200_000,
                         help="environment steps between evaluations (default 200000; 0: only at the end)")

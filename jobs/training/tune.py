@@ -24,7 +24,7 @@ from pathlib import Path
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
 from train.envs import ACTIONS, canonical_action
-from train.trainer import EVAL_TRACKS
+from train.trainer import DEFAULT_EVAL_TRACKS
 
 __all__ = ["add_arguments", "check_args", "run", "default_storage"]
 
@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="environment steps per trial (default 100000)")
     parser.add_argument("--evals", type=arg_int(1, 1000), default=4,
                         help="periodic evaluations per trial, the pruner's reports (default 4)")
-    parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(EVAL_TRACKS[:2]),
+    parser.add_argument("--eval-tracks", type=arg_choice_list(TRACK_NAMES), default=list(DEFAULT_EVAL_TRACKS),
                         help="held-out tracks of the evaluations (default circle,figure8)")
     parser.add_argument("--num-robots", type=arg_int(1, 4096), default=16, help="robots in the vector env (default 16)")
     parser.add_argument("--seed", type=arg_int(0, 2**31 - 1), default=0,

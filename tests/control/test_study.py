@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import pytest
 
+from azimut_env.tracks import TRACK_NAMES
 from control.episode import episode_metrics
 from control.rollout import run_episode
-from jobs.eval.command import DEFAULT_TRACKS
 
 pytestmark = pytest.mark.slow
 
@@ -27,7 +27,7 @@ def test_icr_tracks_the_paper_track(speed_scale):
     assert m["limit_violation_steps"] == 0
 
 
-@pytest.mark.parametrize("track", DEFAULT_TRACKS)
+@pytest.mark.parametrize("track", TRACK_NAMES)
 def test_icr_versus_twist_baseline(track):
     icr = episode_metrics(run_episode("icr", track, seed=0))
     twist = episode_metrics(run_episode("twist", track, seed=0))
