@@ -23,8 +23,7 @@ interface, :mod:`azimut_env.interface`).
 * ``action_spaces/``: the RL action spaces (``controller``: the action-driven controller shared by
   the single and vector wrappers and a trained policy's controller; ``single``, ``vector``,
   ``shaping``);
-* ``limits``, ``checks``: commanded-limit checks and input checks; ``kinematic_model``: a rigid
-  kinematic test bench.
+* ``limits``, ``checks``: commanded-limit checks and input checks.
 """
 
 import estimation.numba_cache  # noqa: F401, I001 (first: numba's cache keyed by the sources, before any kernel)

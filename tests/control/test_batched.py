@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from kinematic_model import KinematicRobot
 
 from control.icr.controller import (
     ICRController,
@@ -17,7 +18,6 @@ from control.icr.controller import (
     project_off_axes,
     project_off_axes_batch,
 )
-from control.kinematic_model import KinematicRobot
 from control.limits import ActuatorLimits, limit_violations
 from estimation import RobotGeometry
 

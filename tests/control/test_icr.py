@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from kinematic_model import KinematicRobot, twist_from_wheels
 
 from control.icr.compiled import compiled_constants
 from control.icr.controller import (
@@ -23,7 +24,6 @@ from control.icr.feasibility import stop_hold_point_batch
 from control.icr.kernel_constants import N_WS
 from control.icr.kernels import stop_normals
 from control.icr.kernels_motion import coordinated_row
-from control.kinematic_model import KinematicRobot, twist_from_wheels
 from control.limits import ActuatorLimits, limit_violations
 from estimation import RobotGeometry, eta_from_twist, lambda_distance, steering_from_lambda, twist_from_eta
 from estimation.kinematics import s_perp, steering_path_derivatives, wheel_speed_coefficients, wheel_speeds

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from kinematic_model import KinematicRobot
 
 from azimut_env.tracks import Track
 from control.follow.path_follower import PathFollower, PathFollowerConfig
-from control.kinematic_model import KinematicRobot
 from control.twist.wpilib import (
     SwerveConfig,
     SwerveController,

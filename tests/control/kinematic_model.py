@@ -1,4 +1,5 @@
-"""A rigid, kinematic stand-in for the robot: a test bench for controllers without the physics.
+"""A rigid, kinematic stand-in for the robot: a test bench for controllers without the physics
+(the tests' own: ``from kinematic_model import KinematicRobot`` in ``tests/control``).
 
 The wheels follow their set-points exactly (β = β_c, φ̇ = φ̇_c). The chassis twist is the least-
 squares solution of every wheel's rolling and no-side-slip constraints; the residual is the slip
