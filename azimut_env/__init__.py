@@ -1,8 +1,11 @@
 """azimut_env: a pymunk AZIMUT-3 with compliant steering, as the Gymnasium env ``Azimut-v2``.
 
-Importing this package only registers the environment (by entry-point string); the physics,
-pymunk and numba load when the env is made. Modules: ``params`` (physical parameters, actuator
-limits, action <-> set-point map), ``imperfections`` (the "paper"/"ideal" presets), ``physics``
+Importing this package only registers the environments (by entry-point strings) and names
+numba's cache folder (:mod:`estimation.numba_cache`, which does not import numba); the physics,
+pymunk, numba and ``estimation``'s modules load when an env is made (``import azimut_env``
+takes about gymnasium's import time; ``tests/architecture/test_imports.py`` checks what it
+loads). Modules: ``params`` (physical parameters, actuator limits, action <-> set-point map),
+``imperfections`` (the "paper"/"ideal" presets), ``physics``
 (N robots in one pymunk Space: ``engine``, ``kernels``, ``layout``, ``tire``, ``actuators``,
 ``stability``, ...), ``tracks``, ``task`` (the task over N robots: ``core`` with the step's data
 flow, ``config`` (``TaskConfig``) and the stages ``actions``, ``sensors``, ``termination``,

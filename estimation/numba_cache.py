@@ -15,7 +15,10 @@ respected as the base instead (the digest folder goes inside it). If no such fol
 created, numba's own default (``__pycache__`` beside the sources) is left in place.
 
 This module is imported first by every package, before any kernel is defined (the cache
-location is read by numba when a ``cache=True`` function is decorated).
+location is read by numba when a ``cache=True`` function is decorated). It does not import numba
+itself (``import azimut_env``, which only registers the envs, stays light): the folder goes into
+``NUMBA_CACHE_DIR``, which numba reads when it is imported, and into ``numba.config`` as well
+where numba is already loaded.
 """
 
 from __future__ import annotations
@@ -35,11 +38,11 @@ PACKAGES = ("estimation", "azimut_env", "control")
 def source_digest(root: Path | None = None) -> str:
     """SHA-256 (16 hex digits) of every ``.py`` file of :data:`PACKAGES` under ``root`` (default:
     where this package is installed), their relative paths included, and the numba and Python
-    versions."""
-    import numba
+    versions (numba's from its installed metadata: numba is not imported)."""
+    from importlib.metadata import version
 
     root = Path(__file__).resolve().parents[1] if root is None else Path(root)
-    h = hashlib.sha256(f"numba {numba.__version__}; python {sys.version_info[:3]}".encode())
+    h = hashlib.sha256(f"numba {version('numba')}; python {sys.version_info[:3]}".encode())
     for pkg in PACKAGES:
         base = root / pkg
         if not base.is_dir():
@@ -72,10 +75,9 @@ def cache_dir() -> Path:
 
 
 def configure() -> Path | None:
-    """Point numba's cache at :func:`cache_dir` (environment and ``numba.config``, so that a
-    config reload and spawned workers agree); the folder, or None where it cannot be created."""
-    from numba.core import config
-
+    """Point numba's cache at :func:`cache_dir` (the environment, which numba reads when it is
+    imported, spawned workers inherit and a config reload reads again; and ``numba.config`` where
+    numba is loaded already); the folder, or None where it cannot be created."""
     try:
         base = _base()
         path = base / "numba" / source_digest()
@@ -87,7 +89,8 @@ def configure() -> Path | None:
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     os.environ["_AZIMUT_NUMBA_CACHE_SET"] = str(path)
     os.environ["_AZIMUT_NUMBA_CACHE_BASE"] = str(base)
-    config.CACHE_DIR = str(path)
+    if "numba.core.config" in sys.modules:
+        sys.modules["numba.core.config"].CACHE_DIR = str(path)
     return path
 
 
