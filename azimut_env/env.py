@@ -89,6 +89,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     the layout is (:meth:`observation_slices` returns these slices by name; the table is
     ``observation.OBSERVATION_FIELDS``, which also sets the bounds and the fill):
 
+    <!-- generated: observation-table -->
     | name          | size | content                                                   | unit   |
     |---------------|------|-----------------------------------------------------------|--------|
     | lambda_hat    | 3    | IT-estimated ICR λ̂ (canonical: μ̂ ≥ 0, else w ≥ 0)         | -      |
@@ -102,6 +103,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     | speed_ref     | 1    | reference progress speed at the current progress          | m/s    |
     | lookahead     | 3K   | K reference points ahead: (x, y) in the chassis frame, Δθ | m, rad |
     | prev_action   | 2n   | the previous action                                       | -      |
+    <!-- end generated -->
 
     **What is privileged.** ``lambda_hat``, ``mu_hat``, ``beta``, ``phidot``, ``motor_angle``
     come from the simulated sensors (noise, quantisation) and the IT estimator; ``speed_ref`` is
@@ -122,6 +124,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     (``reward_weights={name: w}`` sets it), v_max the track's top reference speed, dt the control
     period; every term but progress is ≤ 0:
 
+    <!-- generated: reward-table -->
     | name            | weight | unit | term (per step)                                             |
     |-----------------|--------|------|-------------------------------------------------------------|
     | progress        | 3      | -    | w·clip(Δs, −v_max·dt, v_ref·dt)/(v_max·dt)                  |
@@ -133,6 +136,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     | nullspace_force | 0      | 1/N  | −min(w·F_null, antagonism_cap), F_null the null-space force |
     | action_rate     | 0.05   | -    | −w·‖a − a_prev‖² (normalised actions)                       |
     | off_track       | 10     | -    | −w on the step that leaves the track or stalls              |
+    <!-- end generated -->
 
     * progress: w · v_ref / v_max per step at the reference speed (w at the track's top speed),
       nothing more for going faster, and a backward jump of the track projection costs at most
@@ -148,8 +152,8 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
       wheels, whatever the loads and rolling speeds); nullspace_force (F_null [N], weight 0): the
       minimum-norm null-space force, ``Azimut-v1``'s internal force, which also grows with the
       chassis acceleration;
-    * off_track: also charged on the step that stalls (below); a physics blow-up gets −w as its
-      reward.
+    * off_track: charged on the step that ends the episode by a failure (the penalised end
+      conditions, "Episode End"); a physics blow-up gets −w as its reward.
 
     Each term's typical size under the reference controller and under random actions, and why
     the progress weight is 3, are measured in the documentation (``docs/results/rl.md``).
@@ -160,11 +164,20 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     the reference motion there (plus the same noise), motors on their set-points.
 
     ## Episode End
-    Terminated when the lateral error exceeds ``max_lateral_error`` (``info["off_track"]``), when
-    the track is finished (``info["finished"]``; one lap of a closed track), when the robot stalls
-    (``stall_time`` > 0 s without ``stall_distance`` of new progress, ``info["stalled"]``; off by
-    default), or when the physics blows up (non-finite or absurd state, ``info["error"]``; the last
-    finite observation is returned). Truncated at ``time_limit_factor`` (default 1.5) × T, T the
+    Terminated when an end condition of the table ``termination.TERMINATION_TERMS`` holds (each is
+    a bool of ``info`` under its name; a penalised one pays the ``off_track`` term; ``stalled`` is
+    off by default, ``stall_time`` 0), or when the physics blows up (non-finite or absurd state,
+    ``info["error"]``; the last finite observation is returned):
+
+    <!-- generated: termination-table -->
+    | name      | penalised | ends the episode when                                    |
+    |-----------|-----------|----------------------------------------------------------|
+    | off_track | yes       | left the track: abs(e_lat) > max_lateral_error           |
+    | finished  | no        | finished the track (one lap of a closed one)             |
+    | stalled   | yes       | stall_time without stall_distance of progress (0: never) |
+    <!-- end generated -->
+
+    Truncated at ``time_limit_factor`` (default 1.5) × T, T the
     nominal lap of the ICR reference controller on the episode's track
     (``lap_time.reference_lap_time``: the time of the track's speed profile plus, for each wheel that
     must stop and turn in place across its steering stops along the reference ICR path, the
@@ -175,31 +188,32 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     ## Info
     ``reset`` and ``step`` return the info dict of the table ``info.INFO_FIELDS`` (the vector env's
     is the same, batched); every value is ground truth or the robot's own estimate, as named. The
-    step whose physics blew up has only ``reward_terms``, ``off_track``, ``finished``, ``stalled``
-    and ``error``.
+    step whose physics blew up has only ``reward_terms``, the end conditions' keys and ``error``.
 
-    | key             | value      | unit       | content                                                 |
-    |-----------------|------------|------------|---------------------------------------------------------|
-    | pose            | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame                |
-    | pose_estimate   | (3,)       | m, m, rad  | the pose the observation used (pose_source)             |
-    | twist           | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame             |
-    | eta_true        | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign        |
-    | eta_hat         | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's                   |
-    | beta_true       | (n,)       | rad        | true steering angles (wheel side of the spring)         |
-    | beta_est        | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR              |
-    | tire_forces     | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame         |
-    | slip_power      | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)               |
-    | antagonism      | ()         | N          | step-mean antagonism: stiffness-weighted internal force |
-    | nullspace_force | ()         | N          | step-mean min-norm null-space force of the tires        |
-    | qua             | ()         | -          | qua of the measured steering angles (eq. 28–29)         |
-    | progress        | ()         | m          | true progress along the track (unwrapped over laps)     |
-    | lateral_error   | ()         | m          | true distance to the path, positive to its left         |
-    | heading_error   | ()         | rad        | true θ − θ_ref, wrapped                                 |
-    | reward_terms    | {term: ()} | -          | the reward terms of the step by name (0 at a reset)     |
-    | off_track       | ()         | bool       | the step left the track (terminated)                    |
-    | finished        | ()         | bool       | the step finished the track (terminated)                |
-    | stalled         | ()         | bool       | the step ended a stall (terminated)                     |
-    | error           | ()         | str        | the physics failure, only on the step that blew up      |
+    <!-- generated: info-table -->
+    | key             | value      | unit       | content                                                  |
+    |-----------------|------------|------------|----------------------------------------------------------|
+    | pose            | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame                 |
+    | pose_estimate   | (3,)       | m, m, rad  | the pose the observation used (pose_source)              |
+    | twist           | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame              |
+    | eta_true        | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign         |
+    | eta_hat         | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's                    |
+    | beta_true       | (n,)       | rad        | true steering angles (wheel side of the spring)          |
+    | beta_est        | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR               |
+    | tire_forces     | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame          |
+    | slip_power      | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)                |
+    | antagonism      | ()         | N          | step-mean antagonism: stiffness-weighted internal force  |
+    | nullspace_force | ()         | N          | step-mean min-norm null-space force of the tires         |
+    | qua             | ()         | -          | qua of the measured steering angles (eq. 28–29)          |
+    | progress        | ()         | m          | true progress along the track (unwrapped over laps)      |
+    | lateral_error   | ()         | m          | true distance to the path, positive to its left          |
+    | heading_error   | ()         | rad        | true θ − θ_ref, wrapped                                  |
+    | reward_terms    | {term: ()} | -          | the reward terms of the step by name (0 at a reset)      |
+    | off_track       | ()         | bool       | left the track: abs(e_lat) > max_lateral_error           |
+    | finished        | ()         | bool       | finished the track (one lap of a closed one)             |
+    | stalled         | ()         | bool       | stall_time without stall_distance of progress (0: never) |
+    | error           | ()         | str        | the physics failure, only on the step that blew up       |
+    <!-- end generated -->
 
     ## Arguments
     * ``track``: a :class:`~azimut_env.tracks.Track` or a built-in name (``paper``, ``circle``,
@@ -365,7 +379,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
         info = robot_info(task, 0)
         if self.render_mode == "human":
             self.render()
-        terminated = info["off_track"] or info["finished"] or info["stalled"]
+        terminated = bool(task.ended[0].any())  # an end condition of the termination table
         truncated = bool(task.truncated()[0])
         return task.obs[0].copy(), float(task.reward[0]), terminated, truncated, info
 

@@ -75,32 +75,13 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     with the Gymnasium vector convention: each value with a leading ``num_envs`` axis (the pairs
     ``eta_true``, ``eta_hat``: a pair of batched arrays; ``reward_terms``: a dict of (N,) arrays
     with their masks) and a boolean mask ``"_key"`` saying which sub-envs have the key. A sub-env
-    whose physics blew up on the step has only ``reward_terms``, ``off_track``, ``finished``,
-    ``stalled`` and ``error`` (an object array). ``info.sub_info(info, i)`` gives sub-env i's info,
-    equal to the single env's key by key; :meth:`sub_env_info` gives it from the current state.
+    whose physics blew up on the step has only ``reward_terms``, the end conditions' keys
+    (``off_track``, ``finished``, ``stalled``) and ``error`` (an object array).
+    ``info.sub_info(info, i)`` gives sub-env i's info, equal to the single env's key by key;
+    :meth:`sub_env_info` gives it from the current state.
 
-    | key             | value      | unit       | content                                                 |
-    |-----------------|------------|------------|---------------------------------------------------------|
-    | pose            | (3,)       | m, m, rad  | true chassis pose (x, y, θ), world frame                |
-    | pose_estimate   | (3,)       | m, m, rad  | the pose the observation used (pose_source)             |
-    | twist           | (3,)       | m/s, rad/s | true chassis twist (ẋ, ẏ, θ̇), chassis frame             |
-    | eta_true        | ((3,), ()) | -, m/s     | true H state (λ, μ) of the twist, canonical sign        |
-    | eta_hat         | ((3,), ()) | -, m/s     | IT estimate (λ̂, μ̂), the observation's                   |
-    | beta_true       | (n,)       | rad        | true steering angles (wheel side of the spring)         |
-    | beta_est        | (n,)       | rad        | S(λ̂): steering angles of the estimated ICR              |
-    | tire_forces     | (n, 2)     | N          | step-mean tire forces (F_x, F_y), chassis frame         |
-    | slip_power      | ()         | W          | step-mean tire slip power Σ abs(F·v_slip)               |
-    | antagonism      | ()         | N          | step-mean antagonism: stiffness-weighted internal force |
-    | nullspace_force | ()         | N          | step-mean min-norm null-space force of the tires        |
-    | qua             | ()         | -          | qua of the measured steering angles (eq. 28–29)         |
-    | progress        | ()         | m          | true progress along the track (unwrapped over laps)     |
-    | lateral_error   | ()         | m          | true distance to the path, positive to its left         |
-    | heading_error   | ()         | rad        | true θ − θ_ref, wrapped                                 |
-    | reward_terms    | {term: ()} | -          | the reward terms of the step by name (0 at a reset)     |
-    | off_track       | ()         | bool       | the step left the track (terminated)                    |
-    | finished        | ()         | bool       | the step finished the track (terminated)                |
-    | stalled         | ()         | bool       | the step ended a stall (terminated)                     |
-    | error           | ()         | str        | the physics failure, only on the step that blew up      |
+    The keys, their shapes and units are the single env's table (:class:`~azimut_env.env.AzimutEnv`,
+    "Info"; ``docs/env.md``), generated from ``info.INFO_FIELDS``.
 
     ## Arguments
     ``num_envs``; ``max_episode_steps`` (default None: the per-track limit only); ``autoreset_mode``; ``render_index``

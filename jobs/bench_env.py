@@ -3,7 +3,7 @@
 * The single env (``AzimutEnv``, one robot per Space and per Python call) is timed in a plain
   ``env.step`` loop with small uniformly random actions (resets excluded), split inside the same
   loop (thin timing wrappers) into the physics, what follows it (the noise draw and the one
-  compiled call of :mod:`azimut_env.task.compiled_step`), the info dict and the rest.
+  compiled call of :mod:`azimut_env.task.pipeline`), the info dict and the rest.
 * ``--num-envs 1,16,64,256`` also times ``AzimutVectorEnv`` at each N, in the same run: an
   uninstrumented loop of ``vec.step`` gives the steps/s (robot-steps per second: N per call) and
   the ratio against the single env; a second, instrumented loop splits the time per robot-step
@@ -238,22 +238,23 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
     return out
 
 
+_STAGE_KEYS = {"azimut_env.task.sensors": "sensors", "azimut_env.task.icr_estimate": "estimation",
+               "azimut_env.task.track_state": "track", "azimut_env.task.localisation": "track"}  # else reward_obs
+
+
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``), with the
-    stages after the physics run one by one (``AzimutTask.compiled_step = False``: the
-    uninstrumented loop runs them as one compiled call)."""
+    stages after the physics run one by one (``Pipeline.run_timed``: the uninstrumented loop
+    runs them as one compiled call)."""
     acc = {k: 0.0 for k in VECTOR_STAGES}
     clock = time.perf_counter
     task, phys = venv.task, venv.physics
-    task.compiled_step = False
-    original = (task._outputs, task.sensors.draw_noise)
+    step, reset = task.pipelines()
     task.apply_actions = _timed(acc, task.apply_actions, "actions")
     phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
-    task._measure = _timed(acc, task._measure, "sensors")
-    task._estimate = _timed(acc, task._estimate, "estimation")
-    task._query_tracks = _timed(acc, task._query_tracks, "track")
-    task._outputs = _timed(acc, original[0], "reward_obs")  # termination, reward, observation
-    task.sensors.draw_noise = _timed(acc, original[1], "sensors")
+    task.sensors.draw_noise = _timed(acc, task.sensors.draw_noise, "sensors")
+    column = lambda stage: _STAGE_KEYS.get(stage.__module__, "reward_obs")  # noqa: E731
+    task.pipelines = lambda: (lambda rows, action: step.run_timed(rows, action, acc, column), reset)
     N = venv.num_envs
     try:
         t0 = clock()
@@ -261,11 +262,10 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
             venv.step(actions[i % 64])
         total = clock() - t0
     finally:
-        for name in ("apply_actions", "_measure", "_estimate", "_query_tracks", "_outputs"):
+        for name in ("apply_actions", "pipelines"):
             task.__dict__.pop(name, None)
         phys.stage_times = None
         task.sensors.__dict__.pop("draw_noise", None)
-        task.compiled_step = True
     acc["other"] = max(0.0, total - sum(v for k, v in acc.items() if k != "other"))
     scale = 1e6 / (calls * N)
     out = {f"{k}_us": v * scale for k, v in acc.items()}

@@ -17,7 +17,7 @@ from numba import njit
 from azimut_env.action_map import ActuatorLimits, setpoints_row
 from azimut_env.physics.layout import CMD
 
-__all__ = ["CommandPath", "float32_copy"]
+__all__ = ["CommandPath", "float32_copy", "remember_action"]
 
 
 @njit(cache=True)
@@ -102,3 +102,13 @@ class CommandPath:
             _shift_fifo_kernel(self.fifo, self._new, cmd, rows)
         physics.set_setpoints(cmd, None if rows is self._all else rows)
         return a
+
+
+@njit(cache=True)
+def remember_action(ta, rows, action):
+    """The last stage of the pipeline's reward: ``ta.prev_action`` takes the step's clipped
+    ``action`` (N, 2n) float32 for the robots of ``rows`` (the reward's action rate reads the
+    previous one, the observation this one)."""
+    for i in range(rows.shape[0]):
+        if rows[i]:
+            ta.prev_action[i] = action[i]

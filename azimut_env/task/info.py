@@ -11,18 +11,20 @@ physics blew up has it, and how it is read from :class:`~azimut_env.task.core.Az
   arrays with their own masks) and a boolean mask ``"_key"`` saying which sub-envs have the key;
 * :func:`sub_info`: sub-env i's entries of a batched info, which equal the single env's info of a
   robot in the same state, key by key and bit for bit;
-* :func:`info_table`: the Markdown table of the envs' docstrings.
+* :func:`info_table`: the Markdown table of the docs (:mod:`azimut_env.doc_tables`).
+
+The end conditions' keys (a bool each) come from the termination table
+(:data:`~azimut_env.task.termination.TERMINATION_TERMS`, :func:`info_fields`).
 
 Every value is ground truth or the robot's own estimate as named, whatever the observation's pose
 source. On the step whose physics blew up (``error``) only the keys with ``at_error`` are given
 (the robot is parked: its pose and forces would be those of the rest state, not of the failure).
-To add a key: a row here, with its reader.
+**To add a key**: a row here, with its reader.
 """
 
 from __future__ import annotations
 
 import math
-import unicodedata
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -30,12 +32,15 @@ import numpy as np
 from numba import njit
 
 from azimut_env.physics.layout import RS, RS_POSE, RS_TWIST_BODY, WS, WS_FORCE
+from azimut_env.task import termination
+from azimut_env.task.codegen import markdown_table
+from azimut_env.task.termination import EndCondition
 
 if TYPE_CHECKING:
     from azimut_env.task.core import AzimutTask
 
-__all__ = ["InfoField", "INFO_FIELDS", "INFO_KEYS", "KINDS", "robot_info", "batch_info", "sub_info", "info_table",
-           "true_eta"]
+__all__ = ["InfoField", "INFO_FIELDS", "INFO_KEYS", "KINDS", "info_fields", "robot_info", "batch_info", "sub_info",
+           "info_table", "true_eta"]
 
 # plain-int columns (numpy indexes with IntEnum members several µs slower, and this runs every step)
 _RS_SLIP, _WS_BETA = int(RS.SLIP), int(WS.BETA)
@@ -174,19 +179,42 @@ INFO_FIELDS: tuple[InfoField, ...] = (
     _F("heading_error", "()", "rad", "true θ − θ_ref, wrapped", False, lambda t, r: t.head[r], "float"),
     _F("reward_terms", "{term: ()}", "-", "the reward terms of the step by name (0 at a reset)", True,
        lambda t, r: (t.reward_names, t.reward_terms[r]), "terms"),
-    _F("off_track", "()", "bool", "the step left the track (terminated)", True, lambda t, r: t.off_track[r], "bool"),
-    _F("finished", "()", "bool", "the step finished the track (terminated)", True, lambda t, r: t.finished[r],
-       "bool"),
-    _F("stalled", "()", "bool", "the step ended a stall (terminated)", True, lambda t, r: t.stalled[r], "bool"),
-    _F("error", "()", "str", "the physics failure, only on the step that blew up", True, None, "error"),
+    # then one bool key per end condition (info_fields), and the error
 )
+_ERROR_FIELD = _F("error", "()", "str", "the physics failure, only on the step that blew up", True, None, "error")
 del _F
 
+
+def _end_field(j: int, term: EndCondition) -> InfoField:
+    return InfoField(term.name, "()", "bool", term.doc, True,
+                     lambda t, r: t.ended[r, j], "bool")
+
+
+def info_fields(terms: tuple[EndCondition, ...] | None = None) -> tuple[InfoField, ...]:
+    """The info keys of a termination table (default: :data:`TERMINATION_TERMS` as it is now): the
+    task's, one bool per end condition, and ``error``."""
+    terms = termination.TERMINATION_TERMS if terms is None else terms
+    return INFO_FIELDS[:_BASE] + tuple(_end_field(j, t) for j, t in enumerate(terms)) + (_ERROR_FIELD,)
+
+
+_BASE = len(INFO_FIELDS)
+#: the info dict, key by key (with the default end conditions)
+INFO_FIELDS = info_fields()
 #: the keys, in the order of the table
 INFO_KEYS = tuple(f.name for f in INFO_FIELDS)
-# (name, at_error, source, one robot's value, the batch) of the keys the task holds, in the table's order
-_READERS = tuple((f.name, f.at_error, f.source, *KINDS[f.kind]) for f in INFO_FIELDS if f.source is not None)
-_ERROR = next(f.name for f in INFO_FIELDS if f.source is None)
+_ERROR = _ERROR_FIELD.name
+_READERS_OF: dict[tuple, tuple] = {}
+
+
+def _readers(task: AzimutTask) -> tuple:
+    """(name, at_error, source, one robot's value, the batch) of the keys the task holds, in the
+    table's order (its end conditions')."""
+    key = task.termination_table
+    readers = _READERS_OF.get(key)
+    if readers is None:
+        readers = _READERS_OF[key] = tuple((f.name, f.at_error, f.source, *KINDS[f.kind]) for f in info_fields(key)
+                                           if f.source is not None)
+    return readers
 
 
 def robot_info(task: AzimutTask, i: int, error: str | None = None) -> dict[str, Any]:
@@ -195,7 +223,7 @@ def robot_info(task: AzimutTask, i: int, error: str | None = None) -> dict[str, 
     and ``error``."""
     out: dict[str, Any] = {}
     last, values = None, None
-    for name, at_error, source, one, _ in _READERS:
+    for name, at_error, source, one, _ in _readers(task):
         if error is None or at_error:
             if source is not last:  # consecutive keys of one source (twist, eta_true) read it once
                 last, values = source, source(task, i)
@@ -213,10 +241,11 @@ def batch_info(task: AzimutTask, errors: list[str | None] | None = None) -> dict
     errored = None if errors is None else np.array([e is not None for e in errors], dtype=np.bool_)
     if errored is not None and not errored.any():
         errored = None
-    masks = iter(np.ones((len(_READERS) + len(task.reward_names), N), dtype=np.bool_))  # a row per mask
+    readers = _readers(task)
+    masks = iter(np.ones((len(readers) + len(task.reward_names), N), dtype=np.bool_))  # a row per mask
     out: dict[str, Any] = {}
     last, values, everyone = None, None, slice(None)
-    for name, at_error, source, _, batch in _READERS:
+    for name, at_error, source, _, batch in readers:
         if source is not last:
             last, values = source, source(task, everyone)
         value = batch(values)
@@ -258,12 +287,5 @@ def sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:
 
 
 def info_table() -> str:
-    """The Markdown table of the keys (name, value of one robot, unit, content) for the docstrings."""
-    def width(text: str) -> int:  # combining marks (the hat of λ̂, the dot of θ̇) take no column
-        return sum(not unicodedata.combining(c) for c in text)
-
-    rows = [("key", "value", "unit", "content")]
-    rows += [(f.name, f.shape, f.unit, f.doc) for f in INFO_FIELDS]
-    widths = [max(width(r[j]) for r in rows) for j in range(4)]
-    line = lambda r: "| " + " | ".join(x + " " * (w - width(x)) for x, w in zip(r, widths)) + " |"  # noqa: E731
-    return "\n".join([line(rows[0]), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [line(r) for r in rows[1:]])
+    """The Markdown table of the keys (name, value of one robot, unit, content) for the docs."""
+    return markdown_table(("key", "value", "unit", "content"), [(f.name, f.shape, f.unit, f.doc) for f in INFO_FIELDS])

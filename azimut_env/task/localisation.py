@@ -29,7 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.tracks import TQ
+from azimut_env.physics.layout import RS_POSE
+from azimut_env.task.track_state import AHEAD, BACK
+from azimut_env.tracks import TQ, query_batch_kernel
 from azimut_env.validation import check_fields, check_nonnegative, check_range
 from estimation import integrate_pose, odometry_twist
 
@@ -107,13 +109,35 @@ class OdometryPoses:
         """A localisation fix of robot i: its true pose plus Gaussian noise (draws 3 normals)."""
         return true_pose + self.fix_sigma * self._rngs[i].standard_normal(3)
 
-    def reset_robot(self, i: int, rng: np.random.Generator, true_pose: np.ndarray, beta_measured: np.ndarray) -> None:
-        """Robot i's new episode: its localisation generator, spawned from ``rng`` (one draw), and
-        the first fix; at rest."""
+    def spawn(self, i: int, rng: np.random.Generator) -> None:
+        """Robot i's new episode: its localisation generator, spawned from ``rng`` (one draw)."""
         self._rngs[i] = np.random.default_rng(int(rng.integers(0, 2**63 - 1)))
-        self.beta_prev[i] = beta_measured
-        self.pose[i] = self.fix(i, true_pose)
-        self.vel[i] = 0.0
+
+    def start_stage(self, ns, rows: np.ndarray, action: np.ndarray) -> None:
+        """The odometry stage of a reset (:mod:`azimut_env.task.pipeline`): the first fix of the
+        robots of ``rows``, at rest, and the track state seen from it (from the start progress
+        ``ns.s``). ``ns``: the task's arrays by name (:func:`azimut_env.task.arrays.task_arrays`)."""
+        idx = np.flatnonzero(rows)
+        for i in idx:
+            self.beta_prev[i] = ns.beta_m[i]
+            self.pose[i] = self.fix(int(i), ns.summary[i, RS_POSE])
+            self.vel[i] = 0.0
+        self._query(ns, idx, ns.s)
+
+    def step_stage(self, ns, rows: np.ndarray, action: np.ndarray) -> None:
+        """The odometry stage of a step: :meth:`advance` the robots of ``rows``, then the track
+        state seen from their estimates (from the progress of the last one)."""
+        idx = np.flatnonzero(rows)
+        self.advance(idx, ns.lam_hat, ns.phidot_m, ns.beta_m, ns.steps, ns.summary[:, RS_POSE])
+        self._query(ns, idx, self.track_state[:, TQ.S])
+
+    def _query(self, ns, idx: np.ndarray, hints: np.ndarray) -> None:
+        out = np.empty((idx.shape[0], len(TQ)))
+        look = np.empty((idx.shape[0],) + self.look.shape[1:])
+        query_batch_kernel(ns.packs, idx, ns.track_closed, ns.track_length, ns.track_rho, self.pose[idx], hints[idx],
+                           BACK, AHEAD, ns.lookahead_spacing, out, look)
+        self.track_state[idx] = out
+        self.look[idx] = look
 
     def advance(self, idx: np.ndarray, lam_hat: np.ndarray, phidot: np.ndarray, beta: np.ndarray,
                 steps: np.ndarray, true_poses: np.ndarray) -> None:

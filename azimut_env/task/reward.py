@@ -23,22 +23,22 @@ term's weight ``w``. With v_max the track's top reference speed and dt the contr
   null-space force (``AzimutPhysics.nullspace_force``), weight 0 by default: ``Azimut-v1``'s
   internal-force term, priced by that id (:data:`~azimut_env.task.config.V1_REWARD_WEIGHTS`);
 * action rate −w‖a − a_prev‖² (the normalised set-point actions);
-* off track −w on the step that leaves the track; a stall pays it too (:func:`charge_penalty`,
-  called by the termination stage), and a physics blow-up gets it as its reward.
+* off track −w on the step that ends the episode by a failure (the end conditions of
+  :data:`~azimut_env.task.termination.TERMINATION_TERMS` marked as failures: off the track,
+  stalled); a physics blow-up gets it as its reward.
 
-**To add a term**: write its function and add its row to :data:`REWARD_TERMS`. A term that reads a
-quantity no term reads yet also adds a column to :class:`RewardInput` (and its value to
-:func:`fill_reward_inputs`) or to :class:`RewardConstant` (and to :func:`reward_constants`).
+**To add a term**: write its function and add its row to :data:`REWARD_TERMS` (this module only). A
+term that reads a quantity no term reads yet also adds a column to :class:`RewardInput` (and its
+value to :func:`fill_reward_inputs`) or to :class:`RewardConstant` (and to :func:`reward_constants`).
 
-Data flow (:meth:`~azimut_env.task.core.AzimutTask.observe`): one call of :func:`reward_kernel`'s
-compiled function, generated from the table: :func:`fill_reward_inputs` writes each robot's
-inputs, then each term's function per robot, then the sum, into the terms and the reward.
+Data flow: the reward stage of the pipeline (:mod:`azimut_env.task.pipeline`) is
+:func:`reward_kernel`'s function, generated from the table: for each robot,
+:func:`fill_reward_inputs` writes its inputs from the task's struct, then each term's function,
+then the sum, into the terms and the reward.
 """
 
 from __future__ import annotations
 
-import hashlib
-import inspect
 import math
 from collections.abc import Callable, Iterator, Mapping
 from enum import IntEnum
@@ -47,14 +47,15 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from azimut_env.task.observation import speed_along
+from azimut_env.physics.layout import RS
+from azimut_env.task.codegen import check_table, markdown_table, row_stage
 from azimut_env.tracks import TQ
 from azimut_env.validation import real_scalar, show
 
 __all__ = ["RewardTerm", "REWARD_TERMS", "current_reward_terms", "RewardInput", "RewardConstant", "RewardWeights",
            "OFF_TRACK", "RENAMED_TERMS", "reward_term_names", "default_reward_weights", "check_reward_weights",
            "reward_weight_array",
-           "reward_constants", "reward_table", "fill_reward_inputs", "reward_kernel", "charge_penalty"]
+           "reward_constants", "reward_table", "fill_reward_inputs", "reward_kernel"]
 
 
 class RewardInput(IntEnum):
@@ -71,7 +72,7 @@ class RewardInput(IntEnum):
     ANTAGONISM = 8       # F_ant, step mean [N]
     NULLSPACE_FORCE = 9  # F_null, step mean [N]
     ACTION_CHANGE = 10   # ‖a − a_prev‖² (the normalised actions)
-    OFF_TRACK = 11       # 1.0 on the step that leaves the track, else 0.0
+    OFF_TRACK = 11       # 1.0 on the step that ends the episode by a failure (off the track, stalled), else 0.0
 
 
 class RewardConstant(IntEnum):
@@ -264,121 +265,67 @@ def reward_constants(control_period: float, lateral_scale: float, heading_scale:
 
 
 def reward_table(terms: tuple[RewardTerm, ...] | None = None) -> str:
-    """The Markdown table of the terms (name, default weight, unit, term) for the env's docstring."""
-    rows = [("name", "weight", "unit", "term (per step)")]
-    rows += [(t.name, f"{t.weight:g}", t.unit, t.doc.replace("|", "\\|")) for t in _table(terms)]
-    widths = [max(len(r[j]) for r in rows) for j in range(4)]
-    line = lambda r: "| " + " | ".join(x.ljust(w) for x, w in zip(r, widths)) + " |"  # noqa: E731
-    return "\n".join([line(rows[0]), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [line(r) for r in rows[1:]])
+    """The Markdown table of the terms (name, default weight, unit, term) for the docs."""
+    return markdown_table(("name", "weight", "unit", "term (per step)"),
+                          [(t.name, f"{t.weight:g}", t.unit, t.doc) for t in _table(terms)])
+
+
+_SLIP, _ANTAGONISM, _NULLSPACE = int(RS.SLIP), int(RS.ANTAGONISM), int(RS.NULLSPACE)
 
 
 @njit(cache=True)
-def fill_reward_inputs(rows, track_state, s_prev, vel_world, max_speeds, slip, antagonism, nullspace, action,
-                       prev_action, off_track, v_along, x):
-    """For the robots where ``rows`` is True: the speed along the path ``v_along`` (N,) and the
-    reward inputs ``x`` (N, len(RewardInput)).
-
-    ``track_state`` (N, 5) (columns :class:`~azimut_env.tracks.TQ`) and ``vel_world`` (N, 2) are
-    the true ones, ``s_prev`` the progress before the step, ``max_speeds`` each track's top
-    reference speed, ``slip`` [W], ``antagonism`` and ``nullspace`` [N] the physics' step means, ``action`` and
-    ``prev_action`` (N, 2n) float32, ``off_track`` the termination flags of this step."""
-    for i in range(rows.shape[0]):
-        if not rows[i]:
-            continue
-        ts = track_state[i]
-        va = speed_along(vel_world[i], ts[TQ.PSI])
-        v_along[i] = va
-        da2 = 0.0
-        for j in range(action.shape[1]):
-            d = action[i, j] - prev_action[i, j]  # float32, as the actions
-            da2 += d * d
-        xi = x[i]
-        xi[_X.PROGRESS] = ts[TQ.S]
-        xi[_X.PROGRESS_BEFORE] = s_prev[i]
-        xi[_X.LATERAL_ERROR] = ts[TQ.LATERAL]
-        xi[_X.HEADING_ERROR] = ts[TQ.HEADING]
-        xi[_X.SPEED_REF] = ts[TQ.V_REF]
-        xi[_X.SPEED_ALONG] = va
-        xi[_X.TOP_SPEED] = max(max_speeds[i], 1e-3)
-        xi[_X.SLIP_POWER] = slip[i]
-        xi[_X.ANTAGONISM] = antagonism[i]
-        xi[_X.NULLSPACE_FORCE] = nullspace[i]
-        xi[_X.ACTION_CHANGE] = da2
-        xi[_X.OFF_TRACK] = 1.0 if off_track[i] else 0.0
+def fill_reward_inputs(ta, i, action, x):
+    """Robot i's reward inputs ``x`` (len(RewardInput),) from the task's struct (the true track
+    state of the track stage, the progress before the step ``ta.s_prev``, the physics' step
+    means, the failure flag of the termination stage) and the step's clipped ``action`` (N, 2n)
+    float32 against ``ta.prev_action``."""
+    ts, summary = ta.track_out[i], ta.summary[i]
+    da2 = 0.0
+    for j in range(action.shape[1]):
+        d = action[i, j] - ta.prev_action[i, j]  # float32, as the actions
+        da2 += float(d * d)
+    x[_X.PROGRESS] = ts[TQ.S]
+    x[_X.PROGRESS_BEFORE] = ta.s_prev[i]
+    x[_X.LATERAL_ERROR] = ts[TQ.LATERAL]
+    x[_X.HEADING_ERROR] = ts[TQ.HEADING]
+    x[_X.SPEED_REF] = ts[TQ.V_REF]
+    x[_X.SPEED_ALONG] = ta.v_along[i]
+    x[_X.TOP_SPEED] = max(ta.track_max_speed[i], 1e-3)
+    x[_X.SLIP_POWER] = summary[_SLIP]
+    x[_X.ANTAGONISM] = summary[_ANTAGONISM]
+    x[_X.NULLSPACE_FORCE] = summary[_NULLSPACE]
+    x[_X.ACTION_CHANGE] = da2
+    x[_X.OFF_TRACK] = 1.0 if ta.failed[i] else 0.0
 
 
 def _check_table(terms: tuple[RewardTerm, ...]) -> None:
-    names = [t.name for t in terms]
-    if len(set(names)) != len(names):
-        raise ValueError(f"reward terms must have distinct names, got {names}")
-    for t in terms:
-        if not isinstance(t, RewardTerm) or not t.name.isidentifier():
-            raise ValueError(f"a reward term must be a RewardTerm named by an identifier, got {t!r}")
-        py_func = getattr(t.function, "py_func", None)
-        if py_func is None or len(inspect.signature(py_func).parameters) != 3:
-            raise TypeError(f"reward term {t.name!r}: its function must be numba.njit-compiled and take (x, k, w)")
-    if OFF_TRACK not in names:
-        raise ValueError(f"the reward terms must include {OFF_TRACK!r} (the termination stage charges it)")
+    odd = [t for t in terms if not isinstance(t, RewardTerm)]
+    if odd:
+        raise ValueError(f"a reward term must be a RewardTerm, got {odd[0]!r}")
+    check_table(terms, "reward terms", 3)
+    if OFF_TRACK not in [t.name for t in terms]:
+        raise ValueError(f"the reward terms must include {OFF_TRACK!r} (the failures' penalty)")
 
 
-_KERNELS: dict[tuple, Callable] = {}
-
-
-def reward_kernel(terms: tuple[RewardTerm, ...] | None = None) -> Callable:
-    """The compiled reward stage of a table (default: the module's :data:`REWARD_TERMS` as it is
-    now), ``kernel(rows, <the inputs of fill_reward_inputs>, x, k, weights, terms_out, reward)``:
-    :func:`fill_reward_inputs` into ``x``, then for the robots where ``rows`` is True each term's
-    function on the robot's inputs ``x[i]`` into ``terms_out[i, j]`` (N, len(terms)), and their sum
-    in the table's order into ``reward[i]``; one compiled call per step.
+def reward_kernel(terms: tuple[RewardTerm, ...] | None = None, jit: bool = True) -> Callable:
+    """The reward stage of the pipeline, ``reward(ta, rows, action)``, generated from a table
+    (default: the module's :data:`REWARD_TERMS` as it is now): for each robot of ``rows``,
+    :func:`fill_reward_inputs` into ``ta.reward_inputs[i]``, each term's function on them into
+    ``ta.reward_terms[i, j]``, and their sum in the table's order into ``ta.reward[i]``.
 
     Its source is generated from the table (one line per term), so that adding a term is a row and
-    a function. It is cached on disk by numba as if it were defined in this file, under a name that
-    hashes its source and the source of every function it calls: an edited term gets a new kernel,
-    never a stale one (a function without retrievable source is compiled without the disk cache)."""
+    a function (:func:`~azimut_env.task.codegen.generated_function`: cached on disk under a name
+    that hashes its source and its terms'). ``jit=False``: the same source over the ``py_func``
+    of the same functions (the reference path)."""
     terms = _table(terms)
-    key = tuple((t.name, t.function) for t in terms)
-    kernel = _KERNELS.get(key)
-    if kernel is None:
-        _check_table(terms)
-        kernel = _KERNELS[key] = _compile_kernel(terms)
-    return kernel
-
-
-_FILL_ARGS = ("rows, track_state, s_prev, vel_world, max_speeds, slip, antagonism, nullspace, action, prev_action, "
-              "off_track, v_along, x")
-
-
-def _compile_kernel(terms: tuple[RewardTerm, ...]) -> Callable:
-    body = [f"({_FILL_ARGS}, k, weights, terms, reward):",
-            f"    _fill_inputs({_FILL_ARGS})",
-            "    for i in range(rows.shape[0]):",
-            "        if not rows[i]:",
-            "            continue",
-            "        xi = x[i]"]
-    body += [f"        terms[i, {j}] = _term_{j}(xi, k, weights[{j}])  # {t.name}" for j, t in enumerate(terms)]
-    body += ["        total = 0.0  # the sum in the order of the table",
-             "        for j in range(terms.shape[1]):",
-             "            total += terms[i, j]",
-             "        reward[i] = total"]
-    body_src = "\n".join(body)
-    called = [fill_reward_inputs, speed_along] + [t.function for t in terms]
-    try:
-        sources = [inspect.getsource(f.py_func) for f in called]
-        cache = True
-    except (OSError, TypeError):
-        sources, cache = [], False
-    digest = hashlib.sha256("\n".join([body_src, *sources]).encode()).hexdigest()[:16]
-    name = f"_reward_kernel_{digest}"
+    _check_table(terms)
+    body = ["xi = ta.reward_inputs[i]", "_fill_inputs(ta, i, action, xi)"]
+    body += [f"ta.reward_terms[i, {j}] = _term_{j}(xi, k, weights[{j}])  # {t.name}" for j, t in enumerate(terms)]
+    body += ["total = 0.0  # the sum in the order of the table",
+             "for j in range(ta.reward_terms.shape[1]):",
+             "    total += ta.reward_terms[i, j]",
+             "ta.reward[i] = total"]
     namespace = {f"_term_{j}": t.function for j, t in enumerate(terms)}
     namespace["_fill_inputs"] = fill_reward_inputs
-    namespace["__name__"] = __name__
-    # compiled under this file's name: numba's disk cache needs a source file to key its index on
-    exec(compile(f"def {name}{body_src}\n", __file__, "exec"), namespace)
-    return njit(cache=cache)(namespace[name])
-
-
-def charge_penalty(mask: np.ndarray, penalty: float, reward: np.ndarray, terms: np.ndarray, column: int) -> None:
-    """The robots of ``mask`` pay the off-track ``penalty`` once (a stall): their off-track term
-    (``terms[:, column]``) becomes −penalty and their reward changes by the difference."""
-    reward[mask] += -penalty - terms[mask, column]
-    terms[mask, column] = -penalty
+    return row_stage("_reward", body, namespace, __file__, __name__, jit,
+                     before=["k, weights = ta.reward_constants, ta.weights"])

@@ -20,8 +20,13 @@ from numba import njit
 from numba.typed import List as NumbaList
 
 from azimut_env.params import SensorParams
+from azimut_env.physics.layout import MS, WS
 
-__all__ = ["quantize", "measure_angles", "encoder_counts", "measure_wheel_speeds", "measure_batch", "SensorState"]
+# plain-int columns (numba folds them; the IntEnums stay the names)
+_WS_BETA, _MS_THETA, _MS_PHI, _MS_PHIDOT = int(WS.BETA), int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)
+
+__all__ = ["quantize", "measure_angles", "encoder_counts", "measure_wheel_speeds", "measure_batch", "SensorState",
+           "sense", "SENSOR_STAGES"]
 
 
 def quantize(x: np.ndarray, resolution: float) -> np.ndarray:
@@ -60,30 +65,61 @@ def measure_wheel_speeds(phi: np.ndarray, phi_prev: np.ndarray, true_phidot: np.
 
 
 @njit(cache=True)
+def _measure_robot(beta, bias, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
+                   wheel_noise, normals, out_beta, out_motor, out_phidot, wrap):
+    """One robot's readings: ``beta`` (true steering angles), ``bias`` (the encoders' offsets),
+    ``motor``, ``phi``, ``phi_prev``, ``phidot`` (n,), ``normals`` (3, n) into ``out_beta``,
+    ``out_motor``, ``out_phidot`` (n,) = (β, motor angle, φ̇) measured. ``wrap`` (unlimited
+    steering): the angle readings are taken modulo 2π into ]−π, π], as an absolute encoder reads them."""
+    two_pi = 2 * math.pi
+    for k in range(beta.shape[0]):
+        b = beta[k] + bias[k] + steer_noise * normals[0, k]
+        m = motor[k] + motor_noise * normals[1, k]
+        if resolution > 0:
+            b = np.round(b / resolution) * resolution
+            m = np.round(m / resolution) * resolution
+        if wrap:
+            b = math.pi - (math.pi - b) % two_pi
+            m = math.pi - (math.pi - m) % two_pi
+        if cpr > 0:
+            counts = math.floor(phi[k] * (cpr / two_pi)) - math.floor(phi_prev[k] * (cpr / two_pi))
+            w = counts * (two_pi / cpr) / dt
+        else:
+            w = phidot[k]
+        out_beta[k] = b
+        out_motor[k] = m
+        out_phidot[k] = w + wheel_noise * normals[2, k]
+
+
+@njit(cache=True)
 def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
                     wheel_noise, normals, out, wrap=False):
-    """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured.
-    ``wrap`` (unlimited steering): the angle readings are taken modulo 2π into ]−π, π], as an
-    absolute encoder reads them."""
-    two_pi = 2 * math.pi
+    """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured
+    (:func:`_measure_robot` row by row, without bias)."""
+    no_bias = np.zeros(beta.shape[1])
     for i in range(beta.shape[0]):
-        for k in range(beta.shape[1]):
-            b = beta[i, k] + steer_noise * normals[i, 0, k]
-            m = motor[i, k] + motor_noise * normals[i, 1, k]
-            if resolution > 0:
-                b = np.round(b / resolution) * resolution
-                m = np.round(m / resolution) * resolution
-            if wrap:
-                b = math.pi - (math.pi - b) % two_pi
-                m = math.pi - (math.pi - m) % two_pi
-            if cpr > 0:
-                counts = math.floor(phi[i, k] * (cpr / two_pi)) - math.floor(phi_prev[i, k] * (cpr / two_pi))
-                w = counts * (two_pi / cpr) / dt
-            else:
-                w = phidot[i, k]
-            out[i, 0, k] = b
-            out[i, 1, k] = m
-            out[i, 2, k] = w + wheel_noise * normals[i, 2, k]
+        _measure_robot(beta[i], no_bias, motor[i], phi[i], phi_prev[i], phidot[i], dt, steer_noise, motor_noise,
+                       resolution, cpr, wheel_noise, normals[i], out[i, 0], out[i, 1], out[i, 2], wrap)
+
+
+@njit(cache=True)
+def sense(ta, rows, action):
+    """The sensor stage of the pipeline (:mod:`azimut_env.task.pipeline`): the readings of the
+    robots of ``rows`` from the physics' true state and this step's normals (``ta.normals``, drawn
+    before the pipeline from each robot's generator); the wheel encoders then count from there."""
+    for i in range(rows.shape[0]):
+        if rows[i]:
+            ws, ms = ta.wheel_summary[i], ta.motor_state[i]
+            _measure_robot(ws[:, _WS_BETA], ta.steer_bias[i], ms[:, _MS_THETA], ms[:, _MS_PHI], ta.phi_prev[i],
+                           ms[:, _MS_PHIDOT], ta.control_period, ta.steer_noise, ta.motor_noise,
+                           ta.steer_resolution, ta.wheel_cpr, ta.wheel_speed_noise, ta.normals[i], ta.beta_m[i],
+                           ta.motor_m[i], ta.phidot_m[i], ta.wrap_angles)
+            ta.phi_prev[i] = ms[:, _MS_PHI]
+
+
+#: the sensor models the step and the reset run, in order (stages ``(ta, rows, action)``; a new
+#: sensor adds its own stage here, its readings to :data:`azimut_env.task.arrays.FIELDS`)
+SENSOR_STAGES = (sense,)
 
 
 def _as_rows(x, shape) -> np.ndarray:

@@ -1,7 +1,7 @@
-"""The stages after the physics in one compiled call (``azimut_env.task.compiled_step``) against the
-same stages one by one (``AzimutTask.compiled_step = False``, the reference): the same
-observations, rewards, flags and info, bit for bit, single env and vector env, with resets,
-autoresets, stalls, latency, obstacles, other robots and reward weights."""
+"""The pipeline of stages after the physics compiled (``azimut_env.task.pipeline``) against the
+same stage functions run as plain Python (``AzimutTask.jit = False``: their ``py_func``, the
+reference): the same observations, rewards, flags and info, bit for bit, single env and vector
+env, with resets, autoresets, stalls, latency, obstacles, odometry, other robots and reward weights."""
 
 from __future__ import annotations
 
@@ -39,13 +39,14 @@ CONFIGS = [
     {"track": "square", "reward_weights": {"progress": 1.0, "slip": 0.5}, "domain_randomization": 0.3,
      "max_lateral_error": 0.05},
     {"track": "crab", "obstacles": [(1.0, 0.6, 0.2)], "imperfections": "paper"},
+    {"track": "figure8", "pose_source": "odometry", "robot": "hex"},
 ]
 
 
 @pytest.mark.parametrize("config", CONFIGS)
 def test_single_env_compiled_step_equals_the_stages(config):
     envs = [AzimutEnv(**config) for _ in range(2)]
-    envs[1].task.compiled_step = False
+    envs[1].task.jit = False
     rng = np.random.default_rng(1)
     outs = [e.reset(seed=5) for e in envs]
     _same(outs[0], outs[1], "reset")
@@ -58,7 +59,7 @@ def test_single_env_compiled_step_equals_the_stages(config):
             ends += 1
             outs = [e.reset(seed=k) for e in envs]
             _same(outs[0], outs[1], f"reset {k}")
-    assert envs[0].task._compiled is not None and envs[1].task._compiled is None
+    assert envs[0].task.pipelines()[0].jit and not envs[1].task.pipelines()[0].jit
     if "stall_time" in config:
         assert ends > 0  # stalls ended episodes (the penalty path)
 
@@ -67,7 +68,7 @@ def test_single_env_compiled_step_equals_the_stages(config):
 def test_vector_env_compiled_step_equals_the_stages(mode):
     envs = [AzimutVectorEnv(num_envs=4, track="random", autoreset_mode=mode, max_episode_steps=60, stall_time=0.3,
                             stall_distance=0.2) for _ in range(2)]
-    envs[1].task.compiled_step = False
+    envs[1].task.jit = False
     rng = np.random.default_rng(2)
     outs = [e.reset(seed=11) for e in envs]
     _same(outs[0], outs[1], "reset")
@@ -87,6 +88,6 @@ def test_compiled_step_rebuilt_after_pickling():
     a = np.full(env.action_space.shape, 0.2, dtype=np.float32)
     env.step(a)
     twin = pickle.loads(pickle.dumps(env))
-    assert twin.task._compiled is None
+    assert twin.task._pipelines is None
     for _ in range(20):
         _same(env.step(a), twin.step(a), "after pickling")

@@ -102,8 +102,8 @@ def test_every_key_is_in_the_table_and_the_docstrings():
     assert vinfo["pose"].shape == (2, 3) and vinfo["tire_forces"].shape == (2, 4, 2)
     assert vinfo["eta_true"][0].shape == (2, 3) and vinfo["eta_true"][1].shape == (2,)
     assert vinfo["reward_terms"]["slip"].shape == (2,) and vinfo["reward_terms"]["_slip"].all()
-    for cls in (AzimutEnv, AzimutVectorEnv):
-        assert info_table() in textwrap.dedent(cls.__doc__)
+    assert info_table() in textwrap.dedent(AzimutEnv.__doc__)  # generated (azimut_env.doc_tables)
+    assert "AzimutEnv" in AzimutVectorEnv.__doc__  # the vector env's refers to the single env's table
 
 
 @pytest.mark.parametrize("twist", [(0.3, -0.2, 0.5), (0.0, 0.0, 0.0), (-1e-4, 0.0, -2e-4), (0.0, -5e-4, 0.0),

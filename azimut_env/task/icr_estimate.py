@@ -1,0 +1,39 @@
+"""The estimation stage of the pipeline: the IT estimate (λ̂, μ̂) of the H state from the readings.
+
+:func:`estimate` runs ``estimation``'s compiled IT (``estimation.estimate.estimate_eta_rows``,
+the same bits as ``estimation.estimate_eta``) on the measured steering angles and wheel speeds
+of the robots of ``rows``, into ``ta.lam_hat`` (N, 3), ``ta.mu_hat``, ``ta.qua`` (N,) and
+``ta.beta_est`` (N, n) (S(λ̂)). The estimator's settings are the struct's constants
+(:data:`azimut_env.task.arrays.FIELDS`: the geometry and ``ITParams``).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from estimation.estimate import _eta_it_rows
+from estimation.quality import QUALITY_F
+
+__all__ = ["estimate", "MU_TOL"]
+
+#: below this |μ̂| [m/s] the estimate takes the canonical sign (``estimate_eta``'s ``mu_tol``)
+MU_TOL = 1e-3
+
+
+@njit(cache=True)
+def estimate(ta, rows, action):
+    """The IT estimate of the robots of ``rows`` (every robot: one call over all rows; else robot
+    by robot, the same bits)."""
+    n_rows = rows.shape[0]
+    every = rows.all()
+    for j in range(1 if every else n_rows):
+        if every:
+            a, b = 0, n_rows
+        elif rows[j]:
+            a, b = j, j + 1
+        else:
+            continue
+        _eta_it_rows(ta.beta_m[a:b], ta.phidot_m[a:b], ta.a_minus_l, ta.a_perp, ta.b, ta.r, ta.steer_min,
+                     ta.steer_max, ta.unlimited, ta.eps_delta, ta.eps_lambda, ta.max_iter, ta.min_step, ta.n_starts,
+                     ta.race, ta.accept_d2, MU_TOL, QUALITY_F, ta.lam_hat[a:b], ta.mu_hat[a:b], ta.beta_est[a:b],
+                     ta.qua[a:b])

@@ -1,0 +1,115 @@
+"""One pipeline: the stages after the physics, for a step and for a reset, compiled or not.
+
+A stage is a function ``stage(ta, rows, action)``: it reads and writes the task's struct ``ta``
+(:mod:`azimut_env.task.arrays`) for the robots where ``rows`` (N,) is True. Each lives in the
+module of its concern:
+
+=================  ==================================================  ===========================
+stage              module                                              step / reset
+=================  ==================================================  ===========================
+sense              :mod:`azimut_env.task.sensors` (``SENSOR_STAGES``)   both
+estimate           :mod:`azimut_env.task.icr_estimate`                 both
+odometry           :mod:`azimut_env.task.localisation` (Python)        both, ``pose_source="odometry"``
+track              :mod:`azimut_env.task.track_state`                  both
+terminate          :mod:`azimut_env.task.termination` (its table)      step
+start_episode      :mod:`azimut_env.task.termination`                  reset
+reward             :mod:`azimut_env.task.reward` (its table)           step
+remember_action    :mod:`azimut_env.task.actions`                      step
+observe            :mod:`azimut_env.task.observation` (its table)      both
+=================  ==================================================  ===========================
+
+(the ``info`` dict is built afterwards from its table, :mod:`azimut_env.task.info`). A
+:class:`Pipeline` runs the stages in order for any mask of rows: the consecutive compiled stages
+as one generated compiled function (a step of the single env with the true pose: one call), a
+Python stage (odometry) between them. With ``jit=False`` it runs the same stages as plain Python
+(their ``py_func``, the generated ones from the same source): the reference the tests compare
+the compiled path with, bit for bit (``tests/azimut_env/test_compiled_step.py``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from azimut_env.task import sensors
+from azimut_env.task.actions import remember_action
+from azimut_env.task.codegen import generated_function, py_func
+from azimut_env.task.icr_estimate import estimate
+from azimut_env.task.observation import observe_kernel
+from azimut_env.task.reward import reward_kernel
+from azimut_env.task.termination import start_episode, terminate_kernel
+from azimut_env.task.track_state import track
+
+__all__ = ["Pipeline", "step_stages", "reset_stages"]
+
+
+def step_stages(task: Any, jit: bool = True) -> tuple[Callable, ...]:
+    """The stages of a step, in order."""
+    odometry = () if task.odometry is None else (task.odometry.step_stage,)
+    return (*sensors.SENSOR_STAGES, estimate, *odometry, track, terminate_kernel(task.termination_table, jit),
+            reward_kernel(task.reward_table, jit), remember_action, observe_kernel(task.observation_fields, jit))
+
+
+def reset_stages(task: Any, jit: bool = True) -> tuple[Callable, ...]:
+    """The stages of a reset, in order (the episode's start already drawn and set: pose,
+    steering, sensor bias and noise, ``prev_action``, the start progress in ``ta.s``)."""
+    odometry = () if task.odometry is None else (task.odometry.start_stage,)
+    return (*sensors.SENSOR_STAGES, estimate, *odometry, track, start_episode,
+            observe_kernel(task.observation_fields, jit))
+
+
+def _is_compiled(stage: Callable) -> bool:
+    return hasattr(stage, "py_func")
+
+
+def _fuse(stages: Sequence[Callable]) -> Callable:
+    """One compiled function calling the compiled ``stages`` in order."""
+    lines = ["def _f(ta, rows, action):"] + [f"    _stage_{j}(ta, rows, action)" for j in range(len(stages))]
+    namespace = {f"_stage_{j}": s for j, s in enumerate(stages)}
+    return generated_function("_pipeline", "\n".join(lines) + "\n", namespace, __file__, __name__)
+
+
+class Pipeline:
+    """The ``stages`` run in order on a task's arrays: ``pipeline(rows, action)``.
+
+    Args:
+        stages: the stage functions (:func:`step_stages`, :func:`reset_stages`).
+        ta: the compiled struct (None with ``jit=False``); ns: the same fields by name.
+        jit: False: every stage as plain Python (``py_func``), the reference path.
+    """
+
+    def __init__(self, stages: Sequence[Callable], ta: Any, ns: Any, jit: bool = True) -> None:
+        self.stages = tuple(stages)
+        self.ta, self.ns, self.jit = ta, ns, jit
+        calls: list[tuple[Callable, Any]] = []
+        group: list[Callable] = []
+        for stage in (*self.stages, None):
+            if jit and stage is not None and _is_compiled(stage):
+                group.append(stage)
+                continue
+            if group:
+                calls.append((_fuse(group) if len(group) > 1 else group[0], ta))
+                group = []
+            if stage is not None:
+                calls.append((py_func(stage), ns))
+        self._calls = tuple(calls)
+
+    def __call__(self, rows: np.ndarray, action: np.ndarray) -> None:
+        for fn, arrays in self._calls:
+            fn(arrays, rows, action)
+
+    def run_timed(self, rows: np.ndarray, action: np.ndarray, times: dict[str, float],
+                  label: Callable[[Callable], str]) -> None:
+        """The stages one by one (each compiled stage its own call), adding each one's wall time
+        [s] to ``times[label(stage)]`` (``azimut bench-env``'s breakdown)."""
+        clock = time.perf_counter
+        for stage in self.stages:
+            compiled = _is_compiled(stage) and self.ta is not None
+            fn, arrays = (stage, self.ta) if compiled else (py_func(stage), self.ns)
+            t0 = clock()
+            fn(arrays, rows, action)
+            key = label(stage)
+            times[key] = times.get(key, 0.0) + clock() - t0
