@@ -11,7 +11,7 @@ import numpy as np
 
 from azimut_env.physics.blowup import BlowUpLimits
 from azimut_env.physics.obstacles import Obstacle
-from azimut_env.tracks import ALL_TRACK_NAMES, Track
+from azimut_env.tracks import Track, library, scenarios
 from azimut_env.validation import check_finite, check_index_list, check_int, check_range
 
 __all__ = ["RESET_OPTIONS", "KICK_IMPULSE_MAX", "check_reset_options", "check_kick", "check_track",
@@ -101,8 +101,9 @@ def check_kick(kick: Any, n: int) -> dict[str, Any]:
 def check_track(track: Any, what: str = "track") -> str | Track:
     """A built-in track or scenario name or a :class:`Track` that fits in the simulated world."""
     if isinstance(track, str):
-        if track not in ALL_TRACK_NAMES:
-            raise ValueError(f"{what}: unknown track {track!r}; choose from {list(ALL_TRACK_NAMES)} or pass a Track")
+        names = library.TRACK_NAMES + scenarios.SCENARIO_NAMES  # read now: a test may extend them
+        if track not in names:
+            raise ValueError(f"{what}: unknown track {track!r}; choose from {list(names)} or pass a Track")
         return track
     if not isinstance(track, Track):
         raise TypeError(f"{what} must be a Track or a built-in name, got {type(track).__name__}")
