@@ -10,7 +10,7 @@ Data flow of one control step (each stage batched over the robots, compiled wher
 
 1. :meth:`AzimutTask.apply_actions`: action → set-points (check, clip, ``params`` map; with
    ``action_latency`` through a per-robot FIFO) written to the physics' commands.
-2. :meth:`AzimutTask.step_physics`: kicks due now, then ``substeps`` physics substeps (motors,
+2. :meth:`AzimutTask.step_physics`: the interval events (the kicks due now), then ``substeps`` physics substeps (motors,
    series-elastic steering, tires, ``space.step``), which end with the robot and wheel summaries
    (:mod:`azimut_env.physics.layout`: ``RS``, ``WS``) and the blow-up codes; the front end ends
    blown-up robots' episodes (:meth:`AzimutTask.end_blown_up`).
@@ -20,10 +20,11 @@ Data flow of one control step (each stage batched over the robots, compiled wher
    the task's arrays held in one struct, :mod:`azimut_env.task.arrays`), for every robot or a
    mask of them, compiled (``jit``) or as plain Python (the reference).
 
-Resets (:meth:`AzimutTask.reset_robot`) draw the episode's track, kick, parameters, sensor bias,
-starting configuration (:mod:`azimut_env.task.start_state`) and noise, then run the reset
-pipeline (the same stages: sense → estimate → odometry → track → start_episode → observe) for
-the robot; both envs build their ``info`` from the table of :mod:`azimut_env.task.info`.
+Resets (:meth:`AzimutTask.reset_robot`) draw the episode through the reset events
+(:mod:`azimut_env.task.events`: track, kick, domain randomisation, sensor bias, starting
+configuration, noise), then run the reset pipeline (the same stages: sense → estimate →
+odometry → track → start_episode → observe) for the robot; both envs build their ``info`` from
+the table of :mod:`azimut_env.task.info`.
 
 Where to add things: a sensor in :mod:`azimut_env.task.sensors` (a stage in ``SENSOR_STAGES``, its
 readings a row of :data:`azimut_env.task.arrays.FIELDS`), a reward term in
@@ -43,15 +44,16 @@ from typing import Any
 
 import numpy as np
 
-from azimut_env.params import RobotParams, action_from_setpoints
+from azimut_env.params import RobotParams
 from azimut_env.physics.blowup import BlowUp
 from azimut_env.physics.engine import AzimutPhysics, BlowUpLimits
-from azimut_env.physics.layout import MS, RS
-from azimut_env.physics.wheel_params import default_wheel_params, randomized_wheel_params
-from azimut_env.task import observation, termination
+from azimut_env.physics.layout import RS
+from azimut_env.physics.wheel_params import default_wheel_params
+from azimut_env.task import events, observation, termination
 from azimut_env.task.actions import CommandPath
 from azimut_env.task.arrays import allocate, task_arrays
 from azimut_env.task.config import TaskConfig, resolve_params
+from azimut_env.task.events import Episode
 from azimut_env.task.lap_time import nominal_duration, reference_lap_time  # noqa: F401 (re-exported)
 from azimut_env.task.localisation import OdometryPoses
 from azimut_env.task.observation import field_offsets, observation_bounds, observation_layout
@@ -65,7 +67,6 @@ from azimut_env.task.reset_options import (  # noqa: F401
 )
 from azimut_env.task.reward import RewardInput, current_reward_terms, reward_constants, reward_weight_array
 from azimut_env.task.sensors import SensorState
-from azimut_env.task.start_state import start_configuration
 from azimut_env.task.termination import episode_step_limit
 from azimut_env.tracks import Track, make_track, named_track
 from azimut_env.typed_lists import array_list, set_item
@@ -124,7 +125,7 @@ class AzimutTask:
         self.track_spec = track
         default = track if isinstance(track, Track) else self.builtin_track(track, np.random.default_rng(0))
         self.tracks: list[Track] = [default] * N
-        self._default_wp = default_wheel_params(params, N)
+        self.default_wheel_params = default_wheel_params(params, N)
         self._packs = array_list([t.packed() for t in self.tracks])
         # the tables as they are now (a test may extend one): the observation, termination and reward
         K = config.lookahead_count
@@ -155,7 +156,7 @@ class AzimutTask:
         self._limit_track: list[Track | None] = [None] * N  # the (immutable) track step_limit[i] is of
         self.ready = np.zeros(N, dtype=np.bool_)  # robot i's last reset succeeded (step needs it)
         self.kicks: list[dict | None] = [None] * N
-        self._kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
+        self.kick_step = np.full(N, -1, dtype=np.int64)  # the step of each robot's pending kick, −1: none
         self._all = np.ones(N, dtype=np.bool_)
         self._one = np.zeros(N, dtype=np.bool_)  # the row mask of a reset
         self.commands = CommandPath(params.limits, N, n, config.action_latency)
@@ -224,36 +225,12 @@ class AzimutTask:
         self.ready[i] = True
 
     def _reset_robot(self, i: int, rng: np.random.Generator, options: dict[str, Any], fresh_space: bool) -> None:
-        """The reset's events in the single env's order of draws from ``rng`` (track, kick, domain
-        randomisation, sensor bias, start pose and steering, sensor noise, the localisation's
-        generator), then the reset pipeline for robot i (:func:`~azimut_env.task.pipeline.reset_stages`)."""
-        phys = self.physics
-        spec = options.get("track", self.track_spec)
-        track = spec if isinstance(spec, Track) else self.builtin_track(spec, rng)
-        s0 = start_progress_on(track, float(options.get("start_progress", 0.0)))  # before any state changes
-        self._set_track(i, track)
-        if fresh_space:  # per-episode obstacles come with a Space of their own (check_reset_options)
-            phys.rebuild(options.get("obstacles", self.default_obstacles))
-        self.kicks[i] = dict(options["kick"]) if "kick" in options else None
-        self._kick_step[i] = self.kicks[i]["step"] if "kick" in options else -1
-        wp, mass = randomized_wheel_params(self._default_wp[i], self.params, self.config.domain_randomization, rng)
-        phys.set_wheel_params(wp, robot=i)
-        phys.set_chassis_mass(i, mass)
-        self.sensors.draw_bias(i, rng)
-        pose, beta = start_configuration(track, s0, self.config.start_noise, self.params.geometry, rng)
-        phys.reset_robot(i, pose, beta)
-        self.commands.reset_robot(i, phys.commands[i])  # latency: the reset set-points are held for k steps
-        clash = phys.overlapping_obstacles(i)
-        if clash:
-            raise ValueError(f"obstacles {clash} overlap the robot's starting footprint at {np.round(pose, 3)}: "
-                             "move them off the start of the track")
-        self.sensors.start(i, phys.motor_state[i, :, MS.PHI])
-        self.prev_action[i] = action_from_setpoints(beta, np.zeros(self.n), self.params.limits)
-        self.steps[i] = 0
-        self.sensors.draw_noise_robot(i, rng)
-        if self.odometry is not None:  # the localisation system's generator, spawned from the robot's
-            self.odometry.spawn(i, rng)
-        self.s[i] = s0  # the track stage starts its projection there
+        """The reset events (:data:`~azimut_env.task.events.RESET_EVENTS`, in the order of their
+        draws from ``rng``), then the reset pipeline for robot i
+        (:func:`~azimut_env.task.pipeline.reset_stages`)."""
+        episode = Episode(options, fresh_space)
+        for event in events.RESET_EVENTS:
+            event.function(self, i, rng, episode)
         rows = self._one
         rows[i] = True
         try:
@@ -261,7 +238,7 @@ class AzimutTask:
         finally:
             rows[i] = False
 
-    def _set_track(self, i: int, track: Track) -> None:
+    def set_track(self, i: int, track: Track) -> None:
         """Robot i on ``track``: its packed rows, its constants and its step limit."""
         if track is not self.tracks[i]:
             self.tracks[i] = track
@@ -325,10 +302,8 @@ class AzimutTask:
         """Kicks due now, then one control period of physics for all robots. Returns the blow-up
         codes (N,) (:class:`~azimut_env.physics.blowup.BlowUp`, 0: fine)."""
         phys = self.physics
-        if self._kick_step.max() >= 0:
-            for i in np.flatnonzero(self._kick_step == self.steps):
-                kick = self.kicks[i]
-                phys.kick(int(i), kick["wheels"], kick["impulse"])
+        for event in events.INTERVAL_EVENTS:
+            event.function(self)
         phys.step()
         self.steps += 1
         return phys.summary[:, _RS_CODE]

@@ -162,3 +162,33 @@ def test_recipe_track(monkeypatch):
     assert env.unwrapped.track.length == pytest.approx(oval_track().length)
     assert len(_run(env, n=5)) == 6
     env.reset(seed=0, options={"track": "oval"})
+
+
+# ---------------------------------------------------------------- a randomisation, a perturbation: events
+
+
+def _bias_jitter(task, i, rng, episode):
+    task.sensors.steer_bias[i] += rng.uniform(-0.01, 0.01, task.n)
+
+
+def _push(task):
+    for i in np.flatnonzero(task.steps == 3):
+        task.physics.kick(int(i), [0, 1], 0.3)
+
+
+def test_recipe_events(monkeypatch):
+    from azimut_env.task import events
+
+    base = _run(AzimutEnv(track="paper"), n=6)
+    monkeypatch.setattr(events, "RESET_EVENTS", events.RESET_EVENTS + (events.Event("jitter", _bias_jitter, ""),))
+    jittered = _run(AzimutEnv(track="paper"), n=6)
+    beta = AzimutEnv(track="paper").observation_slices()["beta"]
+    assert not np.array_equal(base[0][0][beta], jittered[0][0][beta])  # the reset drew it
+    venv = AzimutVectorEnv(num_envs=2, track="paper")
+    obs, _ = venv.reset(seed=[3, 4])
+    assert np.array_equal(obs[0], jittered[0][0])  # robot 0 replays the single env seeded alike
+    monkeypatch.setattr(events, "RESET_EVENTS", events.RESET_EVENTS[:-1])
+    monkeypatch.setattr(events, "INTERVAL_EVENTS", events.INTERVAL_EVENTS + (events.Event("push", _push, ""),))
+    pushed = _run(AzimutEnv(track="paper"), n=6)
+    assert all(np.array_equal(a[0], b[0]) for a, b in zip(base[:4], pushed[:4]))  # before the push: the same
+    assert not np.array_equal(base[4][4]["twist"], pushed[4][4]["twist"])  # the step of the push differs
