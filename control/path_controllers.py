@@ -30,14 +30,31 @@ import numpy as np
 from azimut_env.tracks import SCENARIO_NAMES
 from control.commands import WheelCommand
 from control.follow.batch import BatchFollower
-from control.follow.path_follower import PathFollowerConfig
+from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig
 from control.icr.feasibility import reference_stop_mask
+from control.icr.lookahead import (
+    CellPlan,
+    LookaheadConfig,
+    capped_track,
+    plan_cells,
+    plan_sides,
+    stop_circle_normals,
+)
 from control.twist.setpoint import SetpointBatch, SetpointConfig
 from control.twist.wpilib import SwerveBatch, SwerveConfig
 
-__all__ = ["ICRPathController", "TwistPathController", "SetpointPathController"]
+__all__ = ["ICRPathController", "TwistPathController", "SetpointPathController", "PATH_ICR_CONFIG"]
+
+#: the ICR controller's tuning behind a path follower with look-ahead: stopped wheels turn at the
+#: full steering rate and acceleration limits (the default's 50% and 30% were for a controller
+#: that stopped often and without knowing why; on the default robot the full limits save 2-5 s a
+#: lap for 2-6 J more slip), and μ is time-scaled apart from λ's turn (``mu_own_scale``)
+#: the look-ahead's default tuning
+DEFAULT_LOOKAHEAD = LookaheadConfig()
+
+PATH_ICR_CONFIG = ICRControllerConfig(reconfig_rate_fraction=1.0, reconfig_accel_fraction=1.0, mu_own_scale=True)
 
 
 def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | None) -> PathFollowerConfig:
@@ -69,6 +86,11 @@ class _PathFollowing:
     def _stop_mask(self, env):
         return None
 
+    def _follower_track(self, env, i: int, track, config: PathFollowerConfig, progress: float):
+        """The reference robot i's follower follows (``track`` itself, or a copy with a slower
+        speed profile) and the progress values where it should also arrive slowly (None: none)."""
+        return track, None
+
     def _reset_followers(self, env, rows: np.ndarray) -> None:
         num = int(np.shape(env.measured_beta)[0])
         if self.followers is None or self.followers.num != num:
@@ -79,7 +101,8 @@ class _PathFollowing:
             cfg = self.follower_config
             if not self._config_given and tracks[i].name in SCENARIO_NAMES:
                 cfg = PathFollowerConfig.for_robot(env.params, speed_scale=self.speed_scale)
-            self.followers.reset(int(i), tracks[i], float(progress[i]), cfg)
+            track, extra = self._follower_track(env, int(i), tracks[i], cfg, float(progress[i]))
+            self.followers.reset(int(i), track, float(progress[i]), cfg, extra_stops=extra)
 
     def _targets(self, env):
         """Every robot's follower output (:class:`~control.follow.batch.FollowerBatchOutput`)."""
@@ -98,26 +121,70 @@ class ICRPathController(_PathFollowing):
     Args:
         speed_scale: multiplies the track's speed profile (ignored when ``follower_config`` is given).
         follower_config: the followers' gains (default: ``PathFollowerConfig(speed_scale=speed_scale)``).
-        icr_config: the ICR controller's tuning.
+        icr_config: the ICR controller's tuning (default :data:`PATH_ICR_CONFIG` with look-ahead,
+            ``ICRControllerConfig()`` without).
         follower_stops: the followers slow down before the reference's stops and reconfigurations
             (default True; ``azimut record-d2`` records D2 without).
+        lookahead: the look-ahead plan's tuning (:mod:`control.icr.lookahead`: which configuration
+            cell to be in along the track and where to change it, planned at each reset); None:
+            no plan, the controller decides from the current target alone.
     """
 
     name = "icr"
 
     def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
-                 icr_config: ICRControllerConfig | None = None, follower_stops: bool = True) -> None:
+                 icr_config: ICRControllerConfig | None = None, follower_stops: bool = True,
+                 lookahead: LookaheadConfig | None = DEFAULT_LOOKAHEAD) -> None:
         super().__init__(speed_scale, follower_config)
         if icr_config is not None and not isinstance(icr_config, ICRControllerConfig):
             raise TypeError(f"icr_config must be an ICRControllerConfig or None, got {type(icr_config).__name__}")
-        self.icr_config = icr_config or ICRControllerConfig()
+        if lookahead is not None and not isinstance(lookahead, LookaheadConfig):
+            raise TypeError(f"lookahead must be a LookaheadConfig or None, got {type(lookahead).__name__}")
+        self.icr_config = icr_config or (PATH_ICR_CONFIG if lookahead is not None else ICRControllerConfig())
         self.follower_stops = bool(follower_stops)
+        self.lookahead = lookahead
         self.controller: BatchICRController | None = None
+        self._plans: list[CellPlan | None] = []
+        self._plan_cache: dict[tuple, tuple] = {}
+        self._segment = np.zeros(0, dtype=np.int64)
+        self._best = np.zeros(0)  # each robot's farthest progress [m] and the time since it grew [s]
+        self._stalled = np.zeros(0)
+        self._normals = np.zeros((0, 3))
 
     def _stop_mask(self, env):
-        if not self.follower_stops:
+        if not self.follower_stops or self.lookahead is not None:
             return None
         return functools.partial(reference_stop_mask, geom=env.geometry, axis_margin=self.icr_config.axis_margin)
+
+    def _follower_track(self, env, i: int, track, config: PathFollowerConfig, progress: float):
+        if self.lookahead is None:
+            return track, None
+        key = (id(track), config, progress, id(env.geometry), id(env.limits))
+        if key not in self._plan_cache:
+            if len(self._plan_cache) > 64:
+                self._plan_cache.clear()
+            cfg = self.icr_config
+            plan = plan_cells(track, env.geometry, env.limits, speed_scale=config.speed_scale, start=progress,
+                              decel=config.corner_decel, rate_fraction=cfg.reconfig_rate_fraction,
+                              accel_fraction=cfg.reconfig_accel_fraction, hold_margin=cfg.stop_hold_margin,
+                              corners=PathFollower(track, config).stops, corner_speed=config.corner_speed,
+                              config=self.lookahead)
+            slowed = track if plan is None else capped_track(track, plan, config.speed_scale)
+            self._plan_cache[key] = (track, plan, slowed)
+        _, plan, slowed = self._plan_cache[key]
+        while len(self._plans) <= i:
+            self._plans.append(None)
+        self._plans[i] = plan
+        if self._segment.size <= i:
+            grow = i + 1 - self._segment.size
+            self._segment = np.concatenate([self._segment, np.zeros(grow, dtype=np.int64)])
+            self._best = np.concatenate([self._best, np.zeros(grow)])
+            self._stalled = np.concatenate([self._stalled, np.zeros(grow)])
+        self._segment[i], self._best[i], self._stalled[i] = 0, -np.inf, 0.0
+        self._normals = stop_circle_normals(env.geometry)
+        if plan is None or not self.follower_stops:
+            return track, None
+        return slowed, plan.switches
 
     def reset(self, env, rows) -> None:
         rows = np.asarray(rows, dtype=np.intp)
@@ -131,8 +198,23 @@ class ICRPathController(_PathFollowing):
     def act(self, env, obs) -> WheelCommand:
         targets = self._targets(env)
         lam_hat, mu_hat = env.estimated_eta
+        plan = excursion = None
+        if self.lookahead is not None and any(p is not None for p in self._plans):
+            tracks = env.tracks
+            plan, excursion = plan_sides(self._plans, [t.closed for t in tracks], [t.length for t in tracks],
+                                         targets.progress, targets.lam, self._normals, self._segment)
+            # a robot whose progress stalls (a reference the plan's cells cannot follow near a change
+            # of cell) is steered without its plan for the rest of its episode
+            ahead = targets.progress > self._best + self.lookahead.stall_distance
+            self._best = np.where(ahead, targets.progress, self._best)
+            self._stalled = np.where(ahead | targets.holding | targets.finished | (self._stalled < 0),
+                                     np.minimum(self._stalled, 0.0), self._stalled + env.control_period)
+            self._stalled[self._stalled > self.lookahead.stall_time] = -1.0
+            plan[self._stalled < 0] = 0.0
+            excursion[self._stalled < 0] = 0.0
         return self._with_holds(self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
-                                                     targets.lam, targets.mu))
+                                                     targets.lam, targets.mu, plan_side=plan,
+                                                     plan_excursion=excursion))
 
 
 class TwistPathController(_PathFollowing):

@@ -61,8 +61,8 @@ def record_d2(points: int = 2450, seed: int = 0, speed_scale: float = D2_SPEED_S
     if not (math.isfinite(speed_scale) and speed_scale > 0):
         raise ValueError(f"speed_scale must be > 0, got {speed_scale}")
     env_kwargs = {k: v for k, v in (("params", params), ("substeps", substeps)) if v is not None} or None
-    log = run_episode(ICRPathController(speed_scale, follower_stops=False), "paper", seed=seed, max_time=max_time,
-                      env_kwargs=env_kwargs)
+    log = run_episode(ICRPathController(speed_scale, follower_stops=False, lookahead=None), "paper", seed=seed,
+                      max_time=max_time, env_kwargs=env_kwargs)
     if log.error is not None and log.error != "off track":
         raise RuntimeError(f"simulation failed while recording D2: {log.error}")
     steps = int(log.qua.size)

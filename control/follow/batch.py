@@ -35,7 +35,7 @@ from numba import njit
 from azimut_env.tracks import Track, np_interp1, project_window_kernel, wrap_pi
 from azimut_env.typed_lists import array_list, set_item
 from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
-from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress
+from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress, merge_stops
 
 __all__ = ["BatchFollower", "FollowerBatchOutput", "FC", "FS", "FT", "FO"]
 
@@ -369,11 +369,13 @@ class BatchFollower:
             self._cache[key] = hit
         return hit
 
-    def reset(self, i: int, track: Track, progress: float | None, config: PathFollowerConfig | None = None) -> None:
+    def reset(self, i: int, track: Track, progress: float | None, config: PathFollowerConfig | None = None,
+              extra_stops=None) -> None:
         """Robot i starts on ``track`` at ``progress`` [m] (None: the next step searches the whole
         track), with ``config`` (default: the follower's); the integral, farthest progress and
         holds start afresh, as :meth:`PathFollower.reset` (``progress`` checked the same way,
-        before any state changes)."""
+        before any state changes). ``extra_stops``: progress values [m] to arrive slowly at besides
+        those the follower finds itself (a look-ahead plan's changes of configuration)."""
         if not isinstance(track, Track):
             raise ValueError(f"track must be an azimut_env.tracks.Track, got {type(track).__name__}")
         config = self.config if config is None else config
@@ -382,6 +384,7 @@ class BatchFollower:
         if progress is not None:
             progress = check_start_progress(track, progress)
         _, pack, stops, holds = self._track_arrays(track, config)
+        stops = merge_stops(stops, extra_stops, track)
         for lst, value in ((self._packs, pack), (self._stops, stops), (self._holds, holds),
                            (self._cusps, cusp_table(track))):
             set_item(lst, i, value)

@@ -162,6 +162,19 @@ class FollowerOutput:
     holding: bool = False
 
 
+def merge_stops(stops: np.ndarray, extra, track: Track) -> np.ndarray:
+    """The sorted union of ``stops`` and ``extra`` progress values [m] (None: none; wrapped into one
+    lap on a closed track); ``ValueError`` if an extra one is not finite."""
+    if extra is None or np.size(extra) == 0:
+        return stops
+    extra = np.asarray(extra, dtype=np.float64).ravel()
+    if not np.all(np.isfinite(extra)):
+        raise ValueError("extra_stops must be finite")
+    if track.closed:
+        extra = np.mod(extra, track.length)
+    return np.unique(np.concatenate([stops, extra]))
+
+
 class PathFollower:
     """Stateful (only the progress hint) path follower; see the module docstring.
 
@@ -173,10 +186,13 @@ class PathFollower:
             :func:`control.icr.controller.reference_stop_mask`, a steering stop or axis on the
             way). The follower then slows down to reach those points at ``corner_speed``, as for
             sharp corners. None: only sharp corners of the path count.
+        extra_stops: progress values [m] to arrive slowly at as well (a look-ahead plan's changes
+            of configuration; :func:`merge_stops`).
     """
 
     def __init__(self, track: Track, config: PathFollowerConfig | None = None,
-                 stop_mask: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 0.02) -> None:
+                 stop_mask: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 0.02,
+                 extra_stops=None) -> None:
         if not isinstance(track, Track):
             raise ValueError(f"track must be an azimut_env.tracks.Track, got {type(track).__name__}")
         if not (math.isfinite(dt) and dt > 0):
@@ -189,7 +205,7 @@ class PathFollower:
         self._max_progress: float | None = None
         self._hold_next = 0  # index of the next hold of the track
         self._hold_left = 0  # control periods left in the current hold (0: not holding)
-        self.stops = self._find_stops(stop_mask)
+        self.stops = merge_stops(self._find_stops(stop_mask), extra_stops, track)
         self._cusps = cusp_table(track)
 
     def reset(self, progress: float | None = None) -> None:

@@ -2,10 +2,10 @@
 
 It holds the :class:`~control.icr.state.ICRBatchState` of N robots and steps any subset of them
 with one call of the compiled step (:func:`~control.icr.compiled.compiled_control_step_batch`,
-which returns what the NumPy reference :func:`~control.icr.controller.icr_control_step_batch`
-returns, bit for bit); each robot is reset on its own (after its episode's reset). Row i of a step is what the one-robot
-:class:`~control.icr.controller.ICRController` does for robot i: the batched step works row by
-row (per-row masks, no reduction across robots), so stepping N robots together gives the same
+the step :func:`~control.icr.controller.icr_control_step_batch` runs too); each robot is reset on
+its own (after its episode's reset). Row i of a step is what the one-robot
+:class:`~control.icr.controller.ICRController` does for robot i: the step works row by row (no
+row reads another), so stepping N robots together gives the same
 commands, bit for bit, as stepping them one at a time (``tests/control/test_controller_api.py``
 checks it on whole episodes).
 
@@ -76,9 +76,12 @@ class BatchICRController:
         self.ready[rows] = True
         return fresh
 
-    def step(self, rows: np.ndarray | None, lam_hat, mu_hat, beta, phidot, lam_d, mu_d) -> WheelCommand:
+    def step(self, rows: np.ndarray | None, lam_hat, mu_hat, beta, phidot, lam_d, mu_d,
+             plan_side=None, plan_excursion=None) -> WheelCommand:
         """One control period of the robots ``rows`` (None: all N); the arrays are theirs, in that
-        order (λ̂ (M, 3), μ̂ (M,), β and φ̇ (M, n), target λ_d (M, 3) and μ_d (M,)). Returns
+        order (λ̂ (M, 3), μ̂ (M,), β and φ̇ (M, n), target λ_d (M, 3) and μ_d (M,); ``plan_side``
+        (M, n) and ``plan_excursion`` (M,): a look-ahead plan's cell and expected excursions, or
+        None: :func:`compiled_control_step_batch`). Returns
         their commands ((M, n) arrays, ``info`` as
         :func:`~control.icr.controller.icr_control_step_batch`'s) with
         ``mode`` and ``events`` (the sequences started since each robot's reset) set."""
@@ -87,6 +90,7 @@ class BatchICRController:
             raise RuntimeError(f"robots {idx[~self.ready[idx]].tolist()} were never reset: call reset() first")
         self.state, cmd = compiled_control_step_batch(self.state, lam_hat, mu_hat, beta, phidot, lam_d, mu_d, self.geom,
                                                       self.limits, self.config, self.dt, rows=rows,
-                                                      constants=self._constants)
+                                                      constants=self._constants, plan_side=plan_side,
+                                                      plan_excursion=plan_excursion)
         return WheelCommand(beta=cmd.beta, phidot=cmd.phidot, beta_rate=cmd.beta_rate, beta_accel=cmd.beta_accel,
                             phiddot=cmd.phiddot, info=cmd.info, mode=cmd.info["mode"], events=cmd.info["events"])

@@ -1,14 +1,13 @@
 """The ICR controller's step compiled: :func:`compiled_control_step_batch`, one numba call for all robots.
 
-It is :func:`control.icr.controller.icr_control_step_batch` (the NumPy implementation, which
-stays the reference) written row by row: the feasible target, the mode transitions and each
-mode's commands of :mod:`control.icr.feasibility`, :mod:`control.icr.modes` and
-:mod:`control.icr.motion`, with the same operations in the same order (the building blocks are
-in :mod:`control.icr.kernels`), so that it returns the same commands, modes, events and state to
-the bit (``tests/control/test_icr_compiled.py`` checks it on recorded episodes). Two things
-differ in how, not in what: the time scaling tries κ from 1 down and stops at the first feasible
-one (the NumPy version evaluates the whole grid and takes the last feasible one: the same κ; see
-:mod:`control.icr.kernels_motion`), and an arc check stops at its first blocked sample.
+It is the ICR controller's step, the only implementation (what
+:func:`control.icr.controller.icr_control_step_batch`, ``ICRController`` and ``BatchICRController``
+run), row by row: the feasible target, the mode transitions and each mode's commands (the
+building blocks are in :mod:`control.icr.kernels` and :mod:`control.icr.kernels_motion`). The time
+scaling tries κ from 1 down and stops at the first feasible one, and an arc check stops at its
+first blocked sample. The tests' reference is this code run as plain Python
+(``NUMBA_DISABLE_JIT=1``): ``tests/control/test_icr_compiled.py`` replays recorded episodes through
+both and requires the same commands, modes, events and state to the bit.
 
 The kernel takes the robot's constants as one named struct (:func:`compiled_constants`), the
 state before and after the step as the fields of :class:`~control.icr.state.ICRBatchState` (two
@@ -16,9 +15,9 @@ tuples), the step's inputs and its outputs (two tuples); each robot's row is cop
 space (:class:`~control.icr.kernel_constants.WS`) and its results copied out, so that no row
 function allocates or takes a view.
 
-Input checks are the NumPy version's, with the same messages (the finiteness checks run inside
-the kernel, before anything is written). A step may cover a subset of the robots (``rows``): the
-other rows of the state are carried over unchanged.
+Input checks are those of ``icr_control_step_batch``, with the same messages (the finiteness
+checks run inside the kernel, before anything is written). A step may cover a subset of the
+robots (``rows``): the other rows of the state are carried over unchanged.
 """
 
 from __future__ import annotations
@@ -45,6 +44,7 @@ from control.icr.kernels import (
     C_HOLD_SPEED,
     C_HOLD_TOL,
     C_KICK,
+    C_PLAN_HOLD_DIST,
     C_RECONFIG_TIMEOUT,
     C_RECONFIG_TOL,
     C_SIN_HALF_MARGIN,
@@ -57,7 +57,9 @@ from control.icr.kernels import (
     L_HEADROOM_WSM,
     L_UNLIMITED,
     arc_check_row,
+    cell_hold_row,
     dot3,
+    in_cell,
     nearest1,
     norm3,
     project_off_axes_row,
@@ -86,7 +88,8 @@ _ERRORS = ("lam_hat contains NaN or inf", "lam_hat is the zero vector, not a poi
 
 @njit(cache=True)
 def _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d) -> int:
-    """0, or 1 + the index of the first failed check in :data:`_ERRORS` (the NumPy version's order)."""
+    """0, or 1 + the index of the first failed check in :data:`_ERRORS` (in the order of
+    ``icr_control_step_batch``'s checks)."""
     for i in range(lam_hat.shape[0]):
         for j in range(3):
             if not math.isfinite(lam_hat[i, j]):
@@ -117,7 +120,8 @@ def _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d) -> int:
 
 @njit(cache=True)
 def _must_stop(c, ws, lam, lam_d) -> bool:
-    """:func:`control.icr.feasibility.must_stop` of one arc."""
+    """Whether reaching λ_d from λ needs a stop and reconfiguration: the arc passes a steering axis,
+    or goes past a steering stop by more than ``stop_hysteresis``."""
     tune = c.tune
     reason, free, theta = arc_check_row(lam, lam_d, c.E, c.P, c.steer_max, c.s_unit, tune[C_SIN_HALF_MARGIN],
                                         tune[C_ARC_STEP], c.lim[L_UNLIMITED] != 0.0, ws[WS.ARC, :c.b.shape[0]])
@@ -127,8 +131,7 @@ def _must_stop(c, ws, lam, lam_d) -> bool:
 @njit(cache=True)
 def _differs(rlam, ld, md, speed) -> bool:
     """Whether the motion (λ_d, μ_d) differs from one at ``rlam`` by ``speed`` or more: |μ_d| times
-    the chord between ``rlam`` and the nearer of ±λ_d (the retargeting test of
-    :func:`control.icr.modes.mode_transitions`)."""
+    the chord between ``rlam`` and the nearer of ±λ_d (the retargeting test of RECONFIGURING)."""
     a0, a1, a2 = rlam[0] - ld[0], rlam[1] - ld[1], rlam[2] - ld[2]
     b0, b1, b2 = rlam[0] + ld[0], rlam[1] + ld[1], rlam[2] + ld[2]
     chord = min(math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), math.sqrt(b0 * b0 + b1 * b1 + b2 * b2))
@@ -137,7 +140,8 @@ def _differs(rlam, ld, md, speed) -> bool:
 
 @njit(cache=True)
 def _clamp_mu(c, ws, lam_d, mu_d) -> float:
-    """:func:`control.icr.feasibility.clamp_mu` of one target (with ``mu_headroom``)."""
+    """μ_d clamped to the wheel-speed limits at λ_d, with ``mu_headroom``: |μ| ≤ h r_k φ̇_max / |c_k|
+    for every wheel."""
     r, lim = c.r, c.lim
     n = r.shape[0]
     coef = ws[WS.C_NOW, :n]
@@ -150,18 +154,38 @@ def _clamp_mu(c, ws, lam_d, mu_d) -> float:
 
 
 @njit(cache=True)
+def _plan_target(c, side, ld, out) -> None:
+    """The point of the planned cell ``side`` nearest to ±λ_d (λ_d itself when inside; λ_d when no
+    point is found) into ``out``: where a reconfiguration into that cell aims."""
+    if in_cell(ld, side, c.normals):
+        out[0], out[1], out[2] = ld[0], ld[1], ld[2]
+        return
+    margin = c.tune[C_HOLD_MARGIN]
+    a1 = cell_hold_row(side, ld, c.normals, margin, out)
+    neg = np.empty(3)
+    other = np.empty(3)
+    neg[0], neg[1], neg[2] = -ld[0], -ld[1], -ld[2]
+    a2 = cell_hold_row(side, neg, c.normals, margin, other)
+    if a2 >= 0.0 and (a1 < 0.0 or a2 < a1):
+        out[0], out[1], out[2] = other[0], other[1], other[2]
+    elif a1 < 0.0:
+        out[0], out[1], out[2] = ld[0], ld[1], ld[2]
+
+
+@njit(cache=True)
 def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
     """The step of the robots ``rows``: ``c`` the constants; ``state0`` and ``state1`` the fields of
     the state before and after the step, in :class:`~control.icr.state.ICRBatchState`'s order
-    ((N, …) arrays, ``state1`` already a copy of ``state0``); ``inputs`` (λ̂, μ̂, β, φ̇, λ_d, μ_d)
-    and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c, λ_target, μ_target, axis_cap, event, κ,
-    saturated, held) are (M, …), row m of them is robot rows[m]. Returns 0, or (nothing written)
-    1 + the index of the first failed input check in :data:`_ERRORS`."""
+    ((N, …) arrays, ``state1`` already a copy of ``state0``); ``inputs`` (λ̂, μ̂, β, φ̇, λ_d, μ_d,
+    planned cell (M, n): ±1 per stop circle, all 0 without a plan; planned excursion (M,): 1.0 where
+    the plan expects the target outside that cell) and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c,
+    λ_target, μ_target, axis_cap, event, κ, saturated, held) are (M, …), row m of them is robot
+    rows[m]. Returns 0, or (nothing written) 1 + the index of the first failed input check in :data:`_ERRORS`."""
     (mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0, bmeas0, has_bmeas0,
      held_miss0) = state0
     (mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1, has_bmeas1,
      held_miss1) = state1
-    lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in = inputs
+    lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in, plan, excursion = inputs
     beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event_out, kappa_out, saturated, \
         held_out = outputs
     code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in)
@@ -185,7 +209,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
             lam[j], rlam[j], s_lam[j], s_lam_rate[j] = lam0[i, j], rlam0[i, j], lam0[i, j], lam_rate0[i, j]
         for k in range(n):
             b0[k], r0[k], p0[k] = beta0[i, k], rate0[i, k], phidot0[i, k]
-        # ---- feasible target (control.icr.feasibility.feasible_target)
+        # ---- feasible target
         target[0], target[1], target[2] = unit_xyz(lam_d_in[m, 0], lam_d_in[m, 1], lam_d_in[m, 2])
         md = mu_d_in[m]
         zero = abs(md) < tune[C_ZERO_MU]
@@ -204,7 +228,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
         lam_target[m, 0], lam_target[m, 1], lam_target[m, 2] = ld[0], ld[1], ld[2]
         mu_target[m] = md
         axis_cap[m] = axis_k
-        # ---- mode transitions (control.icr.modes.mode_transitions)
+        # ---- mode transitions
         mode = mode0[i]
         mode_time = mode_time0[i] + dt
         events = events0[i]
@@ -217,14 +241,17 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
             kicked = kicked or abs(wrap_half1(beta_meas[m, k] - b0[k])) > tune[C_KICK]
         running = mode == _RUNNING
         blocked = ARC_NONE
+        planned = False
+        for k in range(n):
+            planned = planned or plan[m, k] != 0.0
         if running and not zero:
             reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
                                                 tune[C_ARC_STEP], unlimited, arc)
-
-            reason, free, theta = arc_check_row(lam, ld, E, P, steer_max, s_unit, tune[C_SIN_HALF_MARGIN],
-                                                tune[C_ARC_STEP], unlimited, arc)
             hold = False
-            if reason == ARC_STOP:
+            near = math.sin(tune[C_STOP_HYST])  # a path along a stop circle is on both of its sides
+            if planned and not in_cell(lam, plan[m], normals, near) and in_cell(ld, plan[m], normals):
+                reason = ARC_STOP  # the plan changes cell and the target is there: stop, reconfigure into it
+            elif reason == ARC_STOP:
                 # the hold point: the nearest point of λ's cell, else the arc's last sample
                 slerp3(lam, ld, free, hp)
                 beyond = theta - free
@@ -239,7 +266,12 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
                 miss = max(abs(md), abs(mu0[i])) * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                 grazing = beyond < tune[C_STOP_HYST] and miss < tune[C_HOLD_SPEED]
                 missed = held_miss0[i] + (0.0 if grazing else miss * dt)
-                hold = beyond < tune[C_HOLD_ANGLE] and missed <= tune[C_HOLD_DIST]
+                # in the planned cell, hold through the target's excursions (the plan has weighed them)
+                # unless one goes beyond the hold angle (the follower's feedback after a disturbance)
+                planned_hold = planned and excursion[m] != 0.0 and in_cell(lam, plan[m], normals, near) \
+                    and missed <= tune[C_PLAN_HOLD_DIST] \
+                    and (beyond < tune[C_HOLD_ANGLE] or miss < tune[C_HOLD_SPEED])
+                hold = planned_hold or (beyond < tune[C_HOLD_ANGLE] and missed <= tune[C_HOLD_DIST])
                 if hold:
                     ld[0], ld[1], ld[2] = hp[0], hp[1], hp[2]
                     reason = ARC_NONE
@@ -258,7 +290,10 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
             mode_time = 0.0
         recon = mode == _RECONFIGURING
         if recon and not has_rl:
-            rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
+            if planned and not in_cell(s_lam, plan[m], normals, math.sin(tune[C_STOP_HYST])):  # the plan's change
+                _plan_target(c, plan[m], ld, rlam)
+            else:
+                rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
             has_rl = True
         for k in range(n):
             bt[k] = 0.0
@@ -268,7 +303,13 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
                 far = 0.0
                 for k in range(n):
                     far = max(far, abs(steering_difference1(b0[k], bt[k], unlimited)))
-                if far > tune[C_FREEZE] and _must_stop(c, ws, rlam, ld) and _differs(rlam, ld, md, tune[C_HOLD_SPEED]):
+                if planned and in_cell(rlam, plan[m], normals):
+                    pass  # going where the plan wants
+                elif planned and in_cell(ld, plan[m], normals):
+                    if far > tune[C_FREEZE]:
+                        _plan_target(c, plan[m], ld, rlam)
+                elif far > tune[C_FREEZE] and _must_stop(c, ws, rlam, ld) and _differs(rlam, ld, md,
+                                                                                      tune[C_HOLD_SPEED]):
                     rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
             steering_row(rlam, E, P, steer_max, b0, True, bt, scratch)
             for k in range(n):  # unlimited steering: the nearer angle of each axis
@@ -280,7 +321,6 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
                 err = abs(wrap_half1(beta_meas[m, k] - bt[k]))
                 still = has_bmeas0[i] and abs(wrap_half1(beta_meas[m, k] - bmeas0[i, k])) < tune[C_STILL_TOL]
                 settled_meas = settled_meas and (err < tune[C_RECONFIG_TOL] or (err < tune[C_HOLD_TOL] and still))
-            # (NumPy takes the max over the wheels; max(...) < tol is every wheel < tol)
             if settled_cmd and (settled_meas or mode_time > tune[C_RECONFIG_TIMEOUT]) and not zero:
                 s_lam[0], s_lam[1], s_lam[2] = rlam[0], rlam[1], rlam[2]
                 s_mu = 0.0
@@ -292,7 +332,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
                 for j in range(3):
                     ld[j] = ld[j] * sign
                 md = md * sign
-        # ---- each mode's commands (control.icr.modes.mode_commands)
+        # ---- each mode's commands
         kap = 0.0
         sat = False
         mu_new = 0.0
@@ -357,21 +397,29 @@ def _float_rows(x, name: str, shape: tuple[int, ...]) -> np.ndarray:
 
 def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
                                 geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float,
-                                rows=None, constants=None) -> tuple[ICRBatchState, WheelCommand]:
-    """:func:`control.icr.controller.icr_control_step_batch`, compiled (see the module docstring).
+                                rows=None, constants=None, plan_side=None,
+                                plan_excursion=None) -> tuple[ICRBatchState, WheelCommand]:
+    """One control period of the robots ``rows``: the ICR controller's step (see the module docstring).
 
     Args:
         state: the N robots' state; rows: the robots to step (integer indices; None: all). The
-            other arguments are those of the NumPy version, for the M stepped robots in the
+            other arguments are those of ``icr_control_step_batch``, for the M stepped robots in the
             order of ``rows``. constants: :func:`compiled_constants` of (geom, limits, config,
-            dt), when the caller keeps them (else computed here).
+            dt), when the caller keeps them (else computed here). plan_side: (M, n) the cell a
+            look-ahead plan wants each robot in (±1 per stop circle; a row of zeros, or None: no
+            plan; :func:`control.icr.lookahead.plan_sides`): the controller stops and reconfigures
+            into it when λ is elsewhere and the target is in it. plan_excursion: (M,) 1.0 where the
+            plan expects the target to leave that cell for a while (None: nowhere): there a target
+            beyond a stop is held at the cell's rim for up to ``planned_hold_distance`` of missed
+            motion, not ``stop_hold_distance`` (``docs/icr-controller.md`` §6).
 
     Returns:
-        (the new state of all N robots, the (M, n) commands with the NumPy version's ``info``).
+        (the new state of all N robots, the (M, n) commands with their ``info``: λ_target, μ_target,
+        axis_cap, mode, events, kappa, saturated, event, held_at_stop).
 
     Raises:
-        ValueError: as the NumPy version (non-finite input, wrong shapes, a zero λ_d, dt <= 0),
-            changing nothing.
+        ValueError: as ``icr_control_step_batch`` (non-finite input, wrong shapes, a zero λ_d,
+            dt <= 0), changing nothing.
     """
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0, got {dt!r}")
@@ -391,6 +439,8 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     if lam_d.shape[0] != M:
         raise ValueError(f"lam_d must have shape ({M}, 3)")
     mu_d = _float_rows(mu_d, "mu_d", (M,))
+    plan = np.zeros((M, n)) if plan_side is None else _float_rows(plan_side, "plan_side", (M, n))
+    excursion = np.zeros(M) if plan_excursion is None else _float_rows(plan_excursion, "plan_excursion", (M,))
     c = constants if constants is not None else compiled_constants(geom, limits, config, dt)
     fields = state.__dataclass_fields__
     state0 = tuple(getattr(state, name) for name in fields)
@@ -398,7 +448,8 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     outputs = (np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)),
                np.empty((M, 3)), np.empty(M), np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64), np.empty(M),
                np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_))
-    code = _step_kernel(idx, c, state0, state1, (lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d), outputs)
+    code = _step_kernel(idx, c, state0, state1, (lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d, plan, excursion),
+                        outputs)
     if code:
         raise ValueError(_ERRORS[code - 1])
     new = ICRBatchState(*state1)

@@ -106,6 +106,11 @@ class ICRControllerConfig:
             it against the stop at speed (on the default robot's ``figure8``, holds at 1e-7 rad raised
             the slip energy from 14.8 J to 23.5 J); the held motion then misses a path that runs
             exactly along the stop by this angle, too little to need a reconfiguration.
+        planned_hold_distance: [m] the motion a hold may miss, summed as for
+            ``stop_hold_distance``, where a look-ahead plan (:mod:`control.icr.lookahead`) wants
+            the robot in its current cell: the plan holds through the reference's short excursions
+            (up to a few centimetres each on ``paper``), and beyond this budget (a disturbance, a
+            path along a stop circle that drifts) the controller decides as without a plan.
         stop_timeout: time [s] in STOPPING, with μ_c = 0, after which the robot counts as stopped
             even if μ̂ is noisy.
     """
@@ -130,6 +135,7 @@ class ICRControllerConfig:
     stop_hold_angle: float = np.deg2rad(30.0)
     stop_hold_distance: float = 0.01
     stop_hold_margin: float = 0.003
+    planned_hold_distance: float = 0.5
     coupling_from_measurement: bool = False
     reconfig_rate_fraction: float = 0.5
     reconfig_accel_fraction: float = 0.3
@@ -141,6 +147,7 @@ class ICRControllerConfig:
         for name in ("k_lambda", "mu_accel_fraction", "axis_margin", "arc_step", "stop_mu_tol",
                      "zero_mu_tol", "kick_tol", "reconfig_tol", "reconfig_freeze", "reconfig_timeout", "stop_timeout",
                      "stop_hysteresis", "stop_hold_speed", "stop_hold_angle", "stop_hold_distance", "stop_hold_margin",
+                     "planned_hold_distance",
                      "reconfig_hold_tol", "reconfig_still_tol"):
             fix(name, check_positive(f"ICRControllerConfig.{name}", getattr(self, name)))
         for name in ("mu_headroom", "reconfig_rate_fraction", "reconfig_accel_fraction"):  # fractions of a limit

@@ -81,7 +81,7 @@ FIELDS = (
     ("s_unit", _F2, "RobotGeometry.s_unit (n, 3): the steering axes"),
     ("normals", _F2, "the stop circles' unit normals (n, 3) (control.icr.kernels.stop_normals)"),
     ("lim", _F1, "the limit constants (N_LIM,), indices L_*"),
-    ("tune", _F1, "the tuning (20,), indices C_*"),
+    ("tune", _F1, "the tuning (21,), indices C_*"),
     ("kappa", _F1, "the κ grid (n_kappa,)"),
     ("dt", types.float64, "the control period [s]"),
 )
@@ -125,7 +125,8 @@ def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRC
                      config.stop_timeout, config.reconfig_freeze, config.reconfig_tol, config.reconfig_hold_tol,
                      config.reconfig_still_tol, config.reconfig_timeout, config.k_lambda,
                      float(config.coupling_from_measurement), float(config.mu_own_scale), config.stop_hold_speed,
-                     config.stop_hold_angle, config.stop_hold_margin], dtype=np.float64)
+                     config.stop_hold_angle, config.stop_hold_margin, config.planned_hold_distance],
+                    dtype=np.float64)
     E, P = np.ascontiguousarray(geom.a_minus_l, dtype=np.float64), np.ascontiguousarray(geom.a_perp, dtype=np.float64)
     normals = np.empty((geom.n, 3))
     stop_normals(E, P, float(geom.steer_max), normals)

@@ -1,17 +1,18 @@
 """Compiled building blocks of the ICR controller's step, one robot (one row) at a time.
 
-Each function here is the numba twin of a NumPy function of :mod:`control.icr.feasibility`,
-:mod:`estimation.hrep` or :mod:`estimation.kinematics` applied to one row, with the same
-operations in the same order, so that it returns the same bits: the vector norm ``√((x₀² + x₁²)
-+ x₂²)`` (NumPy's row sums run left to right), the cross product ``a₁b₂ − a₂b₁`` ..., every
-renormalisation the NumPy path does (a function that takes λ normalises it again, and
-normalising a unit vector may change its last bit), the constants NumPy computes in Python
-floats (passed in, computed by the same expressions). ``atan2`` is the C library's on both
-sides (:mod:`estimation.libm`); ``sin``, ``cos`` and ``sqrt`` agree without help.
+The sphere maths of :mod:`estimation.hrep` and the kinematics of :mod:`estimation.kinematics`
+are written here for one row with the same operations in the same order as those NumPy
+functions, so that they give the same bits: the vector norm ``√((x₀² + x₁²) + x₂²)`` (NumPy's row
+sums run left to right), the cross product ``a₁b₂ − a₂b₁`` ..., every renormalisation (a function
+that takes λ normalises it again, and normalising a unit vector may change its last bit).
+``atan2`` is the C library's (as :mod:`estimation.libm`'s); ``sin``, ``cos`` and ``sqrt`` agree
+without help. The controller's own parts (arcs, axis caps, holds at steering stops, braking
+room, saturation) exist only here: :mod:`control.icr.feasibility` runs them for planners and
+tests.
 
-The step that strings them together is :mod:`control.icr.compiled`; the NumPy implementation
-stays the reference (``tests/control/test_icr_compiled.py`` compares the two on recorded
-episodes, bit for bit).
+The step that strings them together is :mod:`control.icr.compiled`, the only implementation; its
+reference in the tests is the same code run as plain Python (``NUMBA_DISABLE_JIT=1``,
+``tests/control/test_icr_compiled.py``, bit for bit on recorded episodes).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ N_LIM = 27
 # the tuning as a float array (indices C_*)
 (C_ZERO_MU, C_AXIS_MARGIN, C_ARC_STEP, C_SIN_HALF_MARGIN, C_STOP_HYST, C_HOLD_DIST, C_KICK, C_STOP_MU, C_STOP_TIMEOUT,
  C_FREEZE, C_RECONFIG_TOL, C_HOLD_TOL, C_STILL_TOL, C_RECONFIG_TIMEOUT, C_K_LAMBDA, C_COUPLING_MEAS,
- C_MU_OWN, C_HOLD_SPEED, C_HOLD_ANGLE, C_HOLD_MARGIN) = range(20)
+ C_MU_OWN, C_HOLD_SPEED, C_HOLD_ANGLE, C_HOLD_MARGIN, C_PLAN_HOLD_DIST) = range(21)
 
 #: :class:`control.icr.feasibility.ArcReason` codes
 ARC_NONE, ARC_STOP, ARC_AXIS = 0, 1, 2
@@ -139,7 +140,8 @@ def steering_difference1(q: float, beta: float, unlimited: bool) -> float:
 
 @njit(cache=True, inline="always")
 def wrap_half1(x: float) -> float:
-    """:func:`control.icr.feasibility.wrap_half` of one angle: (x + π/2) mod π − π/2."""
+    """An angle difference modulo π into [−π/2, π/2[: (x + π/2) mod π − π/2 (as
+    :func:`control.icr.feasibility.wrap_half`)."""
     return np.mod(x + np.pi / 2, np.pi) - np.pi / 2
 
 
@@ -160,7 +162,7 @@ def steering_row(lam, E, P, steer_max, fill, use_fill, out, scratch) -> None:
 def speed_coefs_row(lam, beta, have_beta, E, P, b, steer_max, out, scratch, beta_work) -> None:
     """:func:`estimation.kinematics.wheel_speed_coefficients` of one λ into ``out`` (n,): with the
     steering angles ``beta`` (``have_beta``) or F(λ) (computed from the normalised λ, which
-    :func:`steering_row` normalises again, as the NumPy path does). ``scratch`` (3,),
+    :func:`steering_row` normalises again, as the NumPy functions do). ``scratch`` (3,),
     ``beta_work`` (n,): work space."""
     unit3(lam, scratch)
     if have_beta:
@@ -188,10 +190,10 @@ def gradient_norm_max(lam, E, P, u, g) -> float:
 
 @njit(cache=True)
 def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, step, unlimited, beta_prev):
-    """:func:`control.icr.feasibility.arc_check_batch` of one arc: (reason code, free [rad],
-    theta [rad]). The arc is sampled at m = max(2, ⌈θ/step⌉ + 1) points (the NumPy version pads
-    the rows of a batch to the longest; the padding never counts). ``unlimited``: no stop, only
-    the axes block. ``beta_prev``: (n,) work space.
+    """Whether the great-circle arc λ -> λ_d can be driven continuously (for one arc,
+    :func:`control.icr.feasibility.arc_check`): (reason code, free [rad], theta [rad]). The arc is
+    sampled at m = max(2, ⌈θ/step⌉ + 1) points and stops at its first blocked sample.
+    ``unlimited``: no stop, only the axes block. ``beta_prev``: (n,) work space.
 
     Each sample is :func:`slerp3` of (λ, λ_d) (its tangent, which every sample shares, computed
     once), checked against the axes (‖p × ŝ_k‖ < sin(margin/2), interior samples) and steered
@@ -249,8 +251,9 @@ def arc_check_row(lam_in, lam_d_in, E, P, steer_max, s_unit, sin_half_margin, st
 
 @njit(cache=True)
 def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
-    """:func:`control.icr.feasibility.project_off_axes_batch` of one target: the projected λ_d
-    into ``out``; returns the wheel whose cap held it, or −1."""
+    """A target λ_d moved out of the cap of angular radius ``margin`` around each steering axis
+    (for one target, :func:`control.icr.feasibility.project_off_axes`): the projected λ_d into
+    ``out``; returns the wheel whose cap held it, or −1."""
     d0, d1, d2 = unit_xyz(lam_d_in[0], lam_d_in[1], lam_d_in[2])
     l0, l1, l2 = unit_xyz(lam_in[0], lam_in[1], lam_in[2])
     out[0], out[1], out[2] = d0, d1, d2
@@ -265,7 +268,7 @@ def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
                 sg = 1.0 if l0 * k0 + l1 * k1 + l2 * k2 >= 0 else -1.0
                 h0, h1, h2 = l0 * sg, l1 * sg, l2 * sg
             if angle_xyz(k0, k1, k2, h0, h1, h2) < 1e-9:
-                # λ on the axis too (NumPy's 1-d norm may sum in another order here: a measure-zero case)
+                # λ on the axis too: any direction away from it will do; one orthogonal to s_k
                 if abs(k2) < 0.9:
                     t0, t1, t2 = k1 * 1.0 - k2 * 0.0, k2 * 0.0 - k0 * 1.0, k0 * 0.0 - k1 * 0.0
                 else:
@@ -292,7 +295,8 @@ def project_off_axes_row(lam_d_in, lam_in, s_unit, margin, out) -> int:
 
 @njit(cache=True, inline="always")
 def stop_room1(beta, rate, steer_min, steer_max, unlimited) -> float:
-    """:func:`control.icr.feasibility.stop_room` of one wheel (inf without stops)."""
+    """The angle [rad] one wheel has left before the steering stop it turns toward (inf at rest,
+    and always without stops)."""
     if unlimited:
         return np.inf
     if rate > 0:
@@ -304,16 +308,18 @@ def stop_room1(beta, rate, steer_min, steer_max, unlimited) -> float:
 
 @njit(cache=True, inline="always")
 def safe_stop_speed1(room, c1, c2, c3) -> float:
-    """:func:`control.icr.feasibility.safe_stop_speed` of one wheel, with the constants
-    c1 = −0.5·a·dt, c2 = (0.5·a·dt)², c3 = 2.0·a computed by the caller as NumPy does."""
+    """The largest steering speed v of one wheel from which braking at a, one period late, stops
+    within ``room``: v dt/2 + v²/(2a) ≤ room (``docs/icr-controller.md``, eq. (B)), with the
+    constants c1 = −0.5·a·dt, c2 = (0.5·a·dt)², c3 = 2.0·a computed by the caller."""
     return c1 + math.sqrt(c2 + c3 * max(room, 0.0))
 
 
 @njit(cache=True)
 def saturate_row(beta_prev, rate_prev, phidot_prev, beta_want, phidot_want, steer_min, steer_max, lim, dt,
                  beta_out, rate_out, phidot_out) -> None:
-    """:func:`control.icr.feasibility.saturate` of one robot's wheels. ``lim``: the constants of
-    :func:`compiled_constants` (control.icr.compiled)."""
+    """Per-wheel saturation of one robot's command (the fallback when no κ is feasible): rate,
+    accel, braking before the stops, range, then φ̇ and φ̈. ``lim``: the constants of
+    :func:`~control.icr.kernel_constants.compiled_constants`."""
     a_dt, srm, wsm, wa_dt = lim[L_A_DT], lim[L_SRM], lim[L_WSM], lim[L_WA_DT]
     for k in range(beta_prev.shape[0]):
         rate = (beta_want[k] - beta_prev[k]) / dt
@@ -356,26 +362,50 @@ def _inside(q, N, side) -> bool:
 
 
 @njit(cache=True)
+def in_cell(lam, side, N, tol=0.0) -> bool:
+    """Whether λ or −λ (the same point of Λ) lies in the closed cell ``side`` (n,) (±1 per stop
+    circle; 0: either side) of the stop circles ``N`` (n, 3), or within ``tol`` (a sine) of it
+    across each circle."""
+    plus, minus = True, True
+    for k in range(N.shape[0]):
+        d = side[k] * dot3(N[k], lam)
+        plus = plus and d >= -tol
+        minus = minus and d <= tol
+    return plus or minus
+
+
+@njit(cache=True)
 def stop_hold_row(lam_in, lam_d_in, N, margin, out) -> float:
     """The point of λ's *cell* nearest to λ_d, into ``out`` (3,); returns its angle to λ_d [rad],
     or −1.0 (``out`` untouched) when λ_d is in the cell or no candidate is.
 
     The stop circles (:func:`stop_normals`, ``N`` (n, 3)) cut the sphere into cells: inside one,
     every β_k = F_k(λ) is continuous (no wheel passes its stop), and the cell is convex (an
-    intersection of hemispheres). Its point nearest to an outside λ_d lies on an edge (the
-    projection of λ_d onto one stop circle) or at a vertex (one of the two intersections of two
-    circles): every such candidate, moved ``margin`` [rad] into the cell along the normals of the
-    circles it lies on, is kept if it is strictly inside, and the one nearest to λ_d wins (the
-    first on a tie)."""
+    intersection of hemispheres). The cell is λ's (:func:`cell_hold_row` does the rest)."""
     n = N.shape[0]
     lam = np.empty(3)
-    lam_d = np.empty(3)
     unit3(lam_in, lam)
-    unit3(lam_d_in, lam_d)
     side = np.empty(n)
-    outside = False
     for k in range(n):
         side[k] = 1.0 if dot3(N[k], lam) >= 0.0 else -1.0
+    return cell_hold_row(side, lam_d_in, N, margin, out)
+
+
+@njit(cache=True)
+def cell_hold_row(side, lam_d_in, N, margin, out) -> float:
+    """The point of the cell ``side`` (n,) (±1: the side of each stop circle ``N`` (n, 3)) nearest
+    to λ_d, into ``out`` (3,); returns its angle to λ_d [rad], or −1.0 (``out`` untouched) when
+    λ_d is in the cell or no candidate is.
+
+    The cell is convex: its point nearest to an outside λ_d lies on an edge (the projection of
+    λ_d onto one stop circle) or at a vertex (one of the two intersections of two circles): every
+    such candidate, moved ``margin`` [rad] into the cell along the normals of the circles it lies
+    on, is kept if it is strictly inside, and the one nearest to λ_d wins (the first on a tie)."""
+    n = N.shape[0]
+    lam_d = np.empty(3)
+    unit3(lam_d_in, lam_d)
+    outside = False
+    for k in range(n):
         outside = outside or side[k] * dot3(N[k], lam_d) < 0.0
     if not outside:
         return -1.0

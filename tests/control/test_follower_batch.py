@@ -62,9 +62,9 @@ class _Recorder:
                               BatchFollower.outputs(out.copy())))
             return out
 
-        def recording_reset(batch, i, track, progress, config=None):
-            rec.calls.append(("reset", batch, i, track, progress, config or batch.config))
-            return reset(batch, i, track, progress, config)
+        def recording_reset(batch, i, track, progress, config=None, extra_stops=None):
+            rec.calls.append(("reset", batch, i, track, progress, config or batch.config, extra_stops))
+            return reset(batch, i, track, progress, config, extra_stops=extra_stops)
 
         monkeypatch.setattr(BatchFollower, "_run", recording_step)
         monkeypatch.setattr(BatchFollower, "reset", recording_reset)
@@ -76,8 +76,8 @@ class _Recorder:
         for call in self.calls:
             batch = call[1]
             if call[0] == "reset":
-                _, _, i, track, progress, config = call
-                f = PathFollower(track, config, stop_mask=batch.stop_mask, dt=batch.dt)
+                _, _, i, track, progress, config, extra = call
+                f = PathFollower(track, config, stop_mask=batch.stop_mask, dt=batch.dt, extra_stops=extra)
                 f.reset(progress)
                 refs[(id(batch), i)] = f
                 continue

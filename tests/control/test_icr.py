@@ -546,7 +546,10 @@ def test_reconfigurations_end_when_wheels_stop_where_stiction_holds_them():
 
     if numba_config.DISABLE_JIT:  # test_icr_compiled.py runs this file without JIT
         pytest.skip("the env runs only compiled (its reward terms must be numba functions)")
-    log = run_episode("icr", "paper", seed=0, max_time=40.0)  # figure8 now takes its stops without one
+    from control.path_controllers import ICRPathController
+
+    # without look-ahead: paper's excursions are stops (with it, the plan holds through them)
+    log = run_episode(ICRPathController(lookahead=None), "paper", seed=0, max_time=40.0)
     recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
     edges = np.flatnonzero(np.diff(recon))
     lengths = (edges[1::2] - edges[::2]) * log.dt

@@ -1,0 +1,403 @@
+"""Look-ahead for the ICR controller: which configuration cell to be in along a track, and where
+to change it (:func:`plan_cells`, :class:`CellPlan`).
+
+The stop circles of the wheels cut Λ into *cells* (``docs/icr-controller.md`` §5): inside one,
+no wheel passes its steering stop, so the controller moves λ freely; leaving one means stopping
+the robot and turning some wheels by up to π (1–2 s at rest). Without look-ahead the controller
+decides from the current arc λ → λ_d only: it stops wherever the target leaves λ's cell by more
+than a hold takes (``stop_hold_distance``, 1 cm of missed motion), even for a short excursion of
+the reference that comes straight back, and it picks the cell after a stop from the target of
+that moment, not from where the reference goes next.
+
+The plan looks at the whole reference instead. Along the track, sampled every ``spacing`` [m]
+of progress, the reference motion is (λ_j, μ_j) at the track's speed v_j (× the speed scale). A
+cell sequence c_0 … c_M costs, in seconds,
+
+    J = Σ_j w · m_j(c_j)  +  Σ_{j: c_j ≠ c_{j−1}} T_j(c_{j−1} → c_j)
+
+* m_j(c) = μ_j ‖λ_j − p_c(λ_j)‖ Δt_j, the motion [m] missed while the controller holds λ at
+  p_c(λ_j), the point of cell c nearest to λ_j (the hold point of §5; 0 when λ_j is in c;
+  Δt_j = spacing / v_j), with w = ``miss_cost`` [s/m]; a hold farther than ``max_hold_angle`` is
+  not allowed;
+* T_j, the time a stop and reconfiguration costs there: the speed lost braking to rest and
+  accelerating again, v_j / a (a = the follower's ``corner_decel``), plus the slowest wheel's turn
+  from its angle in c_{j−1} to its angle in c_j (a trapezoidal profile at the reconfiguration rate
+  and acceleration), plus ``switch_overhead`` (detecting rest, settling).
+
+The cheapest sequence is found exactly by dynamic programming over (sample, cell) (Viterbi; the
+candidate cells are those the reference visits, and both sides of a circle it runs along). So a
+short excursion whose hold misses a few millimetres stays in its cell (held on the boundary,
+§5), an unavoidable change of cell lands where the reference is slow (a cusp, a corner, a stop
+of the speed profile, a spin in place), and the cell after a stop and the first cell are those
+the reference ahead needs.
+
+The plan is a table over progress: :attr:`CellPlan.start` [m] where each segment begins and its
+cell's sign pattern :attr:`CellPlan.side` (±1 per stop circle). The path follower slows down to
+arrive slowly at the switch points (:attr:`CellPlan.switches`); the controller gets, every step,
+the cell planned at the robot's progress (:func:`plan_sides`) and holds λ in it rather than stop,
+or stops and reconfigures into it when the plan changes cell (``docs/icr-controller.md`` §6).
+
+Why a dynamic program over cells, not an MPC over (λ, μ) or a time-optimal speed profile: the
+choice that costs time is discrete (which cell, where to change it) and is fixed by the
+reference's geometry alone (λ(s) does not depend on the speed), so it is solved once per track,
+exactly, in milliseconds; the continuous motion inside a cell is already time-scaled within the
+actuator limits by the controller's κ search (§7.1). Measurements are in ``docs/icr-controller.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from control.icr.kernels import cell_hold_row, in_cell, steering_row, stop_normals
+from control.limits import ActuatorLimits
+from estimation.geometry import RobotGeometry
+from estimation.hrep import eta_from_twist
+
+__all__ = ["LookaheadConfig", "CellPlan", "plan_cells", "plan_sides", "capped_track", "stop_circle_normals"]
+
+_INF = 1e18
+
+
+@dataclass(frozen=True)
+class LookaheadConfig:
+    """Tuning of the cell plan (module docstring).
+
+    Attributes:
+        miss_cost: w, seconds a metre of motion missed while holding costs [s/m] (40: a 5 cm
+            miss weighs as much as a 2 s stop).
+        max_hold_angle: the farthest a hold may be from the reference λ [rad] while the
+            reference moves (|μ| > 0.05 m/s): beyond it the held motion makes little progress
+            along the path.
+        switch_overhead: fixed time of a stop and reconfiguration besides braking and turning
+            (detecting rest, settling the wheels) [s].
+        spacing: progress between reference samples [m].
+        swing_window, steer_rate_fraction: the planned steering β(s) is differenced over
+            ``swing_window`` [m] of progress, and the reference speed capped where the wheels would
+            need more than ``steer_rate_fraction`` of their steering rate limit to keep up.
+        excursion_margin: [m] how far before and after an expected excursion of the reference
+            the controller may hold for it (the robot's progress and the follower's preview are
+            not the reference's).
+        stall_distance, stall_time: a robot whose progress grows by less than ``stall_distance``
+            [m] in ``stall_time`` [s] (outside the track's holds) is steered without its plan for
+            the rest of its episode: near a change of cell, a reference neither cell follows can
+            hold it still (the safety net; the summary counts how often it fires).
+        rate_fraction, accel_fraction: the fractions of the steering rate and acceleration limits
+            a reconfiguration turns wheels at (the ICR controller's ``reconfig_rate_fraction`` and
+            ``reconfig_accel_fraction``; :func:`plan_cells` takes them from its config).
+    """
+
+    miss_cost: float = 40.0
+    max_hold_angle: float = math.radians(45.0)
+    switch_overhead: float = 0.5
+    spacing: float = 0.01
+    swing_window: float = 0.05
+    steer_rate_fraction: float = 0.8
+    excursion_margin: float = 0.1
+    stall_distance: float = 0.02
+    stall_time: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("miss_cost", "max_hold_angle", "switch_overhead", "spacing", "swing_window",
+                     "steer_rate_fraction", "excursion_margin", "stall_distance", "stall_time"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value < 0 or (name == "spacing" and value <= 0):
+                raise ValueError(f"LookaheadConfig.{name} must be a finite number >= 0 (spacing > 0), got {value!r}")
+
+
+@dataclass(frozen=True)
+class CellPlan:
+    """Where the ICR controller should be in which cell along a track (module docstring).
+
+    Attributes:
+        start: (K,) progress [m] where each segment begins (the first at the plan's start).
+        side: (K, n) the segment's cell: the side (±1) of each stop circle (a cell and its
+            negation are the same cell of Λ).
+        cost: the plan's cost J [s].
+        holds_missed: the motion [m] the plan expects to miss while holding, in total.
+        excursions: (E, 2) the progress intervals [m] where the reference leaves the planned cell
+            (the plan holds there), widened by ``excursion_margin``.
+        s: (M,) the progress samples [m]; speed_cap: (M,) the speed [m/s] at which the wheels, at
+            ``steer_rate_fraction`` of their steering rate limit, keep up with the planned
+            configuration's steering β(s) over a ``swing_window`` (module docstring), braked
+            and accelerated within the follower's deceleration.
+    """
+
+    start: np.ndarray
+    side: np.ndarray
+    cost: float
+    holds_missed: float
+    excursions: np.ndarray
+    s: np.ndarray
+    speed_cap: np.ndarray
+
+    @property
+    def switches(self) -> np.ndarray:
+        """(K − 1,) the progress values [m] where the plan changes cell."""
+        return self.start[1:]
+
+
+def stop_circle_normals(geom: RobotGeometry) -> np.ndarray:
+    """(n, 3) the unit normals of the wheels' stop circles (:func:`control.icr.kernels.stop_normals`)."""
+    N = np.empty((geom.n, 3))
+    stop_normals(np.ascontiguousarray(geom.a_minus_l, dtype=np.float64),
+                 np.ascontiguousarray(geom.a_perp, dtype=np.float64), float(geom.steer_max), N)
+    return N
+
+
+def reference_lambdas(track, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's chassis-frame ICR λ (M, 3) at progress ``s`` (M,) and whether it moves
+    there (M,) bool (λ does not depend on the speed: the twist at unit progress speed)."""
+    tw = track.reference_twist(s, speed=np.ones_like(s))
+    th = track.sample(s)[:, 2]
+    c, sn = np.cos(th), np.sin(th)
+    body = np.stack([c * tw[:, 0] + sn * tw[:, 1], -sn * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)
+    lam, mu = eta_from_twist(body)
+    return lam, mu
+
+
+def _signature(lam: np.ndarray, N: np.ndarray, tol: float = 1e-3) -> list[tuple[int, ...]]:
+    """The cells λ lies in or on the rim of: its sign pattern (first entry +1, the canonical one
+    of the pair ±pattern), with both signs for circles it is within ``tol`` of."""
+    d = N @ lam
+    options = [[1.0, -1.0] if abs(x) < tol else [1.0 if x >= 0 else -1.0] for x in d]
+    cells = [()]
+    for opt in options:
+        cells = [c + (o,) for c in cells for o in opt]
+    return [tuple(int(v * c[0]) for v in c) for c in cells]
+
+
+@njit(cache=True)
+def _hold_costs(lams, mus, dts, sides, N, margin, max_angle, E, P, steer_max, cost, betas):
+    """Per sample j and cell c: the motion missed holding in c (``cost`` (M, C), inf when the
+    hold is farther than ``max_angle``) and the wheels' angles there (``betas`` (M, C, n))."""
+    M, C, n = lams.shape[0], sides.shape[0], N.shape[0]
+    p = np.empty(3)
+    neg = np.empty(3)
+    scratch = np.empty(3)
+    fill = np.zeros(n)
+    for j in range(M):
+        for c in range(C):
+            if in_cell(lams[j], sides[c], N):
+                p[0], p[1], p[2] = lams[j, 0], lams[j, 1], lams[j, 2]
+                cost[j, c] = 0.0
+            else:
+                a1 = cell_hold_row(sides[c], lams[j], N, margin, p)
+                for k in range(3):
+                    neg[k] = -lams[j, k]
+                a2 = cell_hold_row(sides[c], neg, N, margin, scratch)
+                if a2 >= 0.0 and (a1 < 0.0 or a2 < a1):
+                    a1 = a2
+                    p[0], p[1], p[2] = scratch[0], scratch[1], scratch[2]
+                if a1 < 0.0 or (a1 > max_angle and abs(mus[j]) > 0.05):
+                    cost[j, c] = np.inf
+                    continue
+                chord = 2.0 * math.sin(0.5 * a1)
+                cost[j, c] = abs(mus[j]) * chord * dts[j]
+            steering_row(p, E, P, steer_max, fill, False, betas[j, c], scratch)
+
+
+@njit(cache=True, inline="always")
+def _turn_time(delta, rate, accel) -> float:
+    """A trapezoidal turn by ``delta`` [rad] at ``rate`` and ``accel`` [s]."""
+    if delta * accel >= rate * rate:
+        return delta / rate + rate / accel
+    return 2.0 * math.sqrt(delta / accel)
+
+
+@njit(cache=True)
+def _viterbi(hold, betas, speeds, w, decel, overhead, rate, accel, choice):
+    """The cheapest cell per sample into ``choice`` (M,); returns the cost J [s]."""
+    M, C = hold.shape
+    n = betas.shape[2]
+    cost = np.empty(C)
+    new = np.empty(C)
+    back = np.zeros((M, C), dtype=np.int64)
+    for c in range(C):
+        cost[c] = w * hold[0, c]
+    for j in range(1, M):
+        brake = speeds[j] / decel + overhead
+        for c in range(C):
+            best = cost[c]
+            arg = c
+            for d in range(C):
+                if d == c or cost[d] >= _INF:
+                    continue
+                turn = 0.0
+                for k in range(n):
+                    turn = max(turn, _turn_time(abs(betas[j, c, k] - betas[j, d, k]), rate, accel))
+                total = cost[d] + brake + turn
+                if total < best:
+                    best, arg = total, d
+            h = hold[j, c]
+            new[c] = best + w * h if h < np.inf else _INF
+            back[j, c] = arg
+        for c in range(C):
+            cost[c] = new[c]
+    last = 0
+    for c in range(C):
+        if cost[c] < cost[last]:
+            last = c
+    total = cost[last]
+    for j in range(M - 1, -1, -1):
+        choice[j] = last
+        last = back[j, last]
+    return total
+
+
+def plan_cells(track, geom: RobotGeometry, limits: ActuatorLimits, *, speed_scale: float = 1.0,
+               start: float = 0.0, decel: float = 1.0, rate_fraction: float = 1.0, accel_fraction: float = 1.0,
+               hold_margin: float = 0.003, corners=(), corner_speed: float = 0.02,
+               config: LookaheadConfig | None = None) -> CellPlan | None:
+    """The cell plan of ``track`` from progress ``start`` to its end (a closed track: one lap)
+    for the robot ``geom`` (module docstring). None without steering stops (one cell).
+
+    Args:
+        speed_scale: multiplies the track's speed profile. decel: the follower's braking [m/s²].
+        corners, corner_speed: the progress values [m] the follower brakes to arrive at at
+            ``corner_speed`` [m/s] (sharp corners of the path); the plan counts the time there at
+            that speed.
+        rate_fraction, accel_fraction: the reconfiguration's share of the steering limits.
+        hold_margin: how far inside its cell a hold point is [rad] (``stop_hold_margin``).
+        config: the plan's tuning (default :class:`LookaheadConfig`).
+    """
+    if geom.unlimited_steering:
+        return None
+    cfg = config or LookaheadConfig()
+    length = track.length
+    s = start + np.arange(0.0, length - start if not track.closed else length, cfg.spacing)
+    lam, unit_mu = reference_lambdas(track, s)
+    speed = track.sample(s)[:, 3] * speed_scale
+    corners = np.asarray(corners, dtype=np.float64).ravel()
+    if corners.size:
+        ahead = np.concatenate([corners, corners + length]) if track.closed else corners
+        nxt = np.searchsorted(ahead, s, side="left")
+        dist = np.where(nxt < ahead.size, ahead[np.minimum(nxt, ahead.size - 1)] - s, np.inf)
+        speed = np.minimum(speed, np.sqrt(2.0 * decel * np.maximum(dist, 0.0)) + corner_speed)
+    moving = unit_mu > 1e-9
+    if not moving.any():
+        return None
+    # a sample that does not move keeps the last moving λ (the first moving one before that)
+    idx = np.where(moving, np.arange(s.size), -1)
+    idx = np.maximum.accumulate(idx)
+    idx[idx < 0] = np.flatnonzero(moving)[0]
+    lam = lam[idx]
+    mus = np.where(moving, unit_mu * speed, 0.0)
+    dts = cfg.spacing / np.maximum(speed, 1e-3)
+    N = stop_circle_normals(geom)
+    E, P = np.ascontiguousarray(geom.a_minus_l, dtype=np.float64), np.ascontiguousarray(geom.a_perp, dtype=np.float64)
+    cells = sorted({c for row in lam[::max(1, int(0.05 / cfg.spacing))] for c in _signature(row, N)}
+                   | {c for row in lam for c in _signature(row, N, tol=0.0)})
+    sides = np.array(cells, dtype=np.float64)
+    hold = np.empty((s.size, sides.shape[0]))
+    betas = np.empty((s.size, sides.shape[0], geom.n))
+    _hold_costs(lam, mus, dts, sides, N, hold_margin, cfg.max_hold_angle, E, P, float(geom.steer_max), hold, betas)
+    choice = np.empty(s.size, dtype=np.int64)
+    cost = _viterbi(hold, betas, speed, cfg.miss_cost, decel, cfg.switch_overhead,
+                    rate_fraction * limits.steer_rate_max, accel_fraction * limits.steer_accel_max, choice)
+    first = np.concatenate([[0], np.flatnonzero(np.diff(choice)) + 1])
+    held = hold[np.arange(s.size), choice]
+    beta = betas[np.arange(s.size), choice]
+    cap = _speed_cap(beta, choice, cfg, cfg.steer_rate_fraction * limits.steer_rate_max, decel)
+    out = (held > 0).astype(np.int8)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], out, [0]])))
+    excursions = np.stack([s[edges[0::2]] - cfg.excursion_margin,
+                           s[np.minimum(edges[1::2], s.size) - 1] + cfg.excursion_margin], axis=1)
+    return CellPlan(start=s[first].copy(), side=sides[choice[first]].copy(), cost=float(cost),
+                    holds_missed=float(np.sum(held[np.isfinite(held)])), excursions=excursions, s=s, speed_cap=cap)
+
+
+def _speed_cap(beta: np.ndarray, choice: np.ndarray, cfg: LookaheadConfig, rate: float, decel: float) -> np.ndarray:
+    """(M,) v ≤ rate / |Δβ/Δs| over ``swing_window`` of the planned steering (a change of cell is a
+    stop: not counted), then braked and accelerated at ``decel`` between samples."""
+    M = beta.shape[0]
+    h = max(1, int(round(0.5 * cfg.swing_window / cfg.spacing)))
+    lo, hi = np.maximum(np.arange(M) - h, 0), np.minimum(np.arange(M) + h, M - 1)
+    same = choice[lo] == choice[hi]
+    turn = np.mod(beta[hi] - beta[lo] + 0.5 * np.pi, np.pi) - 0.5 * np.pi  # a wheel at its stop: ±π/2 alike
+    slope = np.max(np.abs(turn), axis=1) / np.maximum((hi - lo) * cfg.spacing, 1e-12)
+    cap = np.where(same & (slope > 0), rate / np.maximum(slope, 1e-12), np.inf)
+    step = 2.0 * decel * cfg.spacing
+    for j in range(M - 2, -1, -1):  # brake before
+        cap[j] = min(cap[j], math.sqrt(cap[j + 1] ** 2 + step))
+    for j in range(1, M):  # accelerate after
+        cap[j] = min(cap[j], math.sqrt(cap[j - 1] ** 2 + step))
+    return cap
+
+
+def capped_track(track, plan: CellPlan, speed_scale: float):
+    """A copy of ``track`` whose speed profile (scaled by ``speed_scale``) stays within the plan's
+    :attr:`CellPlan.speed_cap`: the reference a path follower should follow."""
+    from dataclasses import replace
+
+    cap = np.interp(track.s, plan.s, plan.speed_cap, left=np.inf, right=np.inf)
+    if track.closed:
+        cap = np.minimum(cap, np.interp(track.s + track.length, plan.s, plan.speed_cap, left=np.inf, right=np.inf))
+    speed = np.minimum(track.speed, cap / speed_scale)
+    return replace(track, speed=speed)
+
+
+@njit(cache=True)
+def _lookup(starts, sides, counts, exc, exc_counts, closed, lengths, progress, lam_d, N, lead, segment, out,
+            out_exc):
+    for i in range(progress.shape[0]):
+        K = counts[i]
+        out[i, :] = 0.0
+        out_exc[i] = 0.0
+        if K == 0 or not math.isfinite(progress[i]):
+            continue
+        s = progress[i]
+        if closed[i]:  # one lap from the plan's start (a progress just short of it is the start)
+            s = starts[i, 0] + ((s - starts[i, 0] + 0.05) % lengths[i]) - 0.05
+        k = min(max(segment[i], 0), K - 1)
+        while k + 1 < K and starts[i, k + 1] <= s:
+            k += 1
+        if k + 1 < K and starts[i, k + 1] - s < lead and not in_cell(lam_d[i], sides[i, k], N) \
+                and in_cell(lam_d[i], sides[i, k + 1], N):
+            k += 1
+        segment[i] = k
+        for q in range(sides.shape[2]):
+            out[i, q] = sides[i, k, q]
+        for e in range(exc_counts[i]):
+            if exc[i, e, 0] <= s <= exc[i, e, 1]:
+                out_exc[i] = 1.0
+
+
+def plan_sides(plans: list[CellPlan | None], closed, lengths, progress: np.ndarray, lam_d: np.ndarray,
+               normals: np.ndarray, segment: np.ndarray, lead: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """(N, n) the cell each robot's plan has at its ``progress`` [m] (zeros: no plan), or already
+    the next one when the change is less than ``lead`` [m] ahead and the target λ_d (N, 3) has
+    left the planned cell for it (the robot arrives slowly at a change of cell, and the reference
+    there may already ask for the next cell a few centimetres early: holding it in the old cell
+    would make no progress). ``normals``: the stop circles' (n, 3). ``segment`` (N,) int: each
+    robot's current segment of its plan, updated in place (it never goes back: a target that swings
+    back and forth at rest does not swing the plan; 0 after a reset). Also (N,) 1.0 where the
+    progress is in one of the plan's expected excursions."""
+    num, n = len(plans), normals.shape[0]
+    K = max([1] + [p.start.size for p in plans if p is not None])
+    starts = np.zeros((num, K))
+    sides = np.zeros((num, K, n))
+    counts = np.zeros(num, dtype=np.int64)
+    for i, p in enumerate(plans):
+        if p is not None:
+            counts[i] = p.start.size
+            starts[i, :counts[i]] = p.start
+            sides[i, :counts[i]] = p.side
+    E = max([1] + [p.excursions.shape[0] for p in plans if p is not None])
+    exc = np.zeros((num, E, 2))
+    exc_counts = np.zeros(num, dtype=np.int64)
+    for i, p in enumerate(plans):
+        if p is not None:
+            exc_counts[i] = p.excursions.shape[0]
+            exc[i, :exc_counts[i]] = p.excursions
+    out = np.empty((num, n))
+    out_exc = np.empty(num)
+    _lookup(starts, sides, counts, exc, exc_counts, np.asarray(closed, dtype=np.bool_),
+            np.asarray(lengths, dtype=np.float64),
+            np.asarray(progress, dtype=np.float64), np.ascontiguousarray(lam_d, dtype=np.float64),
+            np.ascontiguousarray(normals, dtype=np.float64), float(lead), segment, out, out_exc)
+    return out, out_exc
