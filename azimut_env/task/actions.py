@@ -111,4 +111,5 @@ def remember_action(ta, rows, action):
     previous one, the observation this one)."""
     for i in range(rows.shape[0]):
         if rows[i]:
-            ta.prev_action[i] = action[i]
+            for j in range(action.shape[1]):  # element by element: no array view per robot
+                ta.prev_action[i, j] = action[i, j]

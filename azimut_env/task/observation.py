@@ -10,9 +10,10 @@ drives
   field's function per robot, then non-finite values as 0 and everything clipped), and
 * :func:`observation_table` (the Markdown table of the docs, :mod:`azimut_env.doc_tables`).
 
-**To add a field**: its function ``_obs_<name>(ta, i, o)`` (``numba.njit``: robot i's values
-into ``o``, the field's slice of the row, reading the task's struct ``ta``,
-:data:`azimut_env.task.arrays.FIELDS`) and its row in :data:`OBSERVATION_FIELDS`. The spaces,
+**To add a field**: its function ``_obs_<name>(ta, i, obs, j)`` (``numba.njit``: robot i's values
+into ``obs[i, j]``, ``obs[i, j + 1]``... (its place in the row), read from the task's struct
+``ta``, :data:`azimut_env.task.arrays.FIELDS`; element by element: an array view per robot costs
+more than the field) and its row in :data:`OBSERVATION_FIELDS`. The spaces,
 the layout, the bounds and the docs follow.
 
 The track state the fields read (``ta.obs_track``, ``ta.obs_look``, ``ta.obs_vel``) is the pose
@@ -32,80 +33,85 @@ from azimut_env.task.codegen import check_table, markdown_table, row_stage
 from azimut_env.tracks import TQ
 
 __all__ = ["ObservationField", "OBSERVATION_FIELDS", "observation_layout", "observation_bounds", "field_offsets",
-           "observation_table", "observe_kernel", "speed_along"]
+           "observation_table", "observe_kernel", "speed_along", "speed_along_xy"]
 
 # plain-int columns (numba folds them; the IntEnums stay the names)
 _LAT, _HEAD, _V_REF, _PSI = int(TQ.LATERAL), int(TQ.HEADING), int(TQ.V_REF), int(TQ.PSI)
 
 
 @njit(cache=True)
-def speed_along(vel_world, psi):
+def speed_along_xy(vx, vy, psi):
     """The velocity (v_x, v_y) [m/s] along the path direction ψ [rad]."""
-    return vel_world[0] * math.cos(psi) + vel_world[1] * math.sin(psi)
+    return vx * math.cos(psi) + vy * math.sin(psi)
 
 
 @njit(cache=True)
-def _copy(values, o):
-    for j in range(o.shape[0]):
-        o[j] = values[j]
+def speed_along(vel_world, psi):
+    """:func:`speed_along_xy` of ``vel_world`` (2,)."""
+    return speed_along_xy(vel_world[0], vel_world[1], psi)
 
 
 @njit(cache=True)
-def _obs_lambda_hat(ta, i, o):
-    _copy(ta.lam_hat[i], o)
+def _obs_lambda_hat(ta, i, obs, j):
+    for k in range(3):
+        obs[i, j + k] = ta.lam_hat[i, k]
 
 
 @njit(cache=True)
-def _obs_mu_hat(ta, i, o):
-    o[0] = ta.mu_hat[i]
+def _obs_mu_hat(ta, i, obs, j):
+    obs[i, j] = ta.mu_hat[i]
 
 
 @njit(cache=True)
-def _obs_beta(ta, i, o):
-    _copy(ta.beta_m[i], o)
+def _obs_beta(ta, i, obs, j):
+    for k in range(ta.beta_m.shape[1]):
+        obs[i, j + k] = ta.beta_m[i, k]
 
 
 @njit(cache=True)
-def _obs_phidot(ta, i, o):
-    _copy(ta.phidot_m[i], o)
+def _obs_phidot(ta, i, obs, j):
+    for k in range(ta.phidot_m.shape[1]):
+        obs[i, j + k] = ta.phidot_m[i, k]
 
 
 @njit(cache=True)
-def _obs_motor_angle(ta, i, o):
-    _copy(ta.motor_m[i], o)
+def _obs_motor_angle(ta, i, obs, j):
+    for k in range(ta.motor_m.shape[1]):
+        obs[i, j + k] = ta.motor_m[i, k]
 
 
 @njit(cache=True)
-def _obs_lateral_error(ta, i, o):
-    o[0] = ta.obs_track[i, _LAT]
+def _obs_lateral_error(ta, i, obs, j):
+    obs[i, j] = ta.obs_track[i, _LAT]
 
 
 @njit(cache=True)
-def _obs_heading_error(ta, i, o):
-    o[0] = ta.obs_track[i, _HEAD]
+def _obs_heading_error(ta, i, obs, j):
+    obs[i, j] = ta.obs_track[i, _HEAD]
 
 
 @njit(cache=True)
-def _obs_speed_along(ta, i, o):
-    o[0] = speed_along(ta.obs_vel[i], ta.obs_track[i, _PSI])
+def _obs_speed_along(ta, i, obs, j):
+    obs[i, j] = speed_along_xy(ta.obs_vel[i, 0], ta.obs_vel[i, 1], ta.obs_track[i, _PSI])
 
 
 @njit(cache=True)
-def _obs_speed_ref(ta, i, o):
-    o[0] = ta.obs_track[i, _V_REF]
+def _obs_speed_ref(ta, i, obs, j):
+    obs[i, j] = ta.obs_track[i, _V_REF]
 
 
 @njit(cache=True)
-def _obs_lookahead(ta, i, o):
-    look = ta.obs_look[i]
-    for k in range(look.shape[0]):
-        for j in range(3):
-            o[3 * k + j] = look[k, j]
+def _obs_lookahead(ta, i, obs, j):
+    look = ta.obs_look
+    for k in range(look.shape[1]):
+        for c in range(3):
+            obs[i, j + 3 * k + c] = look[i, k, c]
 
 
 @njit(cache=True)
-def _obs_prev_action(ta, i, o):
-    _copy(ta.prev_action[i], o)
+def _obs_prev_action(ta, i, obs, j):
+    for k in range(ta.prev_action.shape[1]):
+        obs[i, j + k] = ta.prev_action[i, k]
 
 
 class ObservationField(NamedTuple):
@@ -122,7 +128,7 @@ class ObservationField(NamedTuple):
     per_wheel_speed: bool
     unit: str
     doc: str
-    #: ``numba.njit`` function ``(ta, i, o)``: robot i's values into ``o`` (see the module docstring)
+    #: ``numba.njit`` function ``(ta, i, obs, j)``: robot i's values into ``obs[i, j:]`` (the module docstring)
     function: Callable
 
 
@@ -201,24 +207,24 @@ def observation_table() -> str:
 
 
 @njit(cache=True)
-def clip_row(obs, lo, hi):
-    """Non-finite values of an observation row as 0, then everything clipped to [lo, hi]."""
-    for j in range(obs.shape[0]):
-        x = obs[j]
+def clip_row(obs, i, lo, hi):
+    """Non-finite values of observation row i as 0, then everything clipped to [lo, hi]."""
+    for j in range(obs.shape[1]):
+        x = obs[i, j]
         if not math.isfinite(x):
             x = 0.0
-        obs[j] = min(max(x, lo[j]), hi[j])
+        obs[i, j] = min(max(x, lo[j]), hi[j])
 
 
 def observe_kernel(fields: tuple[ObservationField, ...] | None = None, jit: bool = True) -> Callable:
     """The observation stage of the pipeline, ``observe(ta, rows, action)``, generated from the
     table (default: :data:`OBSERVATION_FIELDS` as it is now): for each robot of ``rows``, each
-    field's function on its slice of ``ta.obs[i]`` (offsets ``ta.obs_offsets``), then
-    :func:`clip_row`. ``jit=False``: the same source over the functions' ``py_func``."""
+    field's function at its offset of ``ta.obs[i]`` (``ta.obs_offsets``), then :func:`clip_row`.
+    ``jit=False``: the same source over the functions' ``py_func``."""
     fields = OBSERVATION_FIELDS if fields is None else fields
-    check_table(fields, "observation fields", 3)
-    body = [f"_field_{j}(ta, i, row[off[{j}]:off[{j + 1}]])  # {f.name}" for j, f in enumerate(fields)]
+    check_table(fields, "observation fields", 4)
+    body = [f"_field_{j}(ta, i, obs, off[{j}])  # {f.name}" for j, f in enumerate(fields)]
     namespace = {f"_field_{j}": f.function for j, f in enumerate(fields)}
     namespace["_clip"] = clip_row
-    return row_stage("_observe", ["row = ta.obs[i]", *body, "_clip(row, ta.obs_low, ta.obs_high)"], namespace,
-                     __file__, __name__, jit, before=["off = ta.obs_offsets"])
+    return row_stage("_observe", [*body, "_clip(obs, i, lo, hi)"], namespace, __file__, __name__, jit,
+                     before=["off, obs, lo, hi = ta.obs_offsets, ta.obs, ta.obs_low, ta.obs_high"])

@@ -65,41 +65,40 @@ def measure_wheel_speeds(phi: np.ndarray, phi_prev: np.ndarray, true_phidot: np.
 
 
 @njit(cache=True)
-def _measure_robot(beta, bias, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
-                   wheel_noise, normals, out_beta, out_motor, out_phidot, wrap):
-    """One robot's readings: ``beta`` (true steering angles), ``bias`` (the encoders' offsets),
-    ``motor``, ``phi``, ``phi_prev``, ``phidot`` (n,), ``normals`` (3, n) into ``out_beta``,
-    ``out_motor``, ``out_phidot`` (n,) = (β, motor angle, φ̇) measured. ``wrap`` (unlimited
-    steering): the angle readings are taken modulo 2π into ]−π, π], as an absolute encoder reads them."""
+def _read_wheel(beta, motor, phi, phi_prev, phidot, n_beta, n_motor, n_phidot, dt, steer_noise, motor_noise,
+                resolution, cpr, wheel_noise, wrap):
+    """One wheel's readings (β, motor angle, φ̇) from its true steering angle ``beta`` (the
+    encoder's bias included), motor angle, wheel angles now and at the last reading, spin rate and
+    this step's three standard normals. ``wrap`` (unlimited steering): the angle readings are taken
+    modulo 2π into ]−π, π], as an absolute encoder reads them. Scalars in and out: the stages call
+    it element by element (an array view per wheel costs more than the model)."""
     two_pi = 2 * math.pi
-    for k in range(beta.shape[0]):
-        b = beta[k] + bias[k] + steer_noise * normals[0, k]
-        m = motor[k] + motor_noise * normals[1, k]
-        if resolution > 0:
-            b = np.round(b / resolution) * resolution
-            m = np.round(m / resolution) * resolution
-        if wrap:
-            b = math.pi - (math.pi - b) % two_pi
-            m = math.pi - (math.pi - m) % two_pi
-        if cpr > 0:
-            counts = math.floor(phi[k] * (cpr / two_pi)) - math.floor(phi_prev[k] * (cpr / two_pi))
-            w = counts * (two_pi / cpr) / dt
-        else:
-            w = phidot[k]
-        out_beta[k] = b
-        out_motor[k] = m
-        out_phidot[k] = w + wheel_noise * normals[2, k]
+    b = beta + steer_noise * n_beta
+    m = motor + motor_noise * n_motor
+    if resolution > 0:
+        b = np.round(b / resolution) * resolution
+        m = np.round(m / resolution) * resolution
+    if wrap:
+        b = math.pi - (math.pi - b) % two_pi
+        m = math.pi - (math.pi - m) % two_pi
+    if cpr > 0:
+        counts = math.floor(phi * (cpr / two_pi)) - math.floor(phi_prev * (cpr / two_pi))
+        w = counts * (two_pi / cpr) / dt
+    else:
+        w = phidot
+    return b, m, w + wheel_noise * n_phidot
 
 
 @njit(cache=True)
 def _measure_kernel(beta, motor, phi, phi_prev, phidot, dt, steer_noise, motor_noise, resolution, cpr,
                     wheel_noise, normals, out, wrap=False):
     """Rows of (N, n) arrays; normals (N, 3, n); out (N, 3, n) = (β, motor angle, φ̇) measured
-    (:func:`_measure_robot` row by row, without bias)."""
-    no_bias = np.zeros(beta.shape[1])
+    (:func:`_read_wheel` element by element)."""
     for i in range(beta.shape[0]):
-        _measure_robot(beta[i], no_bias, motor[i], phi[i], phi_prev[i], phidot[i], dt, steer_noise, motor_noise,
-                       resolution, cpr, wheel_noise, normals[i], out[i, 0], out[i, 1], out[i, 2], wrap)
+        for k in range(beta.shape[1]):
+            out[i, 0, k], out[i, 1, k], out[i, 2, k] = _read_wheel(
+                beta[i, k], motor[i, k], phi[i, k], phi_prev[i, k], phidot[i, k], normals[i, 0, k], normals[i, 1, k],
+                normals[i, 2, k], dt, steer_noise, motor_noise, resolution, cpr, wheel_noise, wrap)
 
 
 @njit(cache=True)
@@ -107,14 +106,17 @@ def sense(ta, rows, action):
     """The sensor stage of the pipeline (:mod:`azimut_env.task.pipeline`): the readings of the
     robots of ``rows`` from the physics' true state and this step's normals (``ta.normals``, drawn
     before the pipeline from each robot's generator); the wheel encoders then count from there."""
+    ws, ms, normals, bias, phi_prev = ta.wheel_summary, ta.motor_state, ta.normals, ta.steer_bias, ta.phi_prev
+    beta_m, motor_m, phidot_m = ta.beta_m, ta.motor_m, ta.phidot_m
     for i in range(rows.shape[0]):
         if rows[i]:
-            ws, ms = ta.wheel_summary[i], ta.motor_state[i]
-            _measure_robot(ws[:, _WS_BETA], ta.steer_bias[i], ms[:, _MS_THETA], ms[:, _MS_PHI], ta.phi_prev[i],
-                           ms[:, _MS_PHIDOT], ta.control_period, ta.steer_noise, ta.motor_noise,
-                           ta.steer_resolution, ta.wheel_cpr, ta.wheel_speed_noise, ta.normals[i], ta.beta_m[i],
-                           ta.motor_m[i], ta.phidot_m[i], ta.wrap_angles)
-            ta.phi_prev[i] = ms[:, _MS_PHI]
+            for k in range(ws.shape[1]):
+                phi = ms[i, k, _MS_PHI]
+                beta_m[i, k], motor_m[i, k], phidot_m[i, k] = _read_wheel(
+                    ws[i, k, _WS_BETA] + bias[i, k], ms[i, k, _MS_THETA], phi, phi_prev[i, k], ms[i, k, _MS_PHIDOT],
+                    normals[i, 0, k], normals[i, 1, k], normals[i, 2, k], ta.control_period, ta.steer_noise,
+                    ta.motor_noise, ta.steer_resolution, ta.wheel_cpr, ta.wheel_speed_noise, ta.wrap_angles)
+                phi_prev[i, k] = phi
 
 
 #: the sensor models the step and the reset run, in order (stages ``(ta, rows, action)``; a new

@@ -14,7 +14,7 @@ from __future__ import annotations
 from numba import njit
 
 from azimut_env.physics.layout import RS
-from azimut_env.task.observation import speed_along
+from azimut_env.task.observation import speed_along_xy
 from azimut_env.tracks import TQ, query_one_kernel
 
 __all__ = ["track", "BACK", "AHEAD"]
@@ -31,15 +31,15 @@ _TQ_S, _TQ_LATERAL, _TQ_HEADING, _TQ_V_REF, _TQ_PSI = (int(TQ.S), int(TQ.LATERAL
 @njit(cache=True)
 def track(ta, rows, action):
     """The true track state of the robots of ``rows`` (see the module docstring)."""
+    summary, out = ta.summary, ta.track_out
     for i in range(rows.shape[0]):
         if rows[i]:
             ta.s_prev[i] = ta.s[i]
-            pose, out = ta.summary[i], ta.track_out[i]
-            query_one_kernel(ta.packs[i], ta.track_closed[i], ta.track_length[i], ta.track_rho[i], pose[_RS_X],
-                             pose[_RS_Y], pose[_RS_TH], ta.s_prev[i], BACK, AHEAD, ta.lookahead_spacing, out,
-                             ta.look[i])
-            ta.s[i] = out[_TQ_S]
-            ta.lat[i] = out[_TQ_LATERAL]
-            ta.head[i] = out[_TQ_HEADING]
-            ta.v_ref[i] = out[_TQ_V_REF]
-            ta.v_along[i] = speed_along(pose[_RS_VX:_RS_VY + 1], out[_TQ_PSI])
+            query_one_kernel(ta.packs[i], ta.track_closed[i], ta.track_length[i], ta.track_rho[i], summary[i, _RS_X],
+                             summary[i, _RS_Y], summary[i, _RS_TH], ta.s_prev[i], BACK, AHEAD, ta.lookahead_spacing,
+                             out[i], ta.look[i])
+            ta.s[i] = out[i, _TQ_S]
+            ta.lat[i] = out[i, _TQ_LATERAL]
+            ta.head[i] = out[i, _TQ_HEADING]
+            ta.v_ref[i] = out[i, _TQ_V_REF]
+            ta.v_along[i] = speed_along_xy(summary[i, _RS_VX], summary[i, _RS_VY], out[i, _TQ_PSI])

@@ -60,8 +60,8 @@ def test_recipe_reward_term(monkeypatch):
 
 
 @njit
-def _obs_qua(ta, i, o):
-    o[0] = ta.qua[i]
+def _obs_qua(ta, i, obs, j):
+    obs[i, j] = ta.qua[i]
 
 
 def test_recipe_observation_field(monkeypatch):
@@ -114,8 +114,8 @@ def _sense_gyro(ta, rows, action):
 
 
 @njit
-def _obs_gyro(ta, i, o):
-    o[0] = ta.gyro_m[i]
+def _obs_gyro(ta, i, obs, j):
+    obs[i, j] = ta.gyro_m[i]
 
 
 def test_recipe_sensor(monkeypatch):
