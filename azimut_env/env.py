@@ -379,7 +379,7 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
         info = robot_info(task, 0)
         if self.render_mode == "human":
             self.render()
-        terminated = bool(task.ended[0].any())  # an end condition of the termination table
+        terminated = any(info[name] for name in task.termination_names)  # an end condition holds
         truncated = bool(task.truncated()[0])
         return task.obs[0].copy(), float(task.reward[0]), terminated, truncated, info
 

@@ -203,18 +203,18 @@ INFO_FIELDS = info_fields()
 #: the keys, in the order of the table
 INFO_KEYS = tuple(f.name for f in INFO_FIELDS)
 _ERROR = _ERROR_FIELD.name
-_READERS_OF: dict[tuple, tuple] = {}
+_READERS_OF: dict[int, tuple] = {}
 
 
 def _readers(task: AzimutTask) -> tuple:
     """(name, at_error, source, one robot's value, the batch) of the keys the task holds, in the
     table's order (its end conditions')."""
     key = task.termination_table
-    readers = _READERS_OF.get(key)
-    if readers is None:
-        readers = _READERS_OF[key] = tuple((f.name, f.at_error, f.source, *KINDS[f.kind]) for f in info_fields(key)
-                                           if f.source is not None)
-    return readers
+    entry = _READERS_OF.get(id(key))  # by identity: hashing the table every step costs a microsecond
+    if entry is None or entry[0] is not key:
+        entry = _READERS_OF[id(key)] = (key, tuple((f.name, f.at_error, f.source, *KINDS[f.kind])
+                                                   for f in info_fields(key) if f.source is not None))
+    return entry[1]
 
 
 def robot_info(task: AzimutTask, i: int, error: str | None = None) -> dict[str, Any]:
