@@ -36,7 +36,7 @@ __all__ = ["steer_rate_step_kernel", "steer_motor_kernel", "spring_torque_kernel
 
 
 @njit(cache=True, inline="always")
-def _clamp_sym(x: float, lim: float) -> float:
+def clamp_sym(x: float, lim: float) -> float:
     """x clipped to [−lim, lim] (lim >= 0)."""
     if x > lim:
         return lim
@@ -57,7 +57,7 @@ def steer_rate_step_kernel(theta: float, omega: float, target: float, gain: floa
     if e < 0:
         v = -v
     dv = v - omega
-    return _clamp_sym(dv, accel_max * dt)
+    return clamp_sym(dv, accel_max * dt)
 
 
 @njit(cache=True, inline="always")
@@ -88,7 +88,7 @@ def spring_torque_kernel(theta: float, omega: float, beta: float, beta_dot: floa
                          stiffness: float, damping: float, torque_max: float) -> float:
     """Torque [N·m] of the series spring + damper on the module (the chassis gets the opposite)."""
     tau = stiffness * (theta - beta) + damping * (omega - beta_dot)
-    return _clamp_sym(tau, torque_max) if enabled else tau
+    return clamp_sym(tau, torque_max) if enabled else tau
 
 
 @njit(cache=True, inline="always")

@@ -127,6 +127,20 @@ def _det3(a11, a12, a13, a22, a23, a33):
     return a11 * (a22 * a33 - a23 * a23) + a12 * (a13 * a23 - a12 * a33) + a13 * (a12 * a23 - a13 * a22)
 
 
+@njit(cache=True, inline="always")
+def sym3_cofactors(a11, a12, a13, a22, a23, a33):
+    """The cofactors (c11, c12, c13, c22, c23, c33) of the symmetric 3 × 3 matrix of :func:`_det3`:
+    its inverse is c / det (the adjugate of a symmetric matrix is symmetric)."""
+    return (a22 * a33 - a23 * a23, a13 * a23 - a12 * a33, a12 * a23 - a13 * a22, a11 * a33 - a13 * a13,
+            a12 * a13 - a11 * a23, a11 * a22 - a12 * a12)
+
+
+@njit(cache=True, inline="always")
+def _damping_xy(d_long, d_lat, c, s):
+    """D = d_long d dᵀ + d_lat e eᵀ (d = (s, −c), e = (c, s)): its (xx, xy, yy)."""
+    return d_long * s * s + d_lat * c * c, (d_lat - d_long) * s * c, d_long * c * c + d_lat * s * s
+
+
 @njit(cache=True)
 def antagonism_kernel(P, F, gam, d_long, d_lat, n: int) -> float:
     """‖F − D J (Jᵀ D J)⁻¹ Jᵀ F‖ [N] of one robot (module docstring).
@@ -141,10 +155,7 @@ def antagonism_kernel(P, F, gam, d_long, d_lat, n: int) -> float:
     for k in range(n):
         px, py = P[k, 0], P[k, 1]
         c, s = math.cos(gam[k]), math.sin(gam[k])
-        # D = d_long d dᵀ + d_lat e eᵀ, d = (s, −c), e = (c, s)
-        dxx = d_long[k] * s * s + d_lat[k] * c * c
-        dxy = (d_lat[k] - d_long[k]) * s * c
-        dyy = d_long[k] * c * c + d_lat[k] * s * s
+        dxx, dxy, dyy = _damping_xy(d_long[k], d_lat[k], c, s)
         # J_k = [[1, 0, −p_y], [0, 1, p_x]]: Jᵀ D J accumulated
         a11 += dxx
         a12 += dxy
@@ -170,12 +181,7 @@ def antagonism_kernel(P, F, gam, d_long, d_lat, n: int) -> float:
         # absurd kick gave det = 0 and a ZeroDivisionError): no finite answer; the state is past
         # the blow-up limits and the step ends the episode (AzimutPhysics.check)
         return 0.0
-    c11 = a22 * a33 - a23 * a23
-    c12 = a13 * a23 - a12 * a33
-    c13 = a12 * a23 - a13 * a22
-    c22 = a11 * a33 - a13 * a13
-    c23 = a12 * a13 - a11 * a23
-    c33 = a11 * a22 - a12 * a12
+    c11, c12, c13, c22, c23, c33 = sym3_cofactors(a11, a12, a13, a22, a23, a33)
     l0 = (c11 * w0 + c12 * w1 + c13 * w2) / det
     l1 = (c12 * w0 + c22 * w1 + c23 * w2) / det
     l2 = (c13 * w0 + c23 * w1 + c33 * w2) / det
@@ -183,9 +189,7 @@ def antagonism_kernel(P, F, gam, d_long, d_lat, n: int) -> float:
     for k in range(n):
         px, py = P[k, 0], P[k, 1]
         c, s = math.cos(gam[k]), math.sin(gam[k])
-        dxx = d_long[k] * s * s + d_lat[k] * c * c
-        dxy = (d_lat[k] - d_long[k]) * s * c
-        dyy = d_long[k] * c * c + d_lat[k] * s * s
+        dxx, dxy, dyy = _damping_xy(d_long[k], d_lat[k], c, s)
         ux = l0 - py * l2  # J_k λ: the common rigid slip at P_k
         uy = l1 + px * l2
         ex = F[k, 0] - (dxx * ux + dxy * uy)

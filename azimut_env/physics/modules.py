@@ -71,6 +71,8 @@ import math
 import numpy as np
 from numba import njit
 
+from azimut_env.physics.actuators import clamp_sym
+from azimut_env.physics.antagonism import sym3_cofactors
 from azimut_env.physics.layout import BODY, CS, JS, MS, WP
 from azimut_env.physics.tire import TS
 
@@ -110,12 +112,7 @@ def friction_impulse(rel: float, rel_start: float, inv_inertia: float, applied: 
 def friction_impulse_within(rel: float, inv_inertia: float, applied: float, lim: float) -> float:
     """:func:`friction_impulse` with its bound ``lim`` = τ_f(|rel_start|) dt [N·m·s] given: the
     substep computes the bound once per joint, not once per Gauss–Seidel pass (the same numbers)."""
-    need = applied - rel / inv_inertia
-    if need > lim:
-        return lim
-    if need < -lim:
-        return -lim
-    return need
+    return clamp_sym(applied - rel / inv_inertia, lim)
 
 
 @njit(cache=True, inline="always")
@@ -146,12 +143,7 @@ def coupled_factor(B, D, mass: float, inertia: float, S_inv) -> None:
         s01 -= b0 * b1 * d
         s02 -= b0 * b2 * d
         s12 -= b1 * b2 * d
-    c00 = s11 * s22 - s12 * s12
-    c01 = s02 * s12 - s01 * s22
-    c02 = s01 * s12 - s02 * s11
-    c11 = s00 * s22 - s02 * s02
-    c12 = s01 * s02 - s00 * s12
-    c22 = s00 * s11 - s01 * s01
+    c00, c01, c02, c11, c12, c22 = sym3_cofactors(s00, s01, s02, s11, s12, s22)
     inv_det = 1.0 / (s00 * c00 + s01 * c01 + s02 * c02)
     S_inv[0, 0] = c00 * inv_det
     S_inv[0, 1] = S_inv[1, 0] = c01 * inv_det

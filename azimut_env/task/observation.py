@@ -51,10 +51,16 @@ def speed_along(vel_world, psi):
     return speed_along_xy(vel_world[0], vel_world[1], psi)
 
 
+@njit(cache=True, inline="always")
+def _row(values, i, obs, j):
+    """Row i of ``values`` (N, m) into obs[i, j:j + m], element by element."""
+    for k in range(values.shape[1]):
+        obs[i, j + k] = values[i, k]
+
+
 @njit(cache=True)
 def _obs_lambda_hat(ta, i, obs, j):
-    for k in range(3):
-        obs[i, j + k] = ta.lam_hat[i, k]
+    _row(ta.lam_hat, i, obs, j)
 
 
 @njit(cache=True)
@@ -64,20 +70,17 @@ def _obs_mu_hat(ta, i, obs, j):
 
 @njit(cache=True)
 def _obs_beta(ta, i, obs, j):
-    for k in range(ta.beta_m.shape[1]):
-        obs[i, j + k] = ta.beta_m[i, k]
+    _row(ta.beta_m, i, obs, j)
 
 
 @njit(cache=True)
 def _obs_phidot(ta, i, obs, j):
-    for k in range(ta.phidot_m.shape[1]):
-        obs[i, j + k] = ta.phidot_m[i, k]
+    _row(ta.phidot_m, i, obs, j)
 
 
 @njit(cache=True)
 def _obs_motor_angle(ta, i, obs, j):
-    for k in range(ta.motor_m.shape[1]):
-        obs[i, j + k] = ta.motor_m[i, k]
+    _row(ta.motor_m, i, obs, j)
 
 
 @njit(cache=True)
@@ -110,8 +113,7 @@ def _obs_lookahead(ta, i, obs, j):
 
 @njit(cache=True)
 def _obs_prev_action(ta, i, obs, j):
-    for k in range(ta.prev_action.shape[1]):
-        obs[i, j + k] = ta.prev_action[i, k]
+    _row(ta.prev_action, i, obs, j)
 
 
 class ObservationField(NamedTuple):
