@@ -238,10 +238,6 @@ def bench_vector_env(num_envs: int, robot_steps: int = 20000, track: str = "pape
     return out
 
 
-_STAGE_KEYS = {"azimut_env.task.sensors": "sensors", "azimut_env.task.icr_estimate": "estimation",
-               "azimut_env.task.track_state": "track", "azimut_env.task.localisation": "track"}  # else reward_obs
-
-
 def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     """The instrumented loop: stage times per robot-step [µs] (keys ``<stage>_us``), with the
     stages after the physics run one by one (``Pipeline.run_timed``: the uninstrumented loop
@@ -253,7 +249,8 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     task.apply_actions = _timed(acc, task.apply_actions, "actions")
     phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
     task.sensors.draw_noise = _timed(acc, task.sensors.draw_noise, "sensors")
-    column = lambda stage: _STAGE_KEYS.get(stage.__module__, "reward_obs")  # noqa: E731
+    column = lambda stage: {"sensors": "sensors", "icr_estimate": "estimation", "track_state": "track",  # noqa: E731
+                            "localisation": "track"}.get(stage.__module__.rsplit(".", 1)[-1], "reward_obs")
     task.pipelines = lambda: (lambda rows, action: step.run_timed(rows, action, acc, column), reset)
     N = venv.num_envs
     try:
@@ -415,19 +412,29 @@ def run(args: argparse.Namespace) -> int:
     if args.action:
         return run_action_bench(args)
     if args.convergence:
-        print("substep convergence: 30 s open-loop replay of smooth kinematic set-points, against 256 substeps")
-        print(f"{'substeps':>9}{'max pos mm':>12}{'final mm':>10}{'heading deg':>12}{'beta deg':>10}{'order':>7}")
-        from azimut_env.physics.convergence import substep_convergence
+        return _print_convergence()
+    r = _print_single(args)
+    if args.num_envs:
+        _print_vector(args, r["steps_per_s"])
+    return _print_reference(args.reference, r) if args.reference else 0
 
-        for row in substep_convergence():
-            if row["refused"]:
-                print(f"{int(row['substeps']):>9}  refused by the stability check")
-                continue
-            print(f"{int(row['substeps']):>9}{row['max_position_error'] * 1e3:>12.3f}"
-                  f"{row['final_position_error'] * 1e3:>10.3f}"
-                  f"{np.degrees(row['final_heading_error']):>12.4f}{np.degrees(row['max_beta_error']):>10.4f}"
-                  f"{row['order']:>7.2f}")
-        return 0
+
+def _print_convergence() -> int:
+    print("substep convergence: 30 s open-loop replay of smooth kinematic set-points, against 256 substeps")
+    print(f"{'substeps':>9}{'max pos mm':>12}{'final mm':>10}{'heading deg':>12}{'beta deg':>10}{'order':>7}")
+    from azimut_env.physics.convergence import substep_convergence
+
+    for row in substep_convergence():
+        if row["refused"]:
+            print(f"{int(row['substeps']):>9}  refused by the stability check")
+            continue
+        print(f"{int(row['substeps']):>9}{row['max_position_error'] * 1e3:>12.3f}"
+              f"{row['final_position_error'] * 1e3:>10.3f}{np.degrees(row['final_heading_error']):>12.4f}"
+              f"{np.degrees(row['max_beta_error']):>10.4f}{row['order']:>7.2f}")
+    return 0
+
+
+def _print_single(args: argparse.Namespace) -> dict[str, float]:
     r = bench_env(args.steps, args.track, args.seed, args.substeps, _robot_kwargs(args))
     per = r["us_per_step"]
     print(f"Azimut-v2 single env, robot {robot_label(args)}, track {args.track}, {int(r['substeps'])} substeps, "
@@ -439,62 +446,55 @@ def run(args: argparse.Namespace) -> int:
     print("(after physics: the sensor noise draw and the one compiled call for sensors, estimation, track, "
           "termination, reward and observation; other: step()'s checks, the actions, the blow-up check)")
     print(f"{'total':<16}{per:>10.1f}")
-    print(f"steps/s: {r['steps_per_s']:.0f} overall ({r['cpu_steps_per_s']:.0f} in CPU time), "
-          f"{r['best_chunk_steps_per_s']:.0f} in the best chunk "
-          f"({int(r['resets'])} resets, not timed)  (bar 1500, goal 5000)")
-    if args.num_envs:
-        single = r["steps_per_s"]
-        print()
-        print(f"AzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
-              f"{args.solver_iterations} solver iterations, IT estimation included; "
-              f"~{args.vector_steps} robot-steps per N, "
-              f"episodes of at most {args.episode_steps} steps (autoresets timed)")
-        presets = args.imperfections or [None]
-        print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}" + "  imperfections" * bool(presets[0]))
-        rows = []
-        for N in args.num_envs:
-            for name in presets:
-                v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
-                                     solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
-                                     robot_kwargs=_robot_kwargs(args, name))
-                rows.append(v)
-                first = rows[len(rows) - 1 - presets.index(name)]  # this N's row of the first preset
-                tail = (f"  {name} ({v['steps_per_s'] / first['steps_per_s']:.2f}x {presets[0]}, "
-                        f"{v['cpu_steps_per_s'] / first['cpu_steps_per_s']:.2f}x in CPU time)") if name else ""
-                print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
-                      f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}{tail}", flush=True)
-        print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
-              "env above, same run; bar 40000, goal 80000 at N = 64)")
-        mb = memory_per_robot(512, args.track, args.substeps)
-        print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env of the default robot, "
-              "fresh process)")
-        print()
-        print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per "
-              "control step, all substeps; without obstacles pymunk is read and written once per step and not "
-              "stepped; the stages after the physics one by one here, not as the one compiled call of the loop "
-              "above)")
-        labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
-        head = "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES)
-        print(f"{'N':>5}{head}{'total':>9}")
-        for v in rows:
-            cells = "".join(f"{v[k + '_us']:>11.2f}" for k in VECTOR_STAGES)
-            print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
-    if args.reference:
-        import gymnasium as gym
+    best, resets = r["best_chunk_steps_per_s"], int(r["resets"])
+    print(f"steps/s: {r['steps_per_s']:.0f} overall ({r['cpu_steps_per_s']:.0f} in CPU time), {best:.0f} in the best "
+          f"chunk ({resets} resets, not timed)  (bar 1500, goal 5000)")
+    return r
 
-        try:
-            ref, ref_cpu = reference_steps_per_s(args.reference, with_cpu=True)
-        except gym.error.DependencyNotInstalled as exc:
-            print(f"reference {args.reference}: not timed, a dependency is missing ({str(exc).splitlines()[0]}); "
-                  "LunarLanderContinuous-v3 needs box2d: pip install 'gymnasium[box2d]'")
-            return 0
-        print(f"reference {args.reference}: {ref:.0f} steps/s in the same run ({ref_cpu:.0f} in CPU time); the "
-              f"single env at {r['steps_per_s'] / ref:.2f}x of it ({r['cpu_steps_per_s'] / ref_cpu:.2f}x in CPU time; "
-              f"goal 0.75x LunarLanderContinuous-v3); load average {load_average()}")
+
+def _print_vector(args: argparse.Namespace, single: float) -> None:
+    print(f"\nAzimutVectorEnv (N robots in one Space), track {args.track}, {args.substeps} substeps, "
+          f"{args.solver_iterations} solver iterations, IT estimation included; ~{args.vector_steps} robot-steps "
+          f"per N, episodes of at most {args.episode_steps} steps (autoresets timed)")
+    presets = args.imperfections or [None]
+    print(f"{'N':>5}{'steps/s':>10}{'best':>9}{'ratio':>7}{'us/step':>9}" + "  imperfections" * bool(presets[0]))
+    rows = []
+    for N in args.num_envs:
+        for name in presets:
+            v = bench_vector_env(N, args.vector_steps, args.track, args.seed, args.substeps,
+                                 solver_iterations=args.solver_iterations, max_episode_steps=args.episode_steps,
+                                 robot_kwargs=_robot_kwargs(args, name))
+            rows.append(v)
+            first = rows[len(rows) - 1 - presets.index(name)]  # this N's row of the first preset
+            tail = (f"  {name} ({v['steps_per_s'] / first['steps_per_s']:.2f}x {presets[0]}, "
+                    f"{v['cpu_steps_per_s'] / first['cpu_steps_per_s']:.2f}x in CPU time)") if name else ""
+            print(f"{N:>5}{v['steps_per_s']:>10.0f}{v['best_chunk_steps_per_s']:>9.0f}"
+                  f"{v['steps_per_s'] / single:>6.1f}x{v['us_per_robot_step']:>9.1f}{tail}", flush=True)
+    print("(steps/s: robot-steps per second ('best': the best fifth of the loop); ratio: against the single "
+          "env above, same run; bar 40000, goal 80000 at N = 64)")
+    mb = memory_per_robot(512, args.track, args.substeps)
+    print(f"memory: {mb:.3f} MB per robot (resident-set growth of a 512-robot vector env of the default robot, "
+          "fresh process)\n")
+    print("time split, us per robot-step (instrumented loop; 'read', 'force', 'write', 'space.step' are per control "
+          "step, all substeps; without obstacles pymunk is read and written once per step and not stepped; the "
+          "stages after the physics one by one here, not as the one compiled call of the loop above)")
+    labels = dict(space_step="space.step", reward_obs="rew+obs", summary="summary")
+    print(f"{'N':>5}" + "".join(f"{labels.get(k, k):>11}" for k in VECTOR_STAGES) + f"{'total':>9}")
+    for v in rows:
+        cells = "".join(f"{v[k + '_us']:>11.2f}" for k in VECTOR_STAGES)
+        print(f"{int(v['num_envs']):>5}{cells}{v['instrumented_us_per_robot_step']:>9.1f}")
+
+
+def _print_reference(name: str, r: dict[str, float]) -> int:
+    import gymnasium as gym
+    try:
+        ref, ref_cpu = reference_steps_per_s(name, with_cpu=True)
+    except gym.error.DependencyNotInstalled as exc:
+        print(f"reference {name}: not timed, a dependency is missing ({str(exc).splitlines()[0]}); "
+              "LunarLanderContinuous-v3 needs box2d: pip install 'gymnasium[box2d]'")
+        return 0
+    print(f"reference {name}: {ref:.0f} steps/s in the same run ({ref_cpu:.0f} in CPU time); the single env at "
+          f"{r['steps_per_s'] / ref:.2f}x of it ({r['cpu_steps_per_s'] / ref_cpu:.2f}x in CPU time; goal 0.75x "
+          f"LunarLanderContinuous-v3); load average {load_average()}")
     return 0
 
-
-if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(p)
-    raise SystemExit(run(p.parse_args()))
