@@ -40,6 +40,7 @@ from control.icr.lookahead import (
     capped_track,
     plan_cells,
     plan_sides,
+    plan_table,
     stop_circle_normals,
 )
 from control.twist.setpoint import SetpointBatch, SetpointConfig
@@ -145,6 +146,7 @@ class ICRPathController(_PathFollowing):
         self.lookahead = lookahead
         self.controller: BatchICRController | None = None
         self._plans: list[CellPlan | None] = []
+        self._table = None  # the plans packed for the lookup, rebuilt after a reset
         self._plan_cache: dict[tuple, tuple] = {}
         self._segment = np.zeros(0, dtype=np.int64)
         self._best = np.zeros(0)  # each robot's farthest progress [m] and the time since it grew [s]
@@ -175,6 +177,7 @@ class ICRPathController(_PathFollowing):
         while len(self._plans) <= i:
             self._plans.append(None)
         self._plans[i] = plan
+        self._table = None
         if self._segment.size <= i:
             grow = i + 1 - self._segment.size
             self._segment = np.concatenate([self._segment, np.zeros(grow, dtype=np.int64)])
@@ -200,9 +203,9 @@ class ICRPathController(_PathFollowing):
         lam_hat, mu_hat = env.estimated_eta
         plan = excursion = None
         if self.lookahead is not None and any(p is not None for p in self._plans):
-            tracks = env.tracks
-            plan, excursion = plan_sides(self._plans, [t.closed for t in tracks], [t.length for t in tracks],
-                                         targets.progress, targets.lam, self._normals, self._segment)
+            if self._table is None:
+                self._table = plan_table(self._plans, env.tracks, env.geometry.n)
+            plan, excursion = plan_sides(self._table, targets.progress, targets.lam, self._normals, self._segment)
             # a robot whose progress stalls (a reference the plan's cells cannot follow near a change
             # of cell) is steered without its plan for the rest of its episode
             ahead = targets.progress > self._best + self.lookahead.stall_distance

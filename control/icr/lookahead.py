@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -56,8 +57,10 @@ from control.icr.kernels import cell_hold_row, in_cell, steering_row, stop_norma
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 from estimation.hrep import eta_from_twist
+from estimation.validation import check_fields, check_positive_fields
 
-__all__ = ["LookaheadConfig", "CellPlan", "plan_cells", "plan_sides", "capped_track", "stop_circle_normals"]
+__all__ = ["LookaheadConfig", "CellPlan", "PlanTable", "plan_cells", "plan_table", "plan_sides", "capped_track",
+           "stop_circle_normals"]
 
 _INF = 1e18
 
@@ -101,12 +104,10 @@ class LookaheadConfig:
     stall_time: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("miss_cost", "max_hold_angle", "switch_overhead", "spacing", "swing_window",
-                     "steer_rate_fraction", "excursion_margin", "stall_distance", "stall_time"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value < 0 or (name == "spacing" and value <= 0):
-                raise ValueError(f"LookaheadConfig.{name} must be a finite number >= 0 (spacing > 0), got {value!r}")
+        check_fields(self)
+        check_positive_fields(self, "max_hold_angle", "spacing", "swing_window", "steer_rate_fraction", "stall_time")
+        check_positive_fields(self, "miss_cost", "switch_overhead", "excursion_margin", "stall_distance",
+                              allow_zero=True)
 
 
 @dataclass(frozen=True)
@@ -367,37 +368,48 @@ def _lookup(starts, sides, counts, exc, exc_counts, closed, lengths, progress, l
                 out_exc[i] = 1.0
 
 
-def plan_sides(plans: list[CellPlan | None], closed, lengths, progress: np.ndarray, lam_d: np.ndarray,
-               normals: np.ndarray, segment: np.ndarray, lead: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """(N, n) the cell each robot's plan has at its ``progress`` [m] (zeros: no plan), or already
-    the next one when the change is less than ``lead`` [m] ahead and the target λ_d (N, 3) has
-    left the planned cell for it (the robot arrives slowly at a change of cell, and the reference
-    there may already ask for the next cell a few centimetres early: holding it in the old cell
-    would make no progress). ``normals``: the stop circles' (n, 3). ``segment`` (N,) int: each
-    robot's current segment of its plan, updated in place (it never goes back: a target that swings
-    back and forth at rest does not swing the plan; 0 after a reset). Also (N,) 1.0 where the
-    progress is in one of the plan's expected excursions."""
-    num, n = len(plans), normals.shape[0]
+class PlanTable(NamedTuple):
+    """N robots' plans packed for the compiled lookup (:func:`plan_table`)."""
+
+    starts: np.ndarray  #: (N, K) segment starts [m]
+    sides: np.ndarray  #: (N, K, n) segment cells
+    counts: np.ndarray  #: (N,) segments per robot (0: no plan)
+    excursions: np.ndarray  #: (N, E, 2) expected excursions [m]
+    excursion_counts: np.ndarray  #: (N,)
+    closed: np.ndarray  #: (N,) bool: the robot's track is a loop
+    lengths: np.ndarray  #: (N,) its length [m]
+
+
+def plan_table(plans: list[CellPlan | None], tracks, n: int) -> PlanTable:
+    """The plans of N robots (None: no plan) on their ``tracks``, packed once per reset."""
+    num = len(plans)
     K = max([1] + [p.start.size for p in plans if p is not None])
-    starts = np.zeros((num, K))
-    sides = np.zeros((num, K, n))
-    counts = np.zeros(num, dtype=np.int64)
-    for i, p in enumerate(plans):
-        if p is not None:
-            counts[i] = p.start.size
-            starts[i, :counts[i]] = p.start
-            sides[i, :counts[i]] = p.side
     E = max([1] + [p.excursions.shape[0] for p in plans if p is not None])
-    exc = np.zeros((num, E, 2))
-    exc_counts = np.zeros(num, dtype=np.int64)
+    table = PlanTable(np.zeros((num, K)), np.zeros((num, K, n)), np.zeros(num, dtype=np.int64), np.zeros((num, E, 2)),
+                      np.zeros(num, dtype=np.int64), np.array([bool(t.closed) for t in tracks], dtype=np.bool_),
+                      np.array([float(t.length) for t in tracks]))
     for i, p in enumerate(plans):
         if p is not None:
-            exc_counts[i] = p.excursions.shape[0]
-            exc[i, :exc_counts[i]] = p.excursions
+            table.counts[i], table.excursion_counts[i] = p.start.size, p.excursions.shape[0]
+            table.starts[i, :p.start.size], table.sides[i, :p.start.size] = p.start, p.side
+            table.excursions[i, :p.excursions.shape[0]] = p.excursions
+    return table
+
+
+def plan_sides(table: PlanTable, progress: np.ndarray, lam_d: np.ndarray, normals: np.ndarray, segment: np.ndarray,
+               lead: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """(N, n) the cell each robot's plan (``table``, :func:`plan_table`) has at its ``progress``
+    [m] (zeros: no plan), or already the next one when the change is less than ``lead`` [m] ahead
+    and the target λ_d (N, 3) has left the planned cell for it (the robot arrives slowly at a
+    change of cell, and the reference there may already ask for the next cell a few centimetres
+    early: holding it in the old cell would make no progress). ``normals``: the stop circles'
+    (n, 3). ``segment`` (N,) int: each robot's current segment of its plan, updated in place (it
+    never goes back: a target that swings back and forth at rest does not swing the plan; 0 after
+    a reset). Also (N,) 1.0 where the progress is in one of the plan's expected excursions."""
+    num, n = table.counts.shape[0], normals.shape[0]
     out = np.empty((num, n))
     out_exc = np.empty(num)
-    _lookup(starts, sides, counts, exc, exc_counts, np.asarray(closed, dtype=np.bool_),
-            np.asarray(lengths, dtype=np.float64),
-            np.asarray(progress, dtype=np.float64), np.ascontiguousarray(lam_d, dtype=np.float64),
+    _lookup(table.starts, table.sides, table.counts, table.excursions, table.excursion_counts, table.closed,
+            table.lengths, np.asarray(progress, dtype=np.float64), np.ascontiguousarray(lam_d, dtype=np.float64),
             np.ascontiguousarray(normals, dtype=np.float64), float(lead), segment, out, out_exc)
     return out, out_exc

@@ -17,6 +17,7 @@ from control.icr.lookahead import (
     capped_track,
     plan_cells,
     plan_sides,
+    plan_table,
     reference_lambdas,
     stop_circle_normals,
 )
@@ -117,13 +118,16 @@ def test_lookup_advances_once_and_early_only_for_a_target_already_in_the_next_ce
     seg = np.zeros(1, dtype=np.int64)
     lam_first, _ = reference_lambdas(_line_track([0.3, 1.5]), np.array([0.5]))
     lam_next, _ = reference_lambdas(_line_track([0.3, 1.5]), np.array([1.5]))
-    side, exc = plan_sides([plan], [False], [2.0], np.array([sw - 0.05]), lam_first, N, seg)
+    legs = _line_track([0.3, 1.5])
+    table = plan_table([plan], [legs], GEOM.n)
+    side, exc = plan_sides(table, np.array([sw - 0.05]), lam_first, N, seg)
     assert np.array_equal(side[0], plan.side[0]) and seg[0] == 0
-    side, _ = plan_sides([plan], [False], [2.0], np.array([sw - 0.05]), lam_next, N, seg)
+    side, _ = plan_sides(table, np.array([sw - 0.05]), lam_next, N, seg)
     assert np.array_equal(side[0], plan.side[1]) and seg[0] == 1
-    side, _ = plan_sides([plan], [False], [2.0], np.array([sw - 0.08]), lam_first, N, seg)
+    side, _ = plan_sides(table, np.array([sw - 0.08]), lam_first, N, seg)
     assert np.array_equal(side[0], plan.side[1])  # never back
-    none, exc = plan_sides([None], [False], [2.0], np.array([0.5]), lam_first, N, np.zeros(1, dtype=np.int64))
+    none, exc = plan_sides(plan_table([None], [legs], GEOM.n), np.array([0.5]), lam_first, N,
+                           np.zeros(1, dtype=np.int64))
     assert not none.any() and not exc.any()
 
 
