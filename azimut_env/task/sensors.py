@@ -3,9 +3,10 @@ motor-angle encoders, and wheel encoders whose count difference over a control p
 
 :class:`SensorState` holds the sensors of N robots next to their model: the per-episode state
 (the steering encoders' constant bias, the wheel angles at the last reading), the noise draws and
-the last readings. Per step (``AzimutTask.observe``): :meth:`SensorState.draw_noise` (each robot
-from its own generator), then :meth:`SensorState.measure` on the true steering angles, motor
-angles, wheel angles and spin rates of the physics.
+the last readings. Per step and at a reset: :meth:`SensorState.draw_noise` (each robot from its own
+generator), then :func:`sense`, the sensor stage of the pipeline (:data:`SENSOR_STAGES`), on the
+true steering angles, motor angles, wheel angles and spin rates of the physics; the model of one
+wheel is :func:`_read_wheel`, which :func:`measure_batch` and :meth:`SensorState.measure` run too.
 
 All noise comes from the generator passed in (the env's ``np_random``): no global state.
 """
