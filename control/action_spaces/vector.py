@@ -11,8 +11,10 @@ one batched ``step`` of the vector env with all set-points):
   on the sphere (in a tangent frame carried with it) and action[2] · ``residual_mu`` [m/s] is added
   to μ_f. A correction that would carry λ_f across a steering stop or into an axis cap is dropped
   (the reference target is used), so the policy cannot cause a stop-and-reconfigure that the
-  reference would not make. The zero action *is* the reference controller of ``azimut eval`` (the
-  same follower, controller and stop mask). A correction bounded in angle rather than in twist
+  reference would not make. The zero action *is* the reference controller of ``azimut eval``
+  without its look-ahead (``ICRPathController(lookahead=None)``: the same follower, controller and
+  stop mask; the shipped agents were trained on it, and the residual corrects a target of the
+  moment). A correction bounded in angle rather than in twist
   stays small at low speed too (a twist residual of 0.2 m/s swamps the target at rest, and the
   controller then stopped and reconfigured half of the time under random actions).
 * ``"icr_rate"`` ((N, 3)): the action moves the ICR target: action[:2] · ``lambda_rate_max`` is the

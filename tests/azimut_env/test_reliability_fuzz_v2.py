@@ -250,10 +250,10 @@ def _prop_record_files(tmp_path_factory, content, mutate):
                 check="jobs.eval.campaign:check_episode_result")
     store = TaskStore(tmp_path_factory.mktemp("records"))
     path = store.path(task)
-    metrics = {name: 0.5 for name in ("rms_lateral_m", "max_lateral_m", "rms_heading_rad", "completion_time_s",
-                                      "slip_energy_J", "mean_antagonism_N", "mean_nullspace_force_N", "mean_qua",
-                                      "mean_qua_moving", "min_qua_moving", "standstill_share", "limit_violation_steps",
-                                      "reconfigure_events", "return")}
+    from jobs.eval.report import SUMMARY_COLUMNS
+
+    # every metric the report reads back (the schema check's own list), a number each
+    metrics = {name: 0.5 for name, *_ in SUMMARY_COLUMNS if name != "completed"}
     metrics.update(completed=True, controller="icr", track="paper", seed=0)
     good = {"id": task.id, "fn": task.fn, "key": dict(task.key), "status": "ok", "attempts": 1,
             "result": {"metrics": metrics}}

@@ -77,10 +77,12 @@ def test_residual_zero_action_is_the_reference_and_random_residual_adds_no_stops
 
 
 def test_residual_zero_action_matches_azimut_eval_reference():
-    """Sub-env 0 with zero residual follows the same trajectory as ``azimut eval``'s ICR run."""
+    """Sub-env 0 with zero residual follows the same trajectory as ``azimut eval``'s ICR run
+    without its look-ahead (the residual corrects the controller of a target of the moment)."""
+    from control.path_controllers import ICRPathController
     from control.rollout import run_episode
 
-    log = run_episode("icr", "circle", seed=5, max_time=2.0)
+    log = run_episode(ICRPathController(lookahead=None), "circle", seed=5, max_time=2.0)
     venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None),
                                   action="residual")
     venv.reset(seed=5)
@@ -95,10 +97,11 @@ def test_residual_follows_the_estimated_pose_as_azimut_eval_does():
     """The residual's path follower reads the pose the observation was computed from, as every
     controller does (the true pose is for evaluation only): with odometry, the zero residual still
     follows ``azimut eval``'s ICR run (which steered on the true pose before, and drifted apart)."""
+    from control.path_controllers import ICRPathController
     from control.rollout import run_episode
 
     kwargs = dict(pose_source="odometry")
-    log = run_episode("icr", "circle", seed=5, max_time=2.0, env_kwargs=kwargs)
+    log = run_episode(ICRPathController(lookahead=None), "circle", seed=5, max_time=2.0, env_kwargs=kwargs)
     venv = VectorControllerAction(AzimutVectorEnv(num_envs=1, track="circle", max_episode_steps=None, **kwargs),
                                   action="residual")
     venv.reset(seed=5)
