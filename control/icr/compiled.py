@@ -181,6 +181,10 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
     the plan expects the target outside that cell) and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c,
     λ_target, μ_target, axis_cap, event, κ, saturated, held) are (M, …), row m of them is robot
     rows[m]. Returns 0, or (nothing written) 1 + the index of the first failed input check in :data:`_ERRORS`."""
+    # One long function on purpose: the whole step of a robot (target, modes, commands) reads and
+    # writes one work space row by row in a single compiled call, with no allocation per robot;
+    # the building blocks it calls (kernels.py, kernels_motion.py) are the named stages, and
+    # splitting the mode logic further would pass the same dozen per-robot scalars back and forth.
     (mode0, lam0, mu0, lam_rate0, beta0, rate0, phidot0, mode_time0, rlam0, has_rl0, events0, bmeas0, has_bmeas0,
      held_miss0) = state0
     (mode1, lam1, mu1, lam_rate1, beta1, rate1, phidot1, mode_time1, rlam1, has_rl1, events1, bmeas1, has_bmeas1,
