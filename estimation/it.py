@@ -172,7 +172,7 @@ def _boundary_d2(x, q, E, P, steer_max, k, fixed):
     return tot
 
 
-@njit(cache=True)
+@njit(cache=True)  # long on purpose: one compiled loop, state in locals (a split costs a call per step)
 def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, lam_t, scratch):
     """IT+ only: descend along the wrap boundary of wheel k, where β_k reaches a stop.
 
@@ -266,7 +266,7 @@ def _slide(q, E, P, steer_max, lam, d2, k, beta_lim, max_iter, min_step, grad, l
     return best
 
 
-@njit(cache=True)
+@njit(cache=True)  # long on purpose: Algorithm 1's loop compiled whole, state in locals, no call per step
 def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_step, grad, lam_t, beta_t,
              slide=False, periodic=False):
     """Lines 7–20 of Algorithm 1 from λ (modified in place), given d2 = ‖q − S(λ)‖² and
@@ -375,7 +375,7 @@ def _descend(q, E, P, steer_max, lam, d2, beta_cur, eps_lambda, max_iter, min_st
     return d2, count, False
 
 
-@njit(cache=True)
+@njit(cache=True)  # long on purpose: one point in one compiled call on the workspace ws, no allocation
 def _it_point(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter, accept_d2, ws,
               out, periodic=False):
     """One point: fills out[0:3] with λ. Returns (d2, iterations, starts tried, converged).

@@ -105,6 +105,9 @@ def _wrap_two_pi(x: float) -> float:
     return math.pi - (math.pi - x) % (2.0 * math.pi)
 
 
+# One long function on purpose: the env's whole physics step is one numba call over all robots and
+# substeps, with no allocation per substep and each wheel's state kept in locals; split into
+# helpers it would cost a call per wheel per substep or reorder float operations (bit-identity).
 @njit(cache=True, error_model="numpy")
 def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, transfer, com_h, restitution, dc, drive_dc,
                 n, dt, substeps, integrate):
@@ -358,6 +361,8 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
         accel[i, 1] = ay_r
 
 
+# One long function on purpose: every per-step summary column in one numba call, reusing the same
+# work arrays across robots; split, it would allocate or pass them around and repeat the loops.
 @njit(cache=True)
 def summary_kernel(state, js, ms, acc, wp, en, axis_xy, n, inv_sub, memory, speed_max, yaw_rate_max, spin_max,
                    position_max, out_r, out_w):

@@ -25,6 +25,9 @@ __all__ = ["swerve_step_kernel", "FLAGS"]
 FLAGS = ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling")
 
 
+# One long function on purpose: one numba call per control step for all robots, no allocation,
+# each robot's state kept in locals between the stages; split, it costs calls per robot or breaks
+# bit-identity with the reference path.
 @njit(cache=True)
 def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_rate, state_phidot, slew, flags,
                        deadband, alpha, axis_xy, b, r, steer_min, steer_max, unlimited, wheel_speed_max, dt,

@@ -165,6 +165,9 @@ def _search(table, mask, G, iters, P, F, i, now, state_beta, state_phidot, c2, d
     return -1.0
 
 
+# One long function on purpose: one numba call per control step for all robots, no allocation,
+# each robot's state kept in locals between the stages; split, it costs calls per robot or breaks
+# bit-identity with the reference path.
 @njit(cache=True)
 def setpoint_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_rate, state_phidot, state_stop,
                          state_events, flags, params, search, alpha, axis_xy, b, r, steer_min, steer_max, unlimited,
