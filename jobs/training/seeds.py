@@ -164,56 +164,79 @@ def check_seed_args(args: argparse.Namespace) -> None:
                                  "keeps the finished seeds, or another folder)")
 
 
-def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict | None = None) -> int:
-    """Train every seed (see the module docstring) and write the aggregate report."""
-    from jobs.campaign.engine import CampaignInterrupted, resolve_executor, run_tasks, summarize
+def _print_progress(done: int, total: int, task, rec: dict) -> None:
+    """One line per finished seed: its steps, wall time and last evaluation, or why it failed."""
+    if rec["status"] == "ok":
+        run = rec["result"]["run"]
+        msg = ("" if run.get("complete", True) else "INCOMPLETE (time-limit guard): ") + (
+               f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, evaluation mean return "
+               f"{rec['result']['evaluations'][-1]['mean_return']:.1f}")
+    else:
+        msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
+    print(f"[{done}/{total}] seed {task.key['seed']}: {msg}", flush=True)
+
+
+def _final_table_lines(cells: list[dict]) -> list[str]:
+    """The final evaluation's table rows: mean over seeds per track, with its interval where shown."""
     from jobs.eval.report import format_value, interval_shown
+
+    lines = []
+    for cell in cells:
+        vals = []
+        for k, fmt, scale in FINAL_COLUMNS:
+            st = cell["metrics"][k]
+            if st["n"] == 0 or not math.isfinite(st["mean"]):
+                vals.append("-")
+            elif not interval_shown(st):
+                vals.append(format_value(k, st["mean"], fmt, scale))
+            else:
+                vals.append(f"{format_value(k, st['mean'], fmt, scale)} [{format_value(k, st['lo'], fmt, scale)}, "
+                            f"{format_value(k, st['hi'], fmt, scale)}]")
+        lines.append(f"| {cell['track']} | {cell['n']} | " + " | ".join(vals) + " |")
+    return lines
+
+
+def _curve_lines(plot: str | None, curve: list[dict], n_ok: int) -> list[str]:
+    """The learning-curves section: the plot and the table of the mean return per evaluation step."""
+    lines = ["", "## Learning curves", ""]
+    if plot:
+        lines.append(f"![learning curves]({plot})")
+    if n_ok > 1:
+        if n_ok < 5:
+            lines += ["", f"With {n_ok} seeds the bootstrap interval is only indicative (with 2 it is the range of "
+                      "the two); use 5 or more seeds for a claim."]
+        lines += ["", "| steps | seeds | mean return | 95% interval |", "|---|---|---|---|"]
+        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} | [{c['lo']:.1f}, {c['hi']:.1f}] |"
+                  for c in curve]
+    else:
+        lines += ["", "| steps | seeds | mean return |", "|---|---|---|"]
+        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} |" for c in curve]
+    return lines
+
+
+def _problem_lines(failed: list[dict], incomplete: list[dict], steps: int) -> list[str]:
+    """The failed seeds and those the --time-limit guard stopped early, one bullet each."""
+    lines = []
+    if failed:
+        lines += ["", "Failed seeds:", ""] + [f"- seed {r['key']['seed']}: {r.get('error')}" for r in failed]
+    if incomplete:
+        lines += ["", "Incomplete seeds (stopped by the --time-limit guard before the step budget; left out of the "
+                  "statistics above):", ""]
+        lines += [f"- seed {r['key']['seed']}: {r['result']['run']['num_timesteps']} of {steps} steps"
+                  for r in incomplete]
+    return lines
+
+
+def _report_lines(args: argparse.Namespace, seeds: Sequence[int], records: list[dict], ok: list[dict],
+                  incomplete: list[dict], cells: list[dict], curve: list[dict], plot: str | None, executor: str,
+                  wall: float, prov: dict, evaluated_on: str) -> list[str]:
+    """``report.md``: the header, the final evaluation table, the learning curves, the failed and
+    incomplete seeds and the glossary."""
+    from jobs.eval.report import interval_shown
     from jobs.glossary import GLOSSARY, glossary_lines
-    from jobs.records import provenance, provenance_text, write_json
-    from jobs.training.plots import evaluation_label, training_label
+    from jobs.records import provenance_text
+    from jobs.training.plots import training_label
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    tasks = seed_tasks(args, seeds, out, env_kwargs)
-    executor = resolve_executor(args.executor, args.workers, args.ray_address)
-
-    def progress(done: int, total: int, task, rec: dict) -> None:
-        if rec["status"] == "ok":
-            run = rec["result"]["run"]
-            msg = ("" if run.get("complete", True) else "INCOMPLETE (time-limit guard): ") + (
-                   f"{run['num_timesteps']} steps in {run['learn_wall_s']:.0f} s, evaluation mean return "
-                   f"{rec['result']['evaluations'][-1]['mean_return']:.1f}")
-        else:
-            msg = f"FAILED after {rec['attempts']} attempt(s): {rec.get('error')}"
-        print(f"[{done}/{total}] seed {task.key['seed']}: {msg}", flush=True)
-
-    start = time.perf_counter()
-    try:
-        records = run_tasks(tasks, out / "seeds", executor=executor, workers=args.workers,
-                            threads=args.torch_threads, ray_address=args.ray_address, retries=args.retries,
-                            resume=args.resume, progress=progress)
-    except CampaignInterrupted as exc:
-        print(f"azimut train: {exc}; run the same command with --resume", flush=True)
-        return 130
-    wall = time.perf_counter() - start
-    done = [r for r in records if r["status"] == "ok"]
-    ok = [r for r in done if r["result"]["run"].get("complete", True)]  # the --time-limit guard: left out
-    incomplete = [r for r in done if r not in ok]
-    histories = [r["result"]["evaluations"] for r in ok]
-    curve = learning_curve_stats(histories)
-    final_rows: list[dict[str, Any]] = []
-    for r in ok:
-        for row in r["result"]["run"]["final_eval"]:
-            final_rows.append({**row, "seed": r["key"]["seed"]})
-    cells = summarize(final_rows, ("track",), [c[0] for c in FINAL_COLUMNS])
-    evaluated_on = evaluation_label(args.track, args.eval_tracks)
-    plot = _plot_curves(out, curve, histories, [r["key"]["seed"] for r in ok], evaluated_on)
-    prov = provenance()
-    write_json(out / "seeds.json",
-               {"seeds": list(seeds), "executor": executor, "workers": args.workers, "wall_s": wall,
-                "provenance": prov, "learning_curve": curve, "final_summary": cells,
-                "runs": [{"seed": r["key"]["seed"], "status": r["status"], "error": r.get("error"),
-                          "run": (r.get("result") or {}).get("run")} for r in records]})
     intervals = any(interval_shown(c["metrics"][k]) for c in cells for k, _, _ in FINAL_COLUMNS)
     stats = ("mean over seeds and, in brackets, the 95% bootstrap interval of the mean (no bracket where every seed "
              "gave the same value)" if intervals else
@@ -227,44 +250,55 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
              f"One deterministic episode per seed and track with the final policy; {stats}.", "",
              "| track | seeds | " + " | ".join(GLOSSARY[k].header for k, _, _ in FINAL_COLUMNS) + " |",
              "|---|---|" + "---|" * len(FINAL_COLUMNS)]
-    for cell in cells:
-        vals = []
-        for k, fmt, scale in FINAL_COLUMNS:
-            st = cell["metrics"][k]
-            if st["n"] == 0 or not math.isfinite(st["mean"]):
-                vals.append("-")
-            elif not interval_shown(st):
-                vals.append(format_value(k, st["mean"], fmt, scale))
-            else:
-                vals.append(f"{format_value(k, st['mean'], fmt, scale)} [{format_value(k, st['lo'], fmt, scale)}, "
-                            f"{format_value(k, st['hi'], fmt, scale)}]")
-        lines.append(f"| {cell['track']} | {cell['n']} | " + " | ".join(vals) + " |")
-    lines += ["", "## Learning curves", ""]
-    if plot:
-        lines.append(f"![learning curves]({plot})")
-    if len(ok) > 1:
-        if len(ok) < 5:
-            lines += ["", f"With {len(ok)} seeds the bootstrap interval is only indicative (with 2 it is the range of "
-                      "the two); use 5 or more seeds for a claim."]
-        lines += ["", "| steps | seeds | mean return | 95% interval |", "|---|---|---|---|"]
-        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} | [{c['lo']:.1f}, {c['hi']:.1f}] |"
-                  for c in curve]
-    else:
-        lines += ["", "| steps | seeds | mean return |", "|---|---|---|"]
-        lines += [f"| {c['timesteps']} | {c['n']} | {c['mean']:.1f} |" for c in curve]
-    failed = [r for r in records if r["status"] != "ok"]
-    if failed:
-        lines += ["", "Failed seeds:", ""] + [f"- seed {r['key']['seed']}: {r.get('error')}" for r in failed]
-    if incomplete:
-        lines += ["", "Incomplete seeds (stopped by the --time-limit guard before the step budget; left out of the "
-                  "statistics above):", ""]
-        lines += [f"- seed {r['key']['seed']}: {r['result']['run']['num_timesteps']} of {args.steps} steps"
-                  for r in incomplete]
+    lines += _final_table_lines(cells)
+    lines += _curve_lines(plot, curve, len(ok))
+    lines += _problem_lines([r for r in records if r["status"] != "ok"], incomplete, args.steps)
     lines += [""] + glossary_lines(["track", "seeds", *(k for k, _, _ in FINAL_COLUMNS)])
     lines += ["- **steps**: environment steps of training (all robots together) at the evaluation.",
               "- **mean return**: the evaluation return averaged over the evaluation tracks, then over the seeds."]
     if len(ok) > 1:
         lines.append("- **95% interval**: the percentile-bootstrap interval of the mean over seeds.")
+    return lines
+
+
+def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict | None = None) -> int:
+    """Train every seed (see the module docstring) and write the aggregate report."""
+    from jobs.campaign.engine import CampaignInterrupted, resolve_executor, run_tasks, summarize
+    from jobs.records import provenance, write_json
+    from jobs.training.plots import evaluation_label
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = seed_tasks(args, seeds, out, env_kwargs)
+    executor = resolve_executor(args.executor, args.workers, args.ray_address)
+    start = time.perf_counter()
+    try:
+        records = run_tasks(tasks, out / "seeds", executor=executor, workers=args.workers,
+                            threads=args.torch_threads, ray_address=args.ray_address, retries=args.retries,
+                            resume=args.resume, progress=_print_progress)
+    except CampaignInterrupted as exc:
+        print(f"azimut train: {exc}; run the same command with --resume", flush=True)
+        return 130
+    wall = time.perf_counter() - start
+    done = [r for r in records if r["status"] == "ok"]
+    ok = [r for r in done if r["result"]["run"].get("complete", True)]  # the --time-limit guard: left out
+    incomplete = [r for r in done if r not in ok]
+    histories = [r["result"]["evaluations"] for r in ok]
+    curve = learning_curve_stats(histories)
+    final_rows: list[dict[str, Any]] = [{**row, "seed": r["key"]["seed"]}
+                                        for r in ok for row in r["result"]["run"]["final_eval"]]
+    cells = summarize(final_rows, ("track",), [c[0] for c in FINAL_COLUMNS])
+    evaluated_on = evaluation_label(args.track, args.eval_tracks)
+    plot = _plot_curves(out, curve, histories, [r["key"]["seed"] for r in ok], evaluated_on)
+    prov = provenance()
+    write_json(out / "seeds.json",
+               {"seeds": list(seeds), "executor": executor, "workers": args.workers, "wall_s": wall,
+                "provenance": prov, "learning_curve": curve, "final_summary": cells,
+                "runs": [{"seed": r["key"]["seed"], "status": r["status"], "error": r.get("error"),
+                          "run": (r.get("result") or {}).get("run")} for r in records]})
+    lines = _report_lines(args, seeds, records, ok, incomplete, cells, curve, plot, executor, wall, prov,
+                          evaluated_on)
     (out / "report.md").write_text("\n".join(lines) + "\n")
     print(f"{len(ok)} of {len(records)} seeds trained; report written to {out}/report.md", flush=True)
+    failed = [r for r in records if r["status"] != "ok"]
     return 0 if not failed and not incomplete else 1
