@@ -214,6 +214,108 @@ def _gauss_newton(theta, beta, brate, phidot, geom, speed, yaw_rate, yaw_w, free
     return theta, r0, info, it
 
 
+def _start_theta(beta, brate, phidot, geom: RobotGeometry, pre, yaw_rate, coaxial: bool, start_offset):
+    """The start of the fit, (offsets, log scales): the linear start on the moving samples ``pre``
+    (or ``start_offset``), turned by 180° where the gyro says coaxial modules drive backwards."""
+    n = geom.n
+    if start_offset is None:
+        spd = np.abs(geom.r * phidot[pre]).max(axis=1)
+        offset, scale = linear_start(beta[pre], phidot[pre], geom, weight=1.0 / spd**2, beta_rate=brate[pre])
+    else:
+        offset, scale = np.asarray(start_offset, dtype=np.float64), np.ones(n)
+    if yaw_rate is not None and coaxial and start_offset is None:  # the gyro settles the common 180°
+        xi, _ = rigid_fit(beta[pre], brate[pre], phidot[pre], geom, offset, scale)
+        ok = np.isfinite(yaw_rate[pre])
+        if np.sum(xi[ok, 2] * yaw_rate[pre][ok]) < 0:
+            offset = offset + np.pi
+    return np.concatenate([offset, np.log(scale)])
+
+
+def _fit_on_moving(theta, beta, brate, phidot, geom: RobotGeometry, yaw_rate, moving_speed: float):
+    """Two passes: the moving mask from the calibrated rigid fit, then the Gauss-Newton fit on it.
+    Returns (theta, residuals, information, moving, the samples used, turning, iterations)."""
+    n = geom.n
+    have_yaw = yaw_rate is not None
+    yaw_w = 0.0
+    if have_yaw:
+        yaw_w = float(np.mean(np.hypot(geom.axis_xy[:, 0], geom.axis_xy[:, 1])))  # a yaw rate as an axis speed
+    fit_iters = 0
+    for _ in range(2):
+        xi, _ = rigid_fit(beta, brate, phidot, geom, theta[:n], np.exp(theta[n:]))
+        speed = contact_speeds(xi, beta + theta[:n], geom).max(axis=1)
+        moving = speed >= moving_speed
+        use = moving & (np.isfinite(yaw_rate) if have_yaw else True)
+        if use.sum() < MIN_MOVING_SAMPLES:
+            raise ValueError(f"{int(use.sum())} moving samples (the wheels' rigid fit at {moving_speed} m/s or "
+                             f"faster); calibration needs at least {MIN_MOVING_SAMPLES}")
+        yr = yaw_rate[use] if have_yaw else None
+        turning = have_yaw and np.sum(np.abs(yr) * yaw_w >= 0.2 * speed[use]) >= MIN_MOVING_SAMPLES // 4
+        # a sample's scale: its speed, plus the contact points' own speed while steering (b β̇: the
+        # finite difference of the angles lags and amplifies their noise) and a floor
+        norm = speed[use] + np.abs(geom.b * brate[use]).max(axis=1) + _SPEED_FLOOR
+        theta, r, info, iters = _gauss_newton(theta, beta[use], brate[use], phidot[use], geom, norm, yr,
+                                              yaw_w if have_yaw else 0.0, free_scale=bool(turning))
+        fit_iters += iters
+    return theta, r, info, moving, use, turning, fit_iters
+
+
+def _check_gyro(theta, beta, brate, phidot, geom: RobotGeometry, yaw_rate) -> None:
+    """The wheels alone (no gyro rows) must turn as the gyro says, else one of them is wrong (``ValueError``)."""
+    n = geom.n
+    xi, _ = rigid_fit(beta, brate, phidot, geom, theta[:n], np.exp(theta[n:]))
+    diff = float(np.sqrt(np.mean((xi[:, 2] - yaw_rate) ** 2)))
+    own = float(np.sqrt(np.mean(yaw_rate ** 2)))
+    if diff > _GYRO_TOL + _GYRO_REL * own:
+        raise ValueError(f"the gyro and the wheels disagree on the turn rate while moving (RMS {diff:.2f} rad/s, "
+                         f"the gyro's own {own:.2f} rad/s): a gyro in another unit (--yaw-unit), an entry that is "
+                         "not the heading, or a drive motor inverted; calibrate without the gyro, or fix it")
+
+
+def _uncertainty(r, info, n: int, turning) -> tuple[float, float, bool, float]:
+    """The residual variance, the common offset's standard error [rad], whether it is observable,
+    and the weakest combination's standard error [deg] (``ValueError`` when the motions are too alike)."""
+    dof = max(r.size - 2 * n, 1)
+    sigma2 = float(np.sum(r**2) / dof)
+    # the common offset's standard error: the mean offset's variance, the other parameters free
+    g1 = np.concatenate([np.ones(n) / n, np.zeros(n)])
+    cov0 = np.linalg.pinv(info + _gauge(n, info, bool(turning), hold_common=False)) * sigma2
+    common_std = math.sqrt(max(float(g1 @ cov0 @ g1), 0.0))
+    observable = math.degrees(common_std) < COMMON_OBSERVABLE_DEG
+    gauge = np.zeros((2 * n, 2))
+    gauge[:n, 0], gauge[n:, 1] = 1.0, 1.0
+    proj = np.eye(2 * n) - gauge @ np.linalg.pinv(gauge)
+    eig = np.linalg.eigvalsh(proj @ info @ proj)[2:]  # the two gauge directions are the zeros
+    weakest = math.degrees(math.sqrt(sigma2 / max(eig.min(), 1e-300)))
+    # an exact log of one motion has no noise to scale by: its weakest combination is still unfixed
+    if weakest > MAX_WEAK_STD_DEG or eig.min() < 1e-3 * eig.max():
+        raise ValueError(f"the log's motions are too alike to tell the modules' offsets apart (the weakest "
+                         f"combination is uncertain by ±{weakest:.1f}°, {MAX_WEAK_STD_DEG}° at most): drive in several "
+                         "directions and turn (or the angles are not in the unit given: --angle-unit)")
+    return sigma2, common_std, observable, weakest
+
+
+def _offsets_and_notes(theta, n: int, observable: bool, coaxial: bool, have_yaw: bool):
+    """The fitted offsets in (-π, π] with the common part the log leaves free settled, the scales,
+    and the notes that say how it was settled."""
+    offset, scale = theta[:n].copy(), np.exp(theta[n:])
+    notes = []
+    if not observable:
+        offset -= math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
+        notes.append("The log does not fix the common offset of all modules ("
+                     + ("the robot barely turns while moving, and the gyro cannot fix it either" if have_yaw
+                        else "the robot barely turns, and no gyro")
+                     + "): the offsets are relative, set so that their circular mean is zero (or your current "
+                     "offsets' common part); all modules may share one more unknown turn.")
+    elif coaxial and not have_yaw:
+        mean = math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
+        if abs(mean) > math.pi / 2:  # the robot driving backwards fits as well: take the turn nearer zero
+            offset += math.pi
+        notes.append("Without a gyro, every coaxial module turned by 180° fits as well (the robot driving backwards): "
+                     "the common offset is taken within ±90°.")
+    offset = np.mod(offset + np.pi, 2 * np.pi) - np.pi
+    return offset, scale, notes
+
+
 def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: float = MOVING_SPEED,
                     yaw_rate=None, start_offset=None) -> tuple[CalibrationFit, np.ndarray]:
     """Fit each module's steering offset and wheel factor to a log (module docstring).
@@ -241,83 +343,18 @@ def fit_calibration(t_ns, beta, phidot, geom: RobotGeometry, *, moving_speed: fl
         raise ValueError(f"{int(pre.sum())} samples with a wheel moving at {moving_speed} m/s or faster; "
                          f"calibration needs at least {MIN_MOVING_SAMPLES} (drive the robot: translate in several "
                          "directions and turn)")
-    if start_offset is None:
-        spd = np.abs(geom.r * phidot[pre]).max(axis=1)
-        offset, scale = linear_start(beta[pre], phidot[pre], geom, weight=1.0 / spd**2, beta_rate=brate[pre])
-    else:
-        offset, scale = np.asarray(start_offset, dtype=np.float64), np.ones(n)
-    yaw_w = 0.0
     have_yaw = yaw_rate is not None
     if have_yaw:
         yaw_rate = np.asarray(yaw_rate, dtype=np.float64)
-        yaw_w = float(np.mean(np.hypot(geom.axis_xy[:, 0], geom.axis_xy[:, 1])))  # a yaw rate as an axis speed
     coaxial = bool(np.all(geom.b == 0.0))
-    if have_yaw and coaxial and start_offset is None:  # the gyro settles the common 180° of coaxial modules
-        xi, _ = rigid_fit(beta[pre], brate[pre], phidot[pre], geom, offset, scale)
-        ok = np.isfinite(yaw_rate[pre])
-        if np.sum(xi[ok, 2] * yaw_rate[pre][ok]) < 0:
-            offset = offset + np.pi
-    theta = np.concatenate([offset, np.log(scale)])
-    moving = pre
-    fit_iters = 0
-    for _ in range(2):  # the moving mask from the calibrated rigid fit, then the fit on it
-        xi, _ = rigid_fit(beta, brate, phidot, geom, theta[:n], np.exp(theta[n:]))
-        speed = contact_speeds(xi, beta + theta[:n], geom).max(axis=1)
-        moving = speed >= moving_speed
-        use = moving & (np.isfinite(yaw_rate) if have_yaw else True)
-        if use.sum() < MIN_MOVING_SAMPLES:
-            raise ValueError(f"{int(use.sum())} moving samples (the wheels' rigid fit at {moving_speed} m/s or "
-                             f"faster); calibration needs at least {MIN_MOVING_SAMPLES}")
-        yr = yaw_rate[use] if have_yaw else None
-        turning = have_yaw and np.sum(np.abs(yr) * yaw_w >= 0.2 * speed[use]) >= MIN_MOVING_SAMPLES // 4
-        # a sample's scale: its speed, plus the contact points' own speed while steering (b β̇: the
-        # finite difference of the angles lags and amplifies their noise) and a floor
-        norm = speed[use] + np.abs(geom.b * brate[use]).max(axis=1) + _SPEED_FLOOR
-        theta, r, info, iters = _gauss_newton(theta, beta[use], brate[use], phidot[use], geom, norm, yr,
-                                              yaw_w if have_yaw else 0.0, free_scale=bool(turning))
-        fit_iters += iters
-    if have_yaw:  # the wheels alone (no gyro rows) must turn as the gyro says, else one of them is wrong
-        xi, _ = rigid_fit(beta[use], brate[use], phidot[use], geom, theta[:n], np.exp(theta[n:]))
-        diff = float(np.sqrt(np.mean((xi[:, 2] - yaw_rate[use]) ** 2)))
-        own = float(np.sqrt(np.mean(yaw_rate[use] ** 2)))
-        if diff > _GYRO_TOL + _GYRO_REL * own:
-            raise ValueError(f"the gyro and the wheels disagree on the turn rate while moving (RMS {diff:.2f} rad/s, "
-                             f"the gyro's own {own:.2f} rad/s): a gyro in another unit (--yaw-unit), an entry that is "
-                             "not the heading, or a drive motor inverted; calibrate without the gyro, or fix it")
-    dof = max(r.size - 2 * n, 1)
-    sigma2 = float(np.sum(r**2) / dof)
-    # the common offset's standard error: the mean offset's variance, the other parameters free
-    g1 = np.concatenate([np.ones(n) / n, np.zeros(n)])
-    cov0 = np.linalg.pinv(info + _gauge(n, info, bool(turning), hold_common=False)) * sigma2
-    common_std = math.sqrt(max(float(g1 @ cov0 @ g1), 0.0))
-    observable = math.degrees(common_std) < COMMON_OBSERVABLE_DEG
-    gauge = np.zeros((2 * n, 2))
-    gauge[:n, 0], gauge[n:, 1] = 1.0, 1.0
-    proj = np.eye(2 * n) - gauge @ np.linalg.pinv(gauge)
-    eig = np.linalg.eigvalsh(proj @ info @ proj)[2:]  # the two gauge directions are the zeros
-    weakest = math.degrees(math.sqrt(sigma2 / max(eig.min(), 1e-300)))
-    # an exact log of one motion has no noise to scale by: its weakest combination is still unfixed
-    if weakest > MAX_WEAK_STD_DEG or eig.min() < 1e-3 * eig.max():
-        raise ValueError(f"the log's motions are too alike to tell the modules' offsets apart (the weakest "
-                         f"combination is uncertain by ±{weakest:.1f}°, {MAX_WEAK_STD_DEG}° at most): drive in several "
-                         "directions and turn (or the angles are not in the unit given: --angle-unit)")
+    theta = _start_theta(beta, brate, phidot, geom, pre, yaw_rate, coaxial, start_offset)
+    theta, r, info, moving, use, turning, fit_iters = _fit_on_moving(theta, beta, brate, phidot, geom, yaw_rate,
+                                                                     moving_speed)
+    if have_yaw:
+        _check_gyro(theta, beta[use], brate[use], phidot[use], geom, yaw_rate[use])
+    sigma2, common_std, observable, weakest = _uncertainty(r, info, n, turning)
     cov = np.linalg.pinv(info + _gauge(n, info, bool(turning), hold_common=not observable)) * sigma2
-    offset, scale = theta[:n].copy(), np.exp(theta[n:])
-    notes = []
-    if not observable:
-        offset -= math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
-        notes.append("The log does not fix the common offset of all modules ("
-                     + ("the robot barely turns while moving, and the gyro cannot fix it either" if have_yaw
-                        else "the robot barely turns, and no gyro")
-                     + "): the offsets are relative, set so that their circular mean is zero (or your current "
-                     "offsets' common part); all modules may share one more unknown turn.")
-    elif coaxial and not have_yaw:
-        mean = math.atan2(np.mean(np.sin(offset)), np.mean(np.cos(offset)))
-        if abs(mean) > math.pi / 2:  # the robot driving backwards fits as well: take the turn nearer zero
-            offset += math.pi
-        notes.append("Without a gyro, every coaxial module turned by 180° fits as well (the robot driving backwards): "
-                     "the common offset is taken within ±90°.")
-    offset = np.mod(offset + np.pi, 2 * np.pi) - np.pi
+    offset, scale, notes = _offsets_and_notes(theta, n, observable, coaxial, have_yaw)
     scale_absolute = bool(have_yaw and turning)
     if not scale_absolute:
         notes.append("Wheel factors are relative (geometric mean 1): "
