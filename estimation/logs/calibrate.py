@@ -102,24 +102,22 @@ def _warnings(source, geom, offset, before, after, current, cur, beta, phidot, m
     return out
 
 
-def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_deg=None, chunk: int = 50_000,
-                     progress: Callable | None = None) -> dict:
-    """Calibrate ``source`` (see the module docstring); the result is what ``calibration.json``
-    holds. ``ValueError`` for a log with too few moving samples."""
-    geom = source.geom
-    n = geom.n
-    t, beta, phidot, read, skipped = read_samples(source, chunk, progress)
-    yaw = source.yaw()
-    yaw_rate = window_rate(t, yaw.t_ns, yaw.yaw) if yaw is not None else None
+def _fit_source(source: LogSource, t, beta, phidot, read: int, skipped: dict, yaw, yaw_rate, moving_speed: float):
+    """The calibration fit of the whole log; its ``ValueError`` names the log, the gyro and, where
+    many samples were stale, that cause."""
     try:
-        fit, moving = fit_calibration(t, beta, phidot, geom, moving_speed=moving_speed, yaw_rate=yaw_rate)
+        return fit_calibration(t, beta, phidot, source.geom, moving_speed=moving_speed, yaw_rate=yaw_rate)
     except ValueError as exc:
         stale = skipped.get(BAD_REASONS[BAD_STALE], 0)
         hint = (f" ({stale} of the {read} samples read were skipped as stale: a signal logged on change that "
                 "stopped? --max-age)" if stale > 0.2 * max(read, 1) else "")
         gyro = f" (gyro: {yaw.source})" if yaw is not None and "gyro" in str(exc) else ""
         raise ValueError(f"{source.path}: {exc}{gyro}{hint}") from None
-    cur = None if current_offsets_deg is None else np.radians(np.asarray(current_offsets_deg, dtype=np.float64))
+
+
+def _proposed_offsets(fit, cur, geom, yaw_rate):
+    """The offsets to propose: the fit's, with the common part the log leaves free taken from the
+    current offsets ``cur`` where given, wrapped to (-π, π]."""
     offset = fit.steer_offset.copy()
     if cur is not None:
         shift = math.atan2(np.mean(np.sin(cur - offset)), np.mean(np.cos(cur - offset)))
@@ -127,8 +125,13 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
             offset = offset + shift
         elif np.all(geom.b == 0.0) and yaw_rate is None and abs(shift) > math.pi / 2:
             offset = offset + math.pi  # every coaxial module turned by 180° fits alike: the turn nearer the code's
-    offset = np.mod(offset + np.pi, 2 * np.pi) - np.pi
-    # uncertainty: the fit on each half of the moving samples, from the whole log's result
+    return np.mod(offset + np.pi, 2 * np.pi) - np.pi
+
+
+def _halves_spread(fit, t, beta, phidot, geom, moving, yaw_rate, moving_speed: float):
+    """Uncertainty: the fit on each half of the moving samples, from the whole log's result; returns
+    the half-spreads of the relative offsets [deg] and of the wheel factors (None, None where a half
+    cannot be fitted)."""
     halves = []
     idx = np.flatnonzero(moving)
     for part in (idx[: idx.size // 2], idx[idx.size // 2:]):
@@ -147,28 +150,29 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
                        else h.wheel_scale))
     spread_off = (np.abs(_wrap_deg(np.degrees(halves[0][0] - halves[1][0]))) / 2).tolist() if halves else None
     spread_scale = (np.abs(halves[0][1] - halves[1][1]) / 2).tolist() if halves else None
-    before = figures(beta, phidot, geom, moving)
-    b_cal, p_cal = apply_offsets(beta, phidot, geom, offset, fit.wheel_scale)
-    after = figures(b_cal, p_cal, geom, moving)
-    current = None
-    if cur is not None:
-        b_cur, p_cur = apply_offsets(beta, phidot, geom, cur, np.ones(n))
-        current = {**figures(b_cur, p_cur, geom, moving), "steer_offset_deg": np.degrees(cur).tolist()}
-    base = before if current is None else current
+    return spread_off, spread_scale
+
+
+def _refuse_big_change(source: LogSource, fit, offset, cur, base: dict, from_current: bool) -> None:
+    """``ValueError`` where the angles already agree yet the fit would turn a module a lot: only
+    the wheel speeds ask for it."""
+    n = source.geom.n
     change = _wrap_deg(np.degrees(offset - (np.zeros(n) if cur is None else cur)))
     if not fit.common_observable:
         change = change - math.degrees(math.atan2(np.mean(np.sin(np.radians(change))),
                                                   np.mean(np.cos(np.radians(change)))))
     biggest = float(np.abs(_wrap_deg(change)).max())
     if base["qua_IT_mean"] >= _ANGLES_AGREE and biggest > _BIG_CHANGE_DEG:
-        how = "with --current-offsets" if current is not None else "as logged"
+        how = "with --current-offsets" if from_current else "as logged"
         raise ValueError(f"{source.path}: the steering angles already agree (IT's quality "
                          f"{100 * base['qua_IT_mean']:.1f}% while moving {how}), yet the "
                          f"fit would turn a module by {biggest:.0f}°: only the wheel speeds ask "
                          "for it (a drive motor inverted, a wheel speed of the wrong sign or scale?); check them, "
                          "calibrate refuses to propose these offsets")
-    warnings = _warnings(source, geom, offset, before, after, current, cur, beta, phidot, moving)
-    dur = (t[-1] - t[0]) * 1e-9 if t.size else 0.0
+
+
+def _module_entries(source: LogSource, fit, offset, cur, spread_off, spread_scale) -> list[dict]:
+    """One entry per module of ``calibration.json``: offset, factor, their uncertainties, the change."""
     modules = []
     for k, name in enumerate(source.modules):
         entry = {"name": name, "steer_offset_deg": float(np.degrees(offset[k])),
@@ -180,9 +184,35 @@ def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_
         if cur is not None:
             entry["change_from_current_deg"] = float(_wrap_deg(np.degrees(offset[k] - cur[k])))
         modules.append(entry)
+    return modules
+
+
+def calibrate_source(source: LogSource, *, moving_speed: float, current_offsets_deg=None, chunk: int = 50_000,
+                     progress: Callable | None = None) -> dict:
+    """Calibrate ``source`` (see the module docstring); the result is what ``calibration.json``
+    holds. ``ValueError`` for a log with too few moving samples."""
+    geom = source.geom
+    n = geom.n
+    t, beta, phidot, read, skipped = read_samples(source, chunk, progress)
+    yaw = source.yaw()
+    yaw_rate = window_rate(t, yaw.t_ns, yaw.yaw) if yaw is not None else None
+    fit, moving = _fit_source(source, t, beta, phidot, read, skipped, yaw, yaw_rate, moving_speed)
+    cur = None if current_offsets_deg is None else np.radians(np.asarray(current_offsets_deg, dtype=np.float64))
+    offset = _proposed_offsets(fit, cur, geom, yaw_rate)
+    spread_off, spread_scale = _halves_spread(fit, t, beta, phidot, geom, moving, yaw_rate, moving_speed)
+    before = figures(beta, phidot, geom, moving)
+    b_cal, p_cal = apply_offsets(beta, phidot, geom, offset, fit.wheel_scale)
+    after = figures(b_cal, p_cal, geom, moving)
+    current = None
+    if cur is not None:
+        b_cur, p_cur = apply_offsets(beta, phidot, geom, cur, np.ones(n))
+        current = {**figures(b_cur, p_cur, geom, moving), "steer_offset_deg": np.degrees(cur).tolist()}
+    _refuse_big_change(source, fit, offset, cur, before if current is None else current, current is not None)
+    warnings = _warnings(source, geom, offset, before, after, current, cur, beta, phidot, moving)
+    dur = (t[-1] - t[0]) * 1e-9 if t.size else 0.0
     return {
         "schema": 1, "robot": robot_record(geom, source.modules), "log": source.describe(),
-        "modules": modules,
+        "modules": _module_entries(source, fit, offset, cur, spread_off, spread_scale),
         "common_offset_observable": fit.common_observable, "common_offset_std_deg": fit.common_std_deg,
         "weakest_combination_std_deg": fit.weakest_std_deg,
         "wheel_scale_absolute": fit.scale_absolute, "gyro": yaw.source if yaw is not None else None,
