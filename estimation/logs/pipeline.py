@@ -163,6 +163,35 @@ def _check_time(t_ns: np.ndarray, last: int | None, offset: int, source: LogSour
                            "samples must be in strictly increasing time order")
 
 
+def _check_estimate_args(methods, odometry_method, chunk_size, moving_speed) -> tuple[tuple, str]:
+    """:func:`estimate_log`'s arguments checked (``ValueError``); returns the methods as a tuple and
+    the odometry method (default: the first)."""
+    methods = tuple(methods)
+    if not methods or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods):
+        raise ValueError(f"methods must be distinct names among {METHODS}, got {methods}")
+    odometry_method = methods[0] if odometry_method is None else odometry_method
+    if odometry_method not in methods:
+        raise ValueError(f"odometry_method {odometry_method!r} is not among the methods run {methods}")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if isinstance(moving_speed, bool) or not isinstance(moving_speed, (int, float)) or not moving_speed >= 0 \
+            or not math.isfinite(moving_speed):
+        raise ValueError(f"moving_speed must be a finite number >= 0 [m/s], got {moving_speed!r}")
+    return methods, odometry_method
+
+
+def _run_estimators(methods, beta, phidot, geom, mu_tol: float, est: dict, cost: dict) -> None:
+    """Every method on one chunk's good samples: (λ̂, μ̂, quality) appended to ``est``, the time
+    taken added to ``cost``."""
+    for m in methods:
+        t0 = time.perf_counter()
+        lam, mu, _, qua = estimate_eta(beta, phidot, geom, m, mu_tol=mu_tol)
+        cost[m] += time.perf_counter() - t0
+        est[m]["lam"].append(lam)
+        est[m]["mu"].append(mu)
+        est[m]["qua"].append(qua)
+
+
 def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method: str | None = None,
                  chunk_size: int = 50_000, mu_tol: float = 1e-3, moving_speed: float = MOVING_SPEED,
                  progress: Callable[[int, int | None], None] | None = None) -> LogEstimate:
@@ -180,17 +209,7 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
     Raises :class:`LogError` for unsorted or duplicated timestamps, a log with no good sample, or
     an unusable reference pose; the reader's own ``LogError``s pass through.
     """
-    methods = tuple(methods)
-    if not methods or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods):
-        raise ValueError(f"methods must be distinct names among {METHODS}, got {methods}")
-    odometry_method = methods[0] if odometry_method is None else odometry_method
-    if odometry_method not in methods:
-        raise ValueError(f"odometry_method {odometry_method!r} is not among the methods run {methods}")
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
-        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
-    if isinstance(moving_speed, bool) or not isinstance(moving_speed, (int, float)) or not moving_speed >= 0 \
-            or not math.isfinite(moving_speed):
-        raise ValueError(f"moving_speed must be a finite number >= 0 [m/s], got {moving_speed!r}")
+    methods, odometry_method = _check_estimate_args(methods, odometry_method, chunk_size, moving_speed)
     geom = source.geom
     parts: dict[str, list] = {k: [] for k in ("t", "beta", "phidot", "twist", "pose", "oor", "rigid", "resid",
                                               "speed")}
@@ -213,13 +232,7 @@ def estimate_log(source: LogSource, methods=DEFAULT_METHODS, *, odometry_method:
             for m in methods:
                 estimate_eta(beta[:1], phidot[:1], geom, m, mu_tol=mu_tol)
             warm = False
-        for m in methods:
-            t0 = time.perf_counter()
-            lam, mu, _, qua = estimate_eta(beta, phidot, geom, m, mu_tol=mu_tol)
-            cost[m] += time.perf_counter() - t0
-            est[m]["lam"].append(lam)
-            est[m]["mu"].append(mu)
-            est[m]["qua"].append(qua)
+        _run_estimators(methods, beta, phidot, geom, mu_tol, est, cost)
         twist, poses, beta_rate = odo.advance(t, beta, phidot, est[odometry_method]["lam"][-1])
         rigid, resid = twist_from_wheels_batch(beta, beta_rate, phidot, geom)
         speed = contact_speeds(rigid, beta, geom).max(axis=1) if t.size else np.zeros(0)
