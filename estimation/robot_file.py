@@ -198,15 +198,8 @@ def _module_axis(mod: dict, source: str, key: str) -> tuple[float, float]:
                          + (f" (got only {have[0]})" if have else ""))
 
 
-def geometry_kwargs(data: dict, source: str | None = None) -> dict:
-    """The ``RobotGeometry`` keyword arguments of a parsed description (:func:`read_robot_file`):
-    alpha, l, b, r (n,) arrays, steer_min, steer_max [rad] and unlimited_steering."""
-    source = source if source is not None else data.get("_source", "<description>")
-    geo = _check_keys(data.get("geometry"), _GEOMETRY_KEYS, source, "[geometry]")
-    steering = geo.get("steering", "limited")
-    if steering not in ("limited", "unlimited"):
-        raise RobotFileError(f"{where(source, '[geometry].steering')} = {steering!r}: must be 'limited' or 'unlimited'")
-    unlimited = steering == "unlimited"
+def _steer_range(geo: dict, unlimited: bool, source: str) -> tuple[float, float]:
+    """``[geometry].steer_range_deg`` checked: (β_min, β_max) [rad], ±π/2 when not given."""
     smin, smax = -np.pi / 2, np.pi / 2
     if "steer_range_deg" in geo:
         rng = geo["steer_range_deg"]
@@ -221,13 +214,39 @@ def geometry_kwargs(data: dict, source: str | None = None) -> dict:
             raise RobotFileError(f"{where(source, key)} = {rng!r}: must hold 0 inside and span 180 degrees "
                                  "(]β_min, β_max] of width π, the range where the ICR -> steering map is a bijection)")
         smin, smax = float(np.deg2rad(lo)), float(np.deg2rad(hi))
+    return smin, smax
+
+
+def _wheel_radius(raw, source: str, key: str) -> float:
+    """A wheel radius ``r_m`` at ``key``: a number > 0, within :data:`MAX_RADIUS_M`."""
+    r = number(raw, source, key)
+    if r <= 0:
+        raise RobotFileError(f"{where(source, key)} = {raw!r}: must be > 0 [m]")
+    _bounded(r, MAX_RADIUS_M, source, key, "a wheel radius")
+    return r
+
+
+def _check_module_name(name, names: list, source: str, key: str) -> None:
+    """A module's ``name``: a non-empty string that no earlier module has."""
+    if not isinstance(name, str) or not name:
+        raise RobotFileError(f"{where(source, key + '.name')} = {name!r}: must be a non-empty string")
+    if name in names:
+        raise RobotFileError(f"{where(source, key + '.name')} = {name!r}: two modules have this name")
+
+
+def geometry_kwargs(data: dict, source: str | None = None) -> dict:
+    """The ``RobotGeometry`` keyword arguments of a parsed description (:func:`read_robot_file`):
+    alpha, l, b, r (n,) arrays, steer_min, steer_max [rad] and unlimited_steering."""
+    source = source if source is not None else data.get("_source", "<description>")
+    geo = _check_keys(data.get("geometry"), _GEOMETRY_KEYS, source, "[geometry]")
+    steering = geo.get("steering", "limited")
+    if steering not in ("limited", "unlimited"):
+        raise RobotFileError(f"{where(source, '[geometry].steering')} = {steering!r}: must be 'limited' or 'unlimited'")
+    unlimited = steering == "unlimited"
+    smin, smax = _steer_range(geo, unlimited, source)
     b_default = _bounded(number(geo["b_m"], source, "[geometry].b_m"), MAX_OFFSET_M, source, "[geometry].b_m",
                          "an offset b") if "b_m" in geo else 0.0
-    r_default = number(geo["r_m"], source, "[geometry].r_m") if "r_m" in geo else None
-    if r_default is not None and r_default <= 0:
-        raise RobotFileError(f"{where(source, '[geometry].r_m')} = {geo['r_m']!r}: must be > 0 [m]")
-    if r_default is not None:
-        _bounded(r_default, MAX_RADIUS_M, source, "[geometry].r_m", "a wheel radius")
+    r_default = _wheel_radius(geo["r_m"], source, "[geometry].r_m") if "r_m" in geo else None
     mods = geo.get("modules")
     if not isinstance(mods, list) or not mods:
         raise RobotFileError(f"robot file {source}: [geometry] needs its modules ([[geometry.modules]] tables, "
@@ -243,19 +262,13 @@ def geometry_kwargs(data: dict, source: str | None = None) -> dict:
         b_k = _bounded(number(mod["b_m"], source, f"{key}.b_m"), MAX_OFFSET_M, source, f"{key}.b_m",
                        "an offset b") if "b_m" in mod else b_default
         if "r_m" in mod:
-            r_k = number(mod["r_m"], source, f"{key}.r_m")
-            if r_k <= 0:
-                raise RobotFileError(f"{where(source, key + '.r_m')} = {mod['r_m']!r}: must be > 0 [m]")
-            _bounded(r_k, MAX_RADIUS_M, source, f"{key}.r_m", "a wheel radius")
+            r_k = _wheel_radius(mod["r_m"], source, f"{key}.r_m")
         elif r_default is not None:
             r_k = r_default
         else:
             raise RobotFileError(f"{where(source, key)}: no wheel radius (r_m here or in [geometry])")
         if "name" in mod:
-            if not isinstance(mod["name"], str) or not mod["name"]:
-                raise RobotFileError(f"{where(source, key + '.name')} = {mod['name']!r}: must be a non-empty string")
-            if mod["name"] in names:
-                raise RobotFileError(f"{where(source, key + '.name')} = {mod['name']!r}: two modules have this name")
+            _check_module_name(mod["name"], names, source, key)
             names.append(mod["name"])
         alpha.append(a_k)
         l.append(l_k)
