@@ -142,6 +142,78 @@ def _fused_adam(hp: dict) -> dict:
     return {**hp, "policy_kwargs": kw}
 
 
+def _new_or_resumed_model(cls, ckpt: Path | None, out: Path, steps: int, seed: int, hp: dict, env,
+                          run_args: dict):
+    """The normalised vector env and the model: loaded from ``ckpt`` (never more steps than
+    ``steps``), or new, with ``run_args`` written to :data:`RUN_ARGS`."""
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    venv = VecMonitor(env)
+    venv.seed(seed)
+    gamma = float(hp.get("gamma", 0.99))
+    if ckpt is not None:
+        from train.policy import vecnormalize_path
+
+        venv = VecNormalize.load(str(vecnormalize_path(ckpt)), venv)
+        model = cls.load(str(ckpt), env=venv, device="cpu")
+        if model.num_timesteps > int(steps):  # never a record of more steps than its budget (check_resume first)
+            venv.close()
+            raise ValueError(f"--resume: the run in {out} has {model.num_timesteps} steps already, --steps {steps} "
+                             f"is the run's total, not steps to add (give one above {model.num_timesteps})")
+        print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
+    else:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
+        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **_fused_adam(hp))
+        (out / RUN_ARGS).write_text(json.dumps(run_args, indent=1, default=str))
+    return venv, model
+
+
+def _set_logger(model, out: Path, quiet: bool) -> None:
+    """SB3's logger: CSV, stdout unless ``quiet``, and TensorBoard where it is installed."""
+    from stable_baselines3.common.logger import configure
+
+    formats = ["csv"] + ([] if quiet else ["stdout"])
+    try:
+        import tensorboard  # noqa: F401
+
+        formats.append("tensorboard")
+    except ImportError:
+        pass
+    model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
+
+
+def _callbacks(out: Path, algo: str, action: str, env_kwargs: dict, seed: int, num_robots: int, eval_tracks,
+               eval_every: int, checkpoint_every: int, time_limit_min: float, eval_max_time, on_evaluation):
+    """The learning callbacks: signals, info statistics, the wall-clock guard (returned, None
+    without a time limit), the held-out evaluator (returned) and the checkpoints."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, StopOnSignal, WallClockLimit
+
+    callbacks = [StopOnSignal(), InfoStatsCallback()]
+    guard = None
+    if time_limit_min > 0:
+        guard = WallClockLimit(60.0 * time_limit_min)
+        callbacks.append(guard)
+    evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
+                                    env_kwargs, seed=seed, max_time=eval_max_time, on_evaluation=on_evaluation)
+    callbacks.append(evaluator)
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),
+                                            name_prefix="model", save_vecnormalize=True))
+    return callbacks, evaluator, guard
+
+
+def _save_final(model, venv, out: Path) -> None:
+    """The learnt model and its normalisation statistics saved; an empty checkpoints folder (a run
+    shorter than checkpoint_every) removed."""
+    ckpt_dir = out / "checkpoints"
+    if ckpt_dir.is_dir() and not any(ckpt_dir.iterdir()):
+        ckpt_dir.rmdir()  # a run shorter than checkpoint_every: no empty folder left behind
+    model.save(str(out / "model.zip"))
+    venv.save(str(out / "vecnormalize.pkl"))
+
+
 def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
           eval_tracks: tuple[str, ...] = DEFAULT_EVAL_TRACKS, eval_every: int = 200_000,
           checkpoint_every: int = 200_000,
@@ -176,11 +248,8 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     :class:`~train.interrupts.Interrupted` carrying that record."""
     import torch
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    from stable_baselines3.common.callbacks import CallbackList
 
-    from train.callbacks import HeldOutEvalCallback, InfoStatsCallback, StopOnSignal, WallClockLimit
     from train.envs import make_sb3_env
     from train.hyperparams import load_hyperparams
     from train.interrupts import raise_if_requested
@@ -194,43 +263,13 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     hp, hp_version = load_hyperparams(algo, key)
     hp.update(overrides or {})
     cls = PPO if algo == "ppo" else SAC
-    venv = VecMonitor(make_sb3_env(action, num_robots, track, env_kwargs, correction_cost))
-    venv.seed(seed)
-    gamma = float(hp.get("gamma", 0.99))
-    if ckpt is not None:
-        from train.policy import vecnormalize_path
-
-        venv = VecNormalize.load(str(vecnormalize_path(ckpt)), venv)
-        model = cls.load(str(ckpt), env=venv, device="cpu")
-        if model.num_timesteps > int(steps):  # never a record of more steps than its budget (check_resume first)
-            venv.close()
-            raise ValueError(f"--resume: the run in {out} has {model.num_timesteps} steps already, --steps {steps} "
-                             f"is the run's total, not steps to add (give one above {model.num_timesteps})")
-        print(f"resuming from {ckpt} ({model.num_timesteps} steps)", flush=True)
-    else:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
-        model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **_fused_adam(hp))
-        (out / RUN_ARGS).write_text(json.dumps(
-            {"algo": algo, "action": action, "track": track, "seed": seed, "steps": steps, "num_robots": num_robots,
-             "env_kwargs": env_kwargs, "correction_cost": float(correction_cost)}, indent=1, default=str))
-    formats = ["csv"] + ([] if quiet else ["stdout"])
-    try:
-        import tensorboard  # noqa: F401
-
-        formats.append("tensorboard")
-    except ImportError:
-        pass
-    model.set_logger(configure(str(out / ("tb" if "tensorboard" in formats else "logs")), formats))
-    callbacks = [StopOnSignal(), InfoStatsCallback()]
-    if time_limit_min > 0:
-        guard = WallClockLimit(60.0 * time_limit_min)
-        callbacks.append(guard)
-    evaluator = HeldOutEvalCallback(list(eval_tracks), eval_every if eval_every > 0 else 10**15, out, algo, action,
-                                    env_kwargs, seed=seed, max_time=eval_max_time, on_evaluation=on_evaluation)
-    callbacks.append(evaluator)
-    if checkpoint_every > 0:
-        callbacks.append(CheckpointCallback(max(checkpoint_every // num_robots, 1), str(out / "checkpoints"),
-                                            name_prefix="model", save_vecnormalize=True))
+    venv, model = _new_or_resumed_model(cls, ckpt, out, steps, seed, hp, make_sb3_env(
+        action, num_robots, track, env_kwargs, correction_cost),
+        {"algo": algo, "action": action, "track": track, "seed": seed, "steps": steps, "num_robots": num_robots,
+         "env_kwargs": env_kwargs, "correction_cost": float(correction_cost)})
+    _set_logger(model, out, quiet)
+    callbacks, evaluator, guard = _callbacks(out, algo, action, env_kwargs, seed, num_robots, eval_tracks, eval_every,
+                                             checkpoint_every, time_limit_min, eval_max_time, on_evaluation)
     start_steps = model.num_timesteps
     t0 = time.perf_counter()
     # SB3 adds the steps a resumed model has done to total_timesteps: give it what is left
@@ -255,11 +294,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
                     progress_bar=progress_bar, log_interval=1 if algo == "ppo" else 10)
         learn_s = time.perf_counter() - t0
         raise_if_requested()  # StopOnSignal ended learn: an interrupted run, not a finished one
-        ckpt_dir = out / "checkpoints"
-        if ckpt_dir.is_dir() and not any(ckpt_dir.iterdir()):
-            ckpt_dir.rmdir()  # a run shorter than checkpoint_every: no empty folder left behind
-        model.save(str(out / "model.zip"))
-        venv.save(str(out / "vecnormalize.pkl"))
+        _save_final(model, venv, out)
         final = evaluator.evaluate()
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM through train.interrupts: save what there is
         learn_s = time.perf_counter() - t0 if math.isnan(learn_s) else learn_s
@@ -268,7 +303,7 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     evaluator.history.append(final)
     (out / "evaluations.json").write_text(json.dumps(evaluator.history, indent=1, allow_nan=True))
     complete = int(model.num_timesteps) >= int(steps) and not evaluator.stopped
-    stopped = "on_evaluation" if evaluator.stopped else "time_limit" if time_limit_min > 0 and guard.fired else None
+    stopped = "on_evaluation" if evaluator.stopped else "time_limit" if guard is not None and guard.fired else None
     record = record_of(final["rows"], complete, stopped, learn_s)
     (out / "run.json").write_text(json.dumps(record, indent=1, allow_nan=True, default=str))
     venv.close()
