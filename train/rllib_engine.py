@@ -149,6 +149,50 @@ def export_policy(algo, obs_dim: int, action_dim: int, path: Path, check_obs: np
     return path
 
 
+def _start_ray(ray_address: str | None, env_runners: int, quiet: bool) -> bool:
+    """Ray started (on the cluster at ``ray_address``, or locally with a CPU per runner and one for
+    the learner) unless it runs already; returns whether this call started it."""
+    import ray
+
+    started_ray = not ray.is_initialized()
+    if started_ray:
+        if ray_address:
+            ray.init(address=ray_address, log_to_driver=not quiet)
+        else:
+            ray.init(num_cpus=max(env_runners + 1, 2), include_dashboard=False, log_to_driver=not quiet)
+    return started_ray
+
+
+def _probe_env(action: str, track: str, env_kwargs: dict, seed: int):
+    """One env built and reset to read the observation and action sizes and a first observation
+    (the exported policy's trace check)."""
+    probe = env_creator({"action": action, "num_envs": 1, "track": track, "env_kwargs": env_kwargs})
+    obs_dim, act_dim = int(probe.single_observation_space.shape[0]), int(probe.single_action_space.shape[0])
+    check_obs, _ = probe.reset(seed=seed)
+    probe.close()
+    return obs_dim, act_dim, check_obs
+
+
+def _evaluate(algo, obs_dim: int, act_dim: int, check_obs, out: Path, action: str, seed: int, eval_tracks,
+              eval_max_time, quiet: bool, timesteps: int) -> dict:
+    """The policy exported to ``model.pt`` and run once on each evaluation track: the
+    ``evaluations.json`` entry."""
+    from train.policy import load_policy
+    from train.rollout import policy_metrics
+
+    export_policy(algo, obs_dim, act_dim, out / "model.pt", check_obs)
+    policy = load_policy(out)
+    start = time.perf_counter()
+    rows = [policy_metrics(policy, t, seed=seed, label=f"ppo-{action}", max_time=eval_max_time)[0]
+            for t in eval_tracks]
+    entry = {"timesteps": int(timesteps), "eval_wall_s": time.perf_counter() - start, "rows": rows,
+             "mean_return": float(np.mean([r["return"] for r in rows]))}
+    if not quiet:
+        print(f"[eval @ {timesteps}] " + ", ".join(f"{r['track']} ret {r['return']:.0f} lat "
+                                                  f"{100 * r['rms_lateral_m']:.2f} cm" for r in rows), flush=True)
+    return entry
+
+
 def train_rllib(action: str, track: str, seed: int, steps: int, out: Path, num_robots: int = 16,
                 eval_tracks: tuple[str, ...] = ("circle", "figure8"), eval_every: int = 200_000,
                 overrides: dict | None = None, env_kwargs: dict | None = None, ray_address: str | None = None,
@@ -164,25 +208,15 @@ def train_rllib(action: str, track: str, seed: int, steps: int, out: Path, num_r
     from azimut_env import ENV_ID
     from train.envs import action_key
     from train.hyperparams import load_hyperparams
-    from train.policy import load_policy
-    from train.rollout import policy_metrics
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     hp, hp_version = load_hyperparams("ppo", action_key(action))
     hp.update(overrides or {})
     env_kwargs = dict(env_kwargs or {})
-    started_ray = not ray.is_initialized()
-    if started_ray:
-        if ray_address:
-            ray.init(address=ray_address, log_to_driver=not quiet)
-        else:
-            ray.init(num_cpus=max(env_runners + 1, 2), include_dashboard=False, log_to_driver=not quiet)
+    started_ray = _start_ray(ray_address, env_runners, quiet)
     register_env(ENV_NAME, env_creator)
-    probe = env_creator({"action": action, "num_envs": 1, "track": track, "env_kwargs": env_kwargs})
-    obs_dim, act_dim = int(probe.single_observation_space.shape[0]), int(probe.single_action_space.shape[0])
-    check_obs, _ = probe.reset(seed=seed)
-    probe.close()
+    obs_dim, act_dim, check_obs = _probe_env(action, track, env_kwargs, seed)
     algo = rllib_config(action, track, seed, num_robots, env_runners, hp, env_kwargs).build_algo()
     meta = {"engine": "rllib", "algo": "ppo", "action": action, "env_kwargs": env_kwargs}
     (out / "run.json").write_text(json.dumps(meta))  # what load_policy reads during the evaluations
@@ -190,17 +224,8 @@ def train_rllib(action: str, track: str, seed: int, steps: int, out: Path, num_r
     history: list[dict] = []
 
     def evaluate(timesteps: int) -> dict:
-        export_policy(algo, obs_dim, act_dim, out / "model.pt", check_obs)
-        policy = load_policy(out)
-        start = time.perf_counter()
-        rows = [policy_metrics(policy, t, seed=seed, label=f"ppo-{action}", max_time=eval_max_time)[0]
-                for t in eval_tracks]
-        entry = {"timesteps": int(timesteps), "eval_wall_s": time.perf_counter() - start, "rows": rows,
-                 "mean_return": float(np.mean([r["return"] for r in rows]))}
-        if not quiet:
-            print(f"[eval @ {timesteps}] " + ", ".join(f"{r['track']} ret {r['return']:.0f} lat "
-                                                      f"{100 * r['rms_lateral_m']:.2f} cm" for r in rows), flush=True)
-        return entry
+        return _evaluate(algo, obs_dim, act_dim, check_obs, out, action, seed, eval_tracks, eval_max_time, quiet,
+                         timesteps)
 
     t0 = time.perf_counter()
     done, next_eval, stopped_by_guard = 0, eval_every if eval_every > 0 else math.inf, False
