@@ -302,6 +302,78 @@ def reference_scale(scales: Sequence[float]) -> float:
 # ------------------------------------------------------------------------------------- run
 
 
+class _EnvPerRobot:
+    """One env per robot (per distinct env keyword arguments), built on first use: its geometry
+    and limits for the plots and the report."""
+
+    def __init__(self, robots: dict, campaign_kw: dict):
+        self.robots, self.campaign_kw = robots, campaign_kw
+        self.envs: dict[str, Any] = {}
+
+    def __call__(self, name: str):
+        from azimut_env.env import AzimutEnv
+
+        kw = self.robots[name]["env_kwargs"] if name in self.robots else self.campaign_kw
+        if canonical(kw) not in self.envs:
+            self.envs[canonical(kw)] = AzimutEnv(**kw)
+        return self.envs[canonical(kw)]
+
+
+def _remove_own_plots(plot_dir: Path) -> None:
+    """The plots an earlier campaign wrote into ``plot_dir`` removed (not a resumed one's)."""
+    for p in plot_dir.glob("*.png"):
+        if is_own_plot(p.name):
+            p.unlink()
+
+
+def _artifact_writer(store: TaskStore, out: Path, first_seed: int, reference: float, export, robot_id,
+                     video, plot_seed, names: dict, env_of):
+    """The ``on_result`` hook of the campaign: every episode's trace saved (and exported with
+    ``--export``, named by ``robot_id``: the robot file, else the preset); the video and the plots
+    of the first seed at the reference scale."""
+    from jobs.eval.results import export_episode, save_trace
+
+    plot_dir, video_dir = out / "plots", out / "videos"
+
+    def on_result(task: Task, rec: dict) -> None:
+        art = (rec.get("result") or {}).get("artifacts")
+        if not art or "log" not in art:
+            return
+        log = art["log"]
+        first = task.key["seed"] == first_seed and task.key["speed_scale"] == reference
+        store.folder.mkdir(parents=True, exist_ok=True)
+        save_trace(store.folder / f"{task.id}.npz", log)  # every episode's, plots or not
+        rec["result"]["trace"] = f"episodes/{task.id}.npz"
+        if export:
+            rec["result"]["export"] = export_episode(log, out / "exports", task.label, robot_id, export)
+        if video and first:
+            from jobs.eval.video import write_video
+
+            name = re.sub(r"[^A-Za-z0-9_.-]+", "_", task.label)
+            rec["result"]["video"] = f"videos/{write_video(log, video_dir / f'{name}.{video}', fmt=video).name}"
+        if plot_seed is not None and first:
+            plot_dir.mkdir(exist_ok=True)
+            env = env_of(names.get(task.key["controller"], task.key["controller"]))
+            rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(log, plot_dir, env.geometry, env.limits)]
+
+    return on_result
+
+
+def _campaign_record(args: argparse.Namespace, scales, reference: float, env_of, robots: dict, env0, executor: str,
+                     plot_seed, wall: float, computed: int, resumed: int) -> dict:
+    """The campaign's settings and counts as ``results.json`` holds them; the limits once when
+    every controller's robot has the same, else per controller."""
+    by_controller = {name: limits_text(env_of(name).limits) for name in robots}  # each controller's robot's
+    limits: str | dict = (next(iter(by_controller.values())) if len(set(by_controller.values())) == 1
+                          else by_controller) if by_controller else limits_text(env0.limits)
+    return {"speed_scale": scales[0] if len(scales) == 1 else None, "speed_scales": scales,
+            "reference_scale": reference, "domain_randomization": args.domain_randomization,
+            "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
+            "limits": limits, "executor": executor, "workers": args.workers, "level": 0.95,
+            "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
+            "computed": computed, "resumed": resumed}
+
+
 def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], tracks: Sequence[str],
                       seeds: Sequence[int], stream=None) -> int:
     """Run the campaign ``args`` describes (``azimut eval``'s flags) and write the report.
@@ -311,10 +383,9 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     its retries; the report lists it); 130 on Ctrl-C and 143 on SIGTERM, after saving the finished
     episodes (``--resume`` goes on from them)."""
     stream = stream if stream is not None else sys.stdout
-    from azimut_env.env import AzimutEnv
     from jobs.args import robot_env_kwargs, robot_label
     from jobs.eval.console import EXIT_STATUS, progress_printer, say, signals_as_interrupts
-    from jobs.eval.results import export_episode, save_trace, write_results
+    from jobs.eval.results import write_results
     from jobs.eval.robots import controller_robots
 
     scales = speed_scales_of(args)
@@ -327,7 +398,6 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
     store = TaskStore(out / "episodes")
     plot_seed = None if args.no_plots else seeds[0]
     video = getattr(args, "video", None)
-    video_dir = out / "videos"
     robot, robot_file = getattr(args, "robot", None), getattr(args, "robot_file", None)
     imperfections = getattr(args, "imperfections", None)
     campaign_kw = robot_env_kwargs(robot, robot_file, imperfections)
@@ -338,43 +408,12 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                           plot_seed=seeds[0], robot=robot, robot_file=robot_file, names=names, all_logs=True,
                           imperfections=imperfections)
     executor = run_kwargs(args)["executor"]
-    envs: dict[str, Any] = {}  # one env per robot: its geometry and limits for the plots
-
-    def env_of(name: str):
-        kw = robots[name]["env_kwargs"] if name in robots else campaign_kw
-        if canonical(kw) not in envs:
-            envs[canonical(kw)] = AzimutEnv(**kw)
-        return envs[canonical(kw)]
-
+    env_of = _EnvPerRobot(robots, campaign_kw)
     env0 = env_of("")
     if not args.resume and plot_dir.is_dir():
-        for p in plot_dir.glob("*.png"):
-            if is_own_plot(p.name):
-                p.unlink()
-
-    export = getattr(args, "export", None)
-
-    def on_result(task: Task, rec: dict) -> None:
-        art = (rec.get("result") or {}).get("artifacts")
-        if not art or "log" not in art:
-            return
-        log = art["log"]
-        first = task.key["seed"] == seeds[0] and task.key["speed_scale"] == reference
-        store.folder.mkdir(parents=True, exist_ok=True)
-        save_trace(store.folder / f"{task.id}.npz", log)  # every episode's, plots or not
-        rec["result"]["trace"] = f"episodes/{task.id}.npz"
-        if export:
-            rec["result"]["export"] = export_episode(log, out / "exports", task.label, robot_file or robot, export)
-        if video and first:
-            from jobs.eval.video import write_video
-
-            name = re.sub(r"[^A-Za-z0-9_.-]+", "_", task.label)
-            rec["result"]["video"] = f"videos/{write_video(log, video_dir / f'{name}.{video}', fmt=video).name}"
-        if plot_seed is not None and first:
-            plot_dir.mkdir(exist_ok=True)
-            env = env_of(names.get(task.key["controller"], task.key["controller"]))
-            rec["result"]["plots"] = [f"plots/{f}" for f in write_plots(log, plot_dir, env.geometry, env.limits)]
-
+        _remove_own_plots(plot_dir)
+    on_result = _artifact_writer(store, out, seeds[0], reference, getattr(args, "export", None), robot_file or robot,
+                                 video, plot_seed, names, env_of)
     start = time.perf_counter()
     n_before = sum(1 for t in tasks if args.resume and (r := store.load(t)) is not None and r.get("status") == "ok")
     for path, problem in store.rejected:  # recomputed below: say so
@@ -391,15 +430,8 @@ def run_eval_campaign(args: argparse.Namespace, controllers: Sequence[str], trac
                   file=sys.stderr, flush=True)
             return EXIT_STATUS.get(sig, 130)
     wall = time.perf_counter() - start
-    by_controller = {name: limits_text(env_of(name).limits) for name in robots}  # each controller's robot's
-    limits: str | dict = (next(iter(by_controller.values())) if len(set(by_controller.values())) == 1
-                          else by_controller) if by_controller else limits_text(env0.limits)
-    campaign = {"speed_scale": scales[0] if len(scales) == 1 else None, "speed_scales": scales,
-                "reference_scale": reference, "domain_randomization": args.domain_randomization,
-                "kicks": bool(args.kicks), "max_time": args.max_time, "control_period": env0.control_period,
-                "limits": limits, "executor": executor, "workers": args.workers, "level": 0.95,
-                "n_resamples": args.bootstrap, "plot_seed": plot_seed, "wall_s": wall,
-                "computed": len(tasks) - n_before, "resumed": n_before}
+    campaign = _campaign_record(args, scales, reference, env_of, robots, env0, executor, plot_seed, wall,
+                                len(tasks) - n_before, n_before)
     n_ok, n_all = write_results(out, records, tasks, controllers, tracks, seeds, names, robots, campaign, store.folder,
                                 n_resamples=args.bootstrap, video=bool(video), compare=plot_seed is not None)
     n_failed = n_all - n_ok
