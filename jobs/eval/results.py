@@ -72,40 +72,27 @@ def row_of(record: dict, names: dict[str, str], records_folder: Path | None = No
     return row
 
 
-def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequence[str], tracks: Sequence[str],
-                  seeds: Sequence[int], names: dict[str, str], robots: dict[str, dict], campaign: dict,
-                  records_folder: Path, *, n_resamples: int, video: bool, compare: bool) -> tuple[int, int]:
-    """The rows, the summary cells (mean and interval over seeds per controller × track × speed
-    scale), the comparison plots of the first seed (at the reference speed scale,
-    ``campaign["reference_scale"]``), the fronts with several speed scales
-    (:mod:`jobs.eval.fronts`) and ``report.md``/``metrics.json``
-    (:func:`jobs.eval.report.write_campaign_report`); ``campaign``: the run's facts so far
-    (completed here). Returns (episodes ok, episodes)."""
-    from jobs.eval.agents import write_agents
-    from jobs.eval.fronts import fronts_lines
-    from jobs.eval.plots import comparison_plots, fronts_plot
-    from jobs.eval.robots import robot_sentence
-    from jobs.records import provenance
-
-    rows = [row_of(r, names, records_folder) for r in records]
-    for row in rows:  # the robot each episode ran
-        r = robots.get(row["controller"])
-        if r is not None:
-            row["robot"], row["imperfections"] = r["robot"], r["imperfections"]
-    controllers = [names.get(c, c) for c in specs]  # the report speaks of names
-    ok_rows = [r for r in rows if r["status"] == "ok"]
+def _metric_names(ok_rows: list[dict]) -> list[str]:
+    """The metrics summarised: the summary columns, then every other number of an ok row, then the
+    scenario columns some row has."""
     skip = ("controller", "track", "seed", "status", "error", "attempts", "kick", "robot", "imperfections", "record",
             "speed_scale")
     metrics = [c[0] for c in SUMMARY_COLUMNS] + [k for k in (ok_rows[0] if ok_rows else {})
                                                  if k not in {c[0] for c in SUMMARY_COLUMNS} and k not in skip
                                                  and isinstance(ok_rows[0][k], (int, float))]
     metrics += [c[0] for c in SCENARIO_COLUMNS if c[0] not in metrics and any(c[0] in r for r in ok_rows)]
-    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
-    reference = campaign.get("reference_scale", scales[0])
+    return metrics
+
+
+def _summary_cells(rows: list[dict], tracks: Sequence[str], scales: list[float], controllers: list[str],
+                   robots: dict[str, dict], n_resamples: int) -> list[dict]:
+    """One cell per track × speed scale × controller, empty ones included: the statistics over
+    seeds of the ok rows, the counts of ok and failed episodes, the controller's robot."""
+    ok_rows = [r for r in rows if r["status"] == "ok"]
     several = len(scales) > 1
     # grouped by speed scale only when there are several: a campaign of one keeps its cells' bootstrap seeds
     # (a hash of the group) and so its intervals
-    cells = summarize(ok_rows, ("controller", "track") + (("speed_scale",) if several else ()), metrics,
+    cells = summarize(ok_rows, ("controller", "track") + (("speed_scale",) if several else ()), _metric_names(ok_rows),
                       n_resamples=n_resamples)
     for cell in cells:
         cell.setdefault("speed_scale", scales[0])
@@ -120,6 +107,76 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
         if controller in robots:
             cell["robot"], cell["imperfections"] = robots[controller]["robot"], robots[controller]["imperfections"]
         full.append(cell)
+    return full
+
+
+def _plots_and_comparisons(out: Path, at_reference: list[dict], tasks: Sequence, tracks: Sequence[str],
+                           names: dict[str, str], records_folder: Path, plot_seed: int, reference: float):
+    """The per-run plots of the first seed at the reference scale, by (controller, track), and the
+    comparison plots of the controllers per track from their traces."""
+    from jobs.eval.plots import comparison_plots
+
+    plots: dict[tuple[str, str], list[str]] = {}
+    comparisons: dict[str, list[str]] = {}
+    for rec in at_reference:
+        if rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
+            plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
+    for track in tracks:
+        traces = {}
+        for task in tasks:
+            npz = records_folder / f"{task.id}.npz"
+            if (task.key["track"] == track and task.key["seed"] == plot_seed
+                    and task.key.get("speed_scale", 1.0) == reference and npz.is_file()):
+                traces[names.get(task.key["controller"])] = dict(np.load(npz))
+        if traces:
+            (out / "plots").mkdir(exist_ok=True)
+            comparisons[track] = [f"plots/{f}" for f in comparison_plots(track, traces, out / "plots")]
+    return plots, comparisons
+
+
+def _campaign_facts(campaign: dict, controllers: list[str], tracks, seeds, specs, names: dict[str, str],
+                    robots: dict[str, dict], videos: dict, exports: dict) -> dict:
+    """``campaign`` completed: the controllers, tracks, seeds, robots (one, or per controller),
+    videos, exports and the provenance."""
+    from jobs.eval.robots import robot_sentence
+    from jobs.records import provenance
+
+    distinct = {(r["robot"], r["imperfections"]) for r in robots.values()}
+    one = next(iter(distinct)) if len(distinct) == 1 else ("per controller (see robots)", None)
+    return {"controllers": controllers, "tracks": list(tracks), "seeds": list(seeds), **campaign,
+            "videos": videos, "robot": one[0], "imperfections": one[1],
+            "robots": {name: {"robot": r["robot"], "imperfections": r["imperfections"]}
+                       for name, r in robots.items()},
+            "robot_sentence": robot_sentence(robots),
+            "env_kwargs": {name: r.get("other", {}) for name, r in robots.items()},
+            "controller_specs": {names.get(c, c): c for c in specs if names.get(c, c) != c},
+            "exports": exports, "provenance": provenance()}
+
+
+def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequence[str], tracks: Sequence[str],
+                  seeds: Sequence[int], names: dict[str, str], robots: dict[str, dict], campaign: dict,
+                  records_folder: Path, *, n_resamples: int, video: bool, compare: bool) -> tuple[int, int]:
+    """The rows, the summary cells (mean and interval over seeds per controller × track × speed
+    scale), the comparison plots of the first seed (at the reference speed scale,
+    ``campaign["reference_scale"]``), the fronts with several speed scales
+    (:mod:`jobs.eval.fronts`) and ``report.md``/``metrics.json``
+    (:func:`jobs.eval.report.write_campaign_report`); ``campaign``: the run's facts so far
+    (completed here). Returns (episodes ok, episodes)."""
+    from jobs.eval.agents import write_agents
+    from jobs.eval.fronts import fronts_lines
+    from jobs.eval.plots import fronts_plot
+
+    rows = [row_of(r, names, records_folder) for r in records]
+    for row in rows:  # the robot each episode ran
+        r = robots.get(row["controller"])
+        if r is not None:
+            row["robot"], row["imperfections"] = r["robot"], r["imperfections"]
+    controllers = [names.get(c, c) for c in specs]  # the report speaks of names
+    n_ok = sum(1 for r in rows if r["status"] == "ok")
+    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
+    reference = campaign.get("reference_scale", scales[0])
+    several = len(scales) > 1
+    full = _summary_cells(rows, tracks, scales, controllers, robots, n_resamples)
     ok = [rec for rec in records if rec["status"] == "ok"]
     at_reference = [rec for rec in ok if rec["key"].get("speed_scale", 1.0) == reference]
     videos = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}": rec["result"]["video"]
@@ -127,33 +184,9 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
     exports = {f"{names.get(rec['key']['controller'])} on {rec['key']['track']}, seed {rec['key']['seed']}"
                + (f", speed ×{rec['key']['speed_scale']:g}" if several else ""): rec["result"]["export"]
                for rec in ok if rec["result"].get("export")}
-    plots: dict[tuple[str, str], list[str]] = {}
-    comparisons: dict[str, list[str]] = {}
-    plot_seed = seeds[0]
-    if compare:
-        for rec in at_reference:
-            if rec["key"]["seed"] == plot_seed and rec["result"].get("plots"):
-                plots[(names.get(rec["key"]["controller"]), rec["key"]["track"])] = rec["result"]["plots"]
-        for track in tracks:
-            traces = {}
-            for task in tasks:
-                npz = records_folder / f"{task.id}.npz"
-                if (task.key["track"] == track and task.key["seed"] == plot_seed
-                        and task.key.get("speed_scale", 1.0) == reference and npz.is_file()):
-                    traces[names.get(task.key["controller"])] = dict(np.load(npz))
-            if traces:
-                (out / "plots").mkdir(exist_ok=True)
-                comparisons[track] = [f"plots/{f}" for f in comparison_plots(track, traces, out / "plots")]
-    distinct = {(r["robot"], r["imperfections"]) for r in robots.values()}
-    one = next(iter(distinct)) if len(distinct) == 1 else ("per controller (see robots)", None)
-    campaign = {"controllers": controllers, "tracks": list(tracks), "seeds": list(seeds), **campaign,
-                "videos": videos, "robot": one[0], "imperfections": one[1],
-                "robots": {name: {"robot": r["robot"], "imperfections": r["imperfections"]}
-                           for name, r in robots.items()},
-                "robot_sentence": robot_sentence(robots),
-                "env_kwargs": {name: r.get("other", {}) for name, r in robots.items()},
-                "controller_specs": {names.get(c, c): c for c in specs if names.get(c, c) != c},
-                "exports": exports, "provenance": provenance()}
+    plots, comparisons = (_plots_and_comparisons(out, at_reference, tasks, tracks, names, records_folder, seeds[0],
+                                                 reference) if compare else ({}, {}))
+    campaign = _campaign_facts(campaign, controllers, tracks, seeds, specs, names, robots, videos, exports)
     fronts: list[str] = []
     if several:  # per track, each controller through its speed scales
         pngs = None
@@ -166,4 +199,4 @@ def write_results(out: Path, records: list[dict], tasks: Sequence, specs: Sequen
     # agents over training seeds, if any: at the reference speed scale (their statistics are over seeds alone)
     write_agents(out, [r for r in rows if r["speed_scale"] == reference], controllers, list(tracks),
                  n_resamples=n_resamples)
-    return len(ok_rows), len(rows)
+    return n_ok, len(rows)
