@@ -63,13 +63,8 @@ def _shade_stops(ax, log: EpisodeLog) -> None:
                    label="controller stopped or turning wheels in place" if j == 0 else "_nolegend_")
 
 
-def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
-    """The five PNG plots of one run; returns their file names."""
-    plt = _pyplot()
-    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # a file name
-    what = f"{log.controller} on {log.track.name}"
-    files = []
-    # 1. trajectory over the track (Fig. 9)
+def _trajectory_plot(plt, log: EpisodeLog, what: str):
+    """Plot 1: the trajectory over the track (Fig. 9), the stops that reconfigure marked."""
     fig, ax = plt.subplots(figsize=(6, 6))
     _trajectory_axes(ax, log.track.xy)
     if log.pose.size:
@@ -80,8 +75,11 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
             ax.plot(log.pose[ev, 0], log.pose[ev, 1], "rx", label="stop + reconfigure")
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"trajectory: {what}")
-    _save(fig, out, stem + PLOT_ENDING["trajectory"], files, 110)
-    # 2. pairwise β projections against the constraining surface (Fig. 10)
+    return fig
+
+
+def _beta_pairs_plot(plt, log: EpisodeLog, what: str, geom):
+    """Plot 2: pairwise β projections against the constraining surface S(λ) (Fig. 10)."""
     surf = _surface_samples(geom)
     pairs = [(i, j) for i in range(geom.n) for j in range(i + 1, geom.n)]
     fig, axes = plt.subplots(2, 3, figsize=(11, 7))
@@ -96,8 +94,11 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     axes[0, 0].legend(fontsize=7, markerscale=5)
     fig.suptitle(f"measured steering angles against the constraining surface S(λ): {what}")
     fig.tight_layout()
-    _save(fig, out, stem + PLOT_ENDING["beta_pairs"], files, 110)
-    # 3. qua over time (Fig. 11), the stops shaded
+    return fig
+
+
+def _qua_plot(plt, log: EpisodeLog, what: str):
+    """Plot 3: qua over time (Fig. 11), the stops shaded."""
     fig, ax = plt.subplots(figsize=(8, 3))
     _shade_stops(ax, log)
     ax.plot(log.t, log.qua, lw=0.8, color="C0", label="qua (eq. 28–29): 1 = wheels agree on one ICR")
@@ -106,8 +107,11 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     ax.set_ylim(min(0.0, float(np.min(log.qua)) if log.qua.size else 0.0), 1.02)
     ax.legend(fontsize=7, loc="lower left")
     ax.set_title(f"quality of the measured steering configuration: {what}")
-    _save(fig, out, stem + PLOT_ENDING["qua"], files, 110)
-    # 4. the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)
+    return fig
+
+
+def _icr_sphere_plot(plt, log: EpisodeLog, what: str, geom):
+    """Plot 4: the ICR's path on the sphere (canonical hemisphere w >= 0, orthographic from above)."""
     fig, ax = plt.subplots(figsize=(5, 5))
     th = np.linspace(0, 2 * np.pi, 200)
     ax.plot(np.cos(th), np.sin(th), "k", lw=0.8, label="w = 0: translation (ICR at infinity)")
@@ -122,8 +126,11 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     ax.set_ylabel("v (second component of λ̂)")
     ax.legend(fontsize=6, loc="lower left")
     ax.set_title(f"estimated ICR λ̂ = (u, v, w), unit sphere seen from above (w ≥ 0):\n{what}", fontsize=9)
-    _save(fig, out, stem + PLOT_ENDING["icr_sphere"], files, 110)
-    # 5. wheel commands against their limits
+    return fig
+
+
+def _commands_plot(plt, log: EpisodeLog, what: str, limits):
+    """Plot 5: the wheel commands against their limits."""
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
     for ax, data, lim, name in ((axes[0], log.beta_rate, limits.steer_rate_max, "steering rate β̇_c [rad/s]"),
                                 (axes[1], log.phidot_cmd, limits.wheel_speed_max, "wheel speed φ̇_c [rad/s]"),
@@ -140,7 +147,20 @@ def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
     axes[0].legend(fontsize=7, loc="upper right", ncol=5)
     axes[-1].set_xlabel("t [s]")
     axes[0].set_title(f"wheel commands and their limits: {what}")
-    _save(fig, out, stem + PLOT_ENDING["commands"], files, 110)
+    return fig
+
+
+def write_plots(log: EpisodeLog, out: Path, geom, limits) -> list[str]:
+    """The five PNG plots of one run; returns their file names."""
+    plt = _pyplot()
+    stem = re.sub(r"[^A-Za-z0-9_.=+-]+", "_", f"{log.controller}_{log.track.name}")  # a file name
+    what = f"{log.controller} on {log.track.name}"
+    files: list[str] = []
+    for plot, extra, key in ((_trajectory_plot, (), "trajectory"), (_beta_pairs_plot, (geom,), "beta_pairs"),
+                             (_qua_plot, (), "qua"), (_icr_sphere_plot, (geom,), "icr_sphere"),
+                             (_commands_plot, (limits,), "commands")):  # each saved (and closed) before the next
+        fig = plot(plt, log, what, *extra)
+        _save(fig, out, stem + PLOT_ENDING[key], files, 110)
     return files
 
 
