@@ -156,49 +156,35 @@ _PLOT_GUIDE = ("Per track, the controllers overlaid: their trajectories, and the
                "above (colour: time), and each wheel's commands against their limits.")
 
 
-def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
-                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]],
-                          fronts: Sequence[str] = ()) -> None:
-    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``; the plots
-    of a (controller, track) and the comparisons are of the reference speed scale; ``fronts``: the
-    Markdown lines of the fronts section, :func:`jobs.eval.fronts.fronts_lines`, with several
-    speed scales)."""
-    write_json(out / "metrics.json", {"campaign": campaign, "summary": cells, "episodes": rows})
-    seeds = campaign["seeds"]
-    prov = campaign.get("provenance") or {}
-    from azimut_env.tracks import SCENARIO_NAMES
+def _what_ran_lines(campaign: dict, scales: list[float], reference: float) -> list[str]:
+    """The "What ran" section: controllers, tracks, seeds, speed scales, robot, limits, executor and
+    provenance."""
+    from jobs.eval.robots import env_kwargs_sentence, limits_sentence
 
-    table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
+    seeds = campaign["seeds"]
+    several = len(scales) > 1
     specs = campaign.get("controller_specs") or {}
     named = "".join(f"; {name} = {spec}" for name, spec in specs.items())
-    from jobs.eval.robots import env_kwargs_sentence, limits_sentence
-    from jobs.eval.verdict import verdict_lines
+    return ["", "## What ran", "",
+            f"Controllers {', '.join(campaign['controllers'])}{named}; tracks {', '.join(campaign['tracks'])}; "
+            f"seeds {_seed_text(seeds)} ({len(seeds)}); "
+            + (f"speed scales {', '.join(f'{x:g}' for x in scales)} (the fronts below; plots of ×{reference:g})"
+               if several else f"speed scale {scales[0]}") + "; domain randomisation "
+            f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
+            + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
+            (campaign.get("robot_sentence") or f"Robot {campaign.get('robot', 'azimut3')}"
+             + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else ""))
+            + f"; control period {campaign['control_period']} s; "
+            f"{limits_sentence(campaign['limits'])}.",
+            *([text] if (text := env_kwargs_sentence(campaign.get("env_kwargs") or {})) else []),
+            f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
+            f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
+            f"Produced by {provenance_text(campaign.get('provenance') or {})}."]
 
-    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
-    several = len(scales) > 1
-    reference = campaign.get("reference_scale", scales[0])
-    lines = ["# azimut eval", "", "## Verdict", "",
-             f"Best per track{' and speed scale' if several else ''} (means over "
-             f"{'the seeds' if len(seeds) > 1 else 'one seed'}, from the summary table below; the least slip is "
-             "ranked by the slip energy per metre travelled, which crawling or standing still does not lower):", ""]
-    lines += verdict_lines(cells, list(campaign["tracks"]), list(campaign["controllers"]))
-    lines += ["", "## What ran", "",
-             f"Controllers {', '.join(campaign['controllers'])}{named}; tracks {', '.join(campaign['tracks'])}; "
-             f"seeds {_seed_text(seeds)} ({len(seeds)}); "
-             + (f"speed scales {', '.join(f'{x:g}' for x in scales)} (the fronts below; plots of ×{reference:g})"
-                if several else f"speed scale {scales[0]}") + "; domain randomisation "
-             f"{campaign['domain_randomization']}; kicks {'on' if campaign['kicks'] else 'off'}"
-             + (f"; max time {campaign['max_time']} s" if campaign.get("max_time") else "") + ".",
-             (campaign.get("robot_sentence") or f"Robot {campaign.get('robot', 'azimut3')}"
-              + (f" (imperfections: {campaign['imperfections']})" if campaign.get("imperfections") else ""))
-             + f"; control period {campaign['control_period']} s; "
-             f"{limits_sentence(campaign['limits'])}.",
-             *([text] if (text := env_kwargs_sentence(campaign.get("env_kwargs") or {})) else []),
-             f"Executor {campaign['executor']} with {campaign['workers']} worker(s); {campaign['computed']} episode(s) "
-             f"computed, {campaign['resumed']} resumed; wall time {campaign['wall_s']:.1f} s.",
-             f"Produced by {provenance_text(prov)}.", "",
-             "## Summary", "", _statistics_sentence(cells, campaign), ""]
-    lines += _summary_table(cells, table, several)
+
+def _undefined_and_failed_lines(rows: list[dict], several: bool) -> list[str]:
+    """The episodes whose per-metre metrics are undefined, and the failed episodes, one bullet each."""
+    lines: list[str] = []
     undefined = sorted({f"{r['controller']} on {r['track']}" + (f" ×{r['speed_scale']:g}" if several else "")
                         + f", seed {r['seed']}: {r['per_m_reason']}" for r in rows if r.get("per_m_reason")})
     if undefined:
@@ -211,23 +197,32 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
                   + f", seed {r['seed']}: {r.get('error')} (after "
                   f"{r.get('attempts', 1)} attempt(s))" + (f"; traceback in `{r['record']}`" if r.get("record") else "")
                   for r in failed]
-    lines += list(fronts)
+    return lines
+
+
+def _plot_lines(campaign: dict, cells: list[dict], plots: dict, compare: dict, table: list, several: bool,
+                reference: float, at: str) -> list[str]:
+    """The "Plots" section: per track, the comparisons, then each controller's summary row and plots."""
     by_cell = {(c["controller"], c["track"]): c for c in cells if c.get("speed_scale", reference) == reference}
-    at = f" at speed scale ×{reference:g}" if several else ""
-    if plots or compare:
-        lines += ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}{at}. {_PLOT_GUIDE}"]
-        for track in campaign["tracks"]:
-            lines += ["", f"### {track}", ""]
-            for f in compare.get(track, []):
+    lines = ["", "## Plots", "", f"Plots are of seed {campaign['plot_seed']}{at}. {_PLOT_GUIDE}"]
+    for track in campaign["tracks"]:
+        lines += ["", f"### {track}", ""]
+        for f in compare.get(track, []):
+            lines.append(f"![{Path(f).stem}]({f})")
+        for controller in campaign["controllers"]:
+            cell = by_cell.get((controller, track))
+            lines += ["", f"#### {controller} on {track}", ""]
+            if cell is not None:
+                lines += _summary_table([cell], table, several)
+            lines.append("")
+            for f in plots.get((controller, track), []):
                 lines.append(f"![{Path(f).stem}]({f})")
-            for controller in campaign["controllers"]:
-                cell = by_cell.get((controller, track))
-                lines += ["", f"#### {controller} on {track}", ""]
-                if cell is not None:
-                    lines += _summary_table([cell], table, several)
-                lines.append("")
-                for f in plots.get((controller, track), []):
-                    lines.append(f"![{Path(f).stem}]({f})")
+    return lines
+
+
+def _media_lines(campaign: dict, at: str) -> list[str]:
+    """The "Videos" and "Episodes as ROS 2 bags" sections, where the campaign wrote any."""
+    lines: list[str] = []
     if campaign.get("videos"):
         lines += ["", "## Videos", "", f"Seed {campaign['seeds'][0]}{at}, the env's top-down view of each episode "
                   "(the true ICR as a green ring, the estimated one as a red dot, the propulsion axes in orange):", ""]
@@ -236,6 +231,40 @@ def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campai
         lines += ["", "## Episodes as ROS 2 bags", "", "Joint states, the estimated ICR, the true pose and odometry "
                   "(docs/logs.md); open the .mcap in Foxglove, or `azimut estimate DIR --robot ...` reads it back:", ""]
         lines += [f"- {what}: [{f}]({f})" for what, f in campaign["exports"].items()]
+    return lines
+
+
+def write_campaign_report(out: Path, rows: list[dict], cells: list[dict], campaign: dict,
+                          plots: dict[tuple[str, str], list[str]], compare: dict[str, list[str]],
+                          fronts: Sequence[str] = ()) -> None:
+    """``report.md`` and ``metrics.json`` in ``out`` (plots are paths relative to ``out``; the plots
+    of a (controller, track) and the comparisons are of the reference speed scale; ``fronts``: the
+    Markdown lines of the fronts section, :func:`jobs.eval.fronts.fronts_lines`, with several
+    speed scales)."""
+    write_json(out / "metrics.json", {"campaign": campaign, "summary": cells, "episodes": rows})
+    seeds = campaign["seeds"]
+    from azimut_env.tracks import SCENARIO_NAMES
+
+    table = SUMMARY_COLUMNS + (SCENARIO_COLUMNS if any(t in SCENARIO_NAMES for t in campaign["tracks"]) else [])
+    from jobs.eval.verdict import verdict_lines
+
+    scales = [float(x) for x in campaign.get("speed_scales") or [campaign.get("speed_scale") or 1.0]]
+    several = len(scales) > 1
+    reference = campaign.get("reference_scale", scales[0])
+    lines = ["# azimut eval", "", "## Verdict", "",
+             f"Best per track{' and speed scale' if several else ''} (means over "
+             f"{'the seeds' if len(seeds) > 1 else 'one seed'}, from the summary table below; the least slip is "
+             "ranked by the slip energy per metre travelled, which crawling or standing still does not lower):", ""]
+    lines += verdict_lines(cells, list(campaign["tracks"]), list(campaign["controllers"]))
+    lines += _what_ran_lines(campaign, scales, reference)
+    lines += ["", "## Summary", "", _statistics_sentence(cells, campaign), ""]
+    lines += _summary_table(cells, table, several)
+    lines += _undefined_and_failed_lines(rows, several)
+    lines += list(fronts)
+    at = f" at speed scale ×{reference:g}" if several else ""
+    if plots or compare:
+        lines += _plot_lines(campaign, cells, plots, compare, table, several, reference, at)
+    lines += _media_lines(campaign, at)
     columns = ["controller", "track"] + (["speed_scale"] if several else []) + ["episodes"] + [k for k, _, _ in table]
     if len(seeds) > 1:
         lines += ["", "## Per-seed rows", ""] + _seed_table(rows, table, several)
