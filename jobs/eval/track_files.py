@@ -57,13 +57,8 @@ def _number(cell: str, where: str) -> float:
     return value
 
 
-def read_track_file(path: str | Path, name: str | None = None):
-    """The :class:`~azimut_env.tracks.Track` of the waypoint file ``path`` (the format of the
-    module docstring), named ``name`` (default: the file's stem). ``ValueError`` (one line naming
-    the file and the line) for a file that cannot be read or is not one."""
-    from azimut_env.tracks import Track
-
-    path = Path(path)
+def _waypoint_lines(path: Path) -> list[tuple[int, list[str]]]:
+    """The file's waypoint lines (header included), numbered from 1, comments and blank lines skipped."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
@@ -73,6 +68,12 @@ def read_track_file(path: str | Path, name: str | None = None):
             if row and "".join(row).strip() and not row[0].lstrip().startswith("#")]
     if not rows:
         raise ValueError(f"{path}: no waypoints (one 'x,y' line per waypoint, in metres)")
+    return rows
+
+
+def _columns(path: Path, rows: list) -> tuple[list[str], list]:
+    """The column names (from the header line, if the first line is one, else :data:`COLUMNS`) and
+    the rows after the header."""
     columns = list(COLUMNS)
     first = rows[0][1]
     try:
@@ -88,6 +89,31 @@ def read_track_file(path: str | Path, name: str | None = None):
             raise ValueError(f"{path}: line {rows[0][0]}: the header must name the columns x, y and optionally "
                              f"heading, speed (each once), got {','.join(c.strip() for c in first)!r}")
         rows = rows[1:]
+    return columns, rows
+
+
+def _check_speeds(path: Path, speeds: np.ndarray, lines: list[int]) -> None:
+    """The speed column: within [0, :data:`MAX_SPEED`] and above 0 somewhere (``ValueError`` naming the line)."""
+    fast = np.flatnonzero(speeds > MAX_SPEED)
+    if fast.size:
+        raise ValueError(f"{path}: line {lines[fast[0]]}: speed {speeds[fast[0]]:g} m/s is above "
+                         f"{MAX_SPEED:g} m/s (the speed column is in m/s)")
+    slow = np.flatnonzero(speeds < 0.0)
+    if slow.size:
+        raise ValueError(f"{path}: line {lines[slow[0]]}: speed {speeds[slow[0]]:g} m/s is negative")
+    if not np.any(speeds > 0.0):
+        raise ValueError(f"{path}: line {lines[0]}: the speed is 0 at every waypoint (the robot would never "
+                         "move; give a speed > 0 m/s somewhere)")
+
+
+def read_track_file(path: str | Path, name: str | None = None):
+    """The :class:`~azimut_env.tracks.Track` of the waypoint file ``path`` (the format of the
+    module docstring), named ``name`` (default: the file's stem). ``ValueError`` (one line naming
+    the file and the line) for a file that cannot be read or is not one."""
+    from azimut_env.tracks import Track
+
+    path = Path(path)
+    columns, rows = _columns(path, _waypoint_lines(path))
     width = len(columns) if columns != list(COLUMNS) else None
     values = []
     for k, row in rows:
@@ -102,18 +128,7 @@ def read_track_file(path: str | Path, name: str | None = None):
         raise ValueError(f"{path}: {len(values)} waypoint(s); a track needs at least 2")
     table = np.array(values, dtype=np.float64)
     if "speed" in columns:
-        lines = [k for k, _ in rows]
-        speeds = table[:, columns.index("speed")]
-        fast = np.flatnonzero(speeds > MAX_SPEED)
-        if fast.size:
-            raise ValueError(f"{path}: line {lines[fast[0]]}: speed {speeds[fast[0]]:g} m/s is above "
-                             f"{MAX_SPEED:g} m/s (the speed column is in m/s)")
-        slow = np.flatnonzero(speeds < 0.0)
-        if slow.size:
-            raise ValueError(f"{path}: line {lines[slow[0]]}: speed {speeds[slow[0]]:g} m/s is negative")
-        if not np.any(speeds > 0.0):
-            raise ValueError(f"{path}: line {lines[0]}: the speed is 0 at every waypoint (the robot would never "
-                             "move; give a speed > 0 m/s somewhere)")
+        _check_speeds(path, table[:, columns.index("speed")], [k for k, _ in rows])
     cols = {c: table[:, j] for j, c in enumerate(columns[:table.shape[1]])}
     xy = np.stack([cols["x"], cols["y"]], axis=1)
     heading = cols.get("heading", 0.0)
