@@ -154,88 +154,168 @@ def _sampling_lines(sm: dict) -> list[str]:
     return out
 
 
+def _finding_motion(f: dict, s: dict, th: dict) -> list[str]:
+    """How long the robot moves and stands, or that it never moves; then the sampling findings."""
+    out: list[str] = []
+    if f["samples_moving"] == 0:
+        out.append(f"The robot never moves in this log ({f['standing_s']:.0f} s standing: no wheel faster "
+                   f"than {100 * f['moving_speed_m_s']:.0f} cm/s by the wheels' own odometry), so nothing "
+                   "can be said about how the wheels work together.")
+        return out
+    qs = s["moving"]["quality"].get("IT", next(iter(s["moving"]["quality"].values())))["standing"]
+    stand = (f" (IT's quality {qs['qua_mean']:.0f}% there, meaningless with the wheels at rest)"
+             if qs["qua_mean"] is not None else "")
+    out.append(f"Moving {100 * f['moving_fraction']:.0f}% of the log ({f['moving_s']:.0f} s); standing "
+               f"{f['standing_s']:.0f} s{stand}, set apart below. Moving: a wheel faster than "
+               f"{100 * f['moving_speed_m_s']:.0f} cm/s by the wheels' own odometry.")
+    out += _sampling_lines(s["samples"])
+    return out
+
+
+def _finding_quality(f: dict, s: dict, th: dict) -> list[str]:
+    """How well the wheels agree while moving, by the estimator's quality."""
+    out: list[str] = []
+    how = ("agree well" if f["qua_p5"] >= 97 else "mostly agree" if f["qua_mean"] >= th["fight_qua"] * 100
+           else "often disagree")
+    rms = s["moving"]["departure"]["median_rms_deg"]
+    out.append(f"While moving, the wheels {how}: {f['method']}'s quality {f['qua_mean']:.1f}% on average, "
+               f"at least {f['qua_p5']:.1f}% in 95% of the moving samples (lowest {f['qua_min']:.0f}%); "
+               f"typically the steering is {rms:.1f}° RMS off one common turning centre."
+               + (" If these are raw absolute-encoder angles (before your code's offsets), `azimut calibrate` "
+                  "fits the offsets." if f["qua_mean"] < _RAW_HINT_QUA else ""))
+    return out
+
+
+def _finding_module_offset(f: dict, s: dict, th: dict) -> list[str]:
+    """One module's steering offset explains the departure."""
+    out: list[str] = []
+    out.append(f"Module {f['module']} reads {f['offset_deg']:+.1f}° off the others while moving (that one "
+               f"offset explains the steering departure: {f['rms_deg']:.2f}° RMS → "
+               f"{f['rms_without_deg']:.2f}°; "
+               f"its own departure {f['mean_deg']:+.1f}° mean, {f['p95_abs_deg']:.1f}° p95): check its "
+               "steering offset (`azimut calibrate` fits it).")
+    return out
+
+
+def _finding_steering_disagree(f: dict, s: dict, th: dict) -> list[str]:
+    """The modules disagree and no single offset explains it."""
+    out: list[str] = []
+    mods = _list([f"{m} {v:+.1f}°" for m, v in zip(f["modules"], f["median_deg"])])
+    out.append(f"The modules' angles disagree while moving (median departure {mods}) and no single module's "
+               "offset explains it: check the steering offsets and the module positions in the robot file.")
+    return out
+
+
+def _finding_fight(f: dict, s: dict, th: dict) -> list[str]:
+    """The stretches where the wheels fight."""
+    out: list[str] = []
+    sts = _list([f"{_span(st)} (quality {st['qua_mean']:.0f}%)" for st in f["stretches"]])
+    out.append(f"Stretches where the wheels fight while moving ({f['method']}'s quality below "
+               f"{100 * th['fight_qua']:.0f}% for {th['stretch_min_s']} s or more): {sts}.")
+    return out
+
+
+def _finding_frozen(f: dict, s: dict, th: dict) -> list[str]:
+    """A module's signal frozen while the robot moves."""
+    out: list[str] = []
+    what = "steering angle" if f["signal"] == "steering" else "wheel speed"
+    out.append(f"Module {f['module']}'s {what} is frozen for {f['t1_s'] - f['t0_s']:.1f} s ({_span(f)}, "
+               f"exactly {f['value']:.4g}) while the robot moves and the other modules' change: a stale or "
+               "disconnected sensor, or a signal logged on change that stopped?")
+    return out
+
+
+def _finding_noisy(f: dict, s: dict, th: dict) -> list[str]:
+    """A module's steering angle noisy at rest."""
+    out: list[str] = []
+    out.append(f"Module {f['module']}'s steering angle is noisy at rest: {f['rms_deg']:.2f}° RMS from "
+               f"sample to sample, against {f['others_median_deg']:.2f}° for the others: a loose encoder "
+               "or magnet, or electrical noise?")
+    return out
+
+
+def _finding_gyro_scale(f: dict, s: dict, th: dict) -> list[str]:
+    """The wheel odometry turns more or less than the gyro."""
+    out: list[str] = []
+    more = "more" if f["slope"] > 1 else "less"
+    out.append(f"Wheel odometry turns {100 * abs(f['slope'] - 1):.0f}% {more} than the gyro (slope "
+               f"{f['slope']:.3f} over {f['turning_s']:.0f} s of turning): check the wheel radius and the "
+               "module positions (track width) in the robot file, or the gyro's scale"
+               + ("; fix the steering offsets first, they bias the odometry's turn rate too."
+                  if any(g["kind"] in ("module_offset", "steering_disagree") for g in s["findings"]) else "."))
+    return out
+
+
+def _finding_gyro_agree(f: dict, s: dict, th: dict) -> list[str]:
+    """The wheels and the gyro agree on the turn rate."""
+    out: list[str] = []
+    out.append(f"The wheels and the gyro agree on the turn rate while moving: slope {f['slope']:.3f}, "
+               f"RMS difference {f['rms_diff_rad_s']:.3f} rad/s.")
+    return out
+
+
+def _finding_gyro_no_turn(f: dict, s: dict, th: dict) -> list[str]:
+    """The gyro says the robot hardly turns: against the wheels that say it does (a check), or too
+    little turning to check the odometry's scale."""
+    out: list[str] = []
+    if f["severity"] == "check":
+        tot = (f" (heading change: gyro {math.degrees(f['gyro_rad']):.0f}°, wheels "
+               f"{math.degrees(f['odometry_rad']):.0f}°)" if f["gyro_rad"] is not None else "")
+        out.append(f"The wheels say the robot turns while the gyro says it hardly does{tot}; RMS difference "
+                   f"{f['rms_diff_rad_s']:.2f} rad/s while moving: a drive motor inverted (a wheel speed of the "
+                   "wrong sign), a gyro entry that is not the robot's heading, or the robot on blocks?")
+    else:
+        out.append(f"The robot hardly turns while moving ({f['turning_s']:.1f} s faster than "
+                   f"{th['turn_rate_rad_s']} rad/s by the gyro): the gyro cannot check the odometry's turn "
+                   f"scale (RMS difference {f['rms_diff_rad_s']:.3f} rad/s).")
+    return out
+
+
+def _finding_gyro_disagree(f: dict, s: dict, th: dict) -> list[str]:
+    """The stretches where the gyro and the wheels disagree."""
+    out: list[str] = []
+    sts = _list([f"{_span(st)} (gyro {st['gyro_rad_s']:+.2f}, wheels {st['wheels_rad_s']:+.2f} rad/s)"
+                 for st in f["stretches"]], 3)
+    out.append(f"The gyro and the wheels disagree on the turn rate {sts}: slip, a skid, a push, or a "
+               "wheel speed of the wrong sign?")
+    return out
+
+
+def _finding_no_gyro(f: dict, s: dict, th: dict) -> list[str]:
+    """The log has no gyro, and the flag that would read one."""
+    out: list[str] = []
+    fmt = str(f["format"]).lower()
+    how = next((v for key, v in _YAW_FLAGS.items() if key in fmt or (key == "wpilog" and "wpilib" in fmt)),
+               f"the {f['format']} reader reads no gyro")
+    out.append(f"The log has no gyro here: {how} to check the wheel odometry against it.")
+    return out
+
+
+#: the sentence(s) of each kind of finding, by kind (:func:`diagnosis_lines`)
+_FINDING_LINES = {
+    "motion": _finding_motion,
+    "quality": _finding_quality,
+    "module_offset": _finding_module_offset,
+    "steering_disagree": _finding_steering_disagree,
+    "fight": _finding_fight,
+    "frozen": _finding_frozen,
+    "noisy": _finding_noisy,
+    "gyro_scale": _finding_gyro_scale,
+    "gyro_agree": _finding_gyro_agree,
+    "gyro_no_turn": _finding_gyro_no_turn,
+    "gyro_disagree": _finding_gyro_disagree,
+    "no_gyro": _finding_no_gyro,
+}
+
+
 def diagnosis_lines(s: dict) -> list[str]:
     """The diagnosis in plain words, one sentence per finding of the :func:`summary` ``s``, in the
     findings' order; every number comes from the log."""
     th = s["thresholds"]
     out = []
     for f in s["findings"]:
-        k = f["kind"]
-        if k == "motion":
-            if f["samples_moving"] == 0:
-                out.append(f"The robot never moves in this log ({f['standing_s']:.0f} s standing: no wheel faster "
-                           f"than {100 * f['moving_speed_m_s']:.0f} cm/s by the wheels' own odometry), so nothing "
-                           "can be said about how the wheels work together.")
-                continue
-            qs = s["moving"]["quality"].get("IT", next(iter(s["moving"]["quality"].values())))["standing"]
-            stand = (f" (IT's quality {qs['qua_mean']:.0f}% there, meaningless with the wheels at rest)"
-                     if qs["qua_mean"] is not None else "")
-            out.append(f"Moving {100 * f['moving_fraction']:.0f}% of the log ({f['moving_s']:.0f} s); standing "
-                       f"{f['standing_s']:.0f} s{stand}, set apart below. Moving: a wheel faster than "
-                       f"{100 * f['moving_speed_m_s']:.0f} cm/s by the wheels' own odometry.")
-            out += _sampling_lines(s["samples"])
-        elif k == "quality":
-            how = ("agree well" if f["qua_p5"] >= 97 else "mostly agree" if f["qua_mean"] >= th["fight_qua"] * 100
-                   else "often disagree")
-            rms = s["moving"]["departure"]["median_rms_deg"]
-            out.append(f"While moving, the wheels {how}: {f['method']}'s quality {f['qua_mean']:.1f}% on average, "
-                       f"at least {f['qua_p5']:.1f}% in 95% of the moving samples (lowest {f['qua_min']:.0f}%); "
-                       f"typically the steering is {rms:.1f}° RMS off one common turning centre."
-                       + (" If these are raw absolute-encoder angles (before your code's offsets), `azimut calibrate` "
-                          "fits the offsets." if f["qua_mean"] < _RAW_HINT_QUA else ""))
-        elif k == "module_offset":
-            out.append(f"Module {f['module']} reads {f['offset_deg']:+.1f}° off the others while moving (that one "
-                       f"offset explains the steering departure: {f['rms_deg']:.2f}° RMS → "
-                       f"{f['rms_without_deg']:.2f}°; "
-                       f"its own departure {f['mean_deg']:+.1f}° mean, {f['p95_abs_deg']:.1f}° p95): check its "
-                       "steering offset (`azimut calibrate` fits it).")
-        elif k == "steering_disagree":
-            mods = _list([f"{m} {v:+.1f}°" for m, v in zip(f["modules"], f["median_deg"])])
-            out.append(f"The modules' angles disagree while moving (median departure {mods}) and no single module's "
-                       "offset explains it: check the steering offsets and the module positions in the robot file.")
-        elif k == "fight":
-            sts = _list([f"{_span(st)} (quality {st['qua_mean']:.0f}%)" for st in f["stretches"]])
-            out.append(f"Stretches where the wheels fight while moving ({f['method']}'s quality below "
-                       f"{100 * th['fight_qua']:.0f}% for {th['stretch_min_s']} s or more): {sts}.")
-        elif k == "frozen":
-            what = "steering angle" if f["signal"] == "steering" else "wheel speed"
-            out.append(f"Module {f['module']}'s {what} is frozen for {f['t1_s'] - f['t0_s']:.1f} s ({_span(f)}, "
-                       f"exactly {f['value']:.4g}) while the robot moves and the other modules' change: a stale or "
-                       "disconnected sensor, or a signal logged on change that stopped?")
-        elif k == "noisy":
-            out.append(f"Module {f['module']}'s steering angle is noisy at rest: {f['rms_deg']:.2f}° RMS from "
-                       f"sample to sample, against {f['others_median_deg']:.2f}° for the others: a loose encoder "
-                       "or magnet, or electrical noise?")
-        elif k == "gyro_scale":
-            more = "more" if f["slope"] > 1 else "less"
-            out.append(f"Wheel odometry turns {100 * abs(f['slope'] - 1):.0f}% {more} than the gyro (slope "
-                       f"{f['slope']:.3f} over {f['turning_s']:.0f} s of turning): check the wheel radius and the "
-                       "module positions (track width) in the robot file, or the gyro's scale"
-                       + ("; fix the steering offsets first, they bias the odometry's turn rate too."
-                          if any(g["kind"] in ("module_offset", "steering_disagree") for g in s["findings"]) else "."))
-        elif k == "gyro_agree":
-            out.append(f"The wheels and the gyro agree on the turn rate while moving: slope {f['slope']:.3f}, "
-                       f"RMS difference {f['rms_diff_rad_s']:.3f} rad/s.")
-        elif k == "gyro_no_turn" and f["severity"] == "check":
-            tot = (f" (heading change: gyro {math.degrees(f['gyro_rad']):.0f}°, wheels "
-                   f"{math.degrees(f['odometry_rad']):.0f}°)" if f["gyro_rad"] is not None else "")
-            out.append(f"The wheels say the robot turns while the gyro says it hardly does{tot}; RMS difference "
-                       f"{f['rms_diff_rad_s']:.2f} rad/s while moving: a drive motor inverted (a wheel speed of the "
-                       "wrong sign), a gyro entry that is not the robot's heading, or the robot on blocks?")
-        elif k == "gyro_no_turn":
-            out.append(f"The robot hardly turns while moving ({f['turning_s']:.1f} s faster than "
-                       f"{th['turn_rate_rad_s']} rad/s by the gyro): the gyro cannot check the odometry's turn "
-                       f"scale (RMS difference {f['rms_diff_rad_s']:.3f} rad/s).")
-        elif k == "gyro_disagree":
-            sts = _list([f"{_span(st)} (gyro {st['gyro_rad_s']:+.2f}, wheels {st['wheels_rad_s']:+.2f} rad/s)"
-                         for st in f["stretches"]], 3)
-            out.append(f"The gyro and the wheels disagree on the turn rate {sts}: slip, a skid, a push, or a "
-                       "wheel speed of the wrong sign?")
-        elif k == "no_gyro":
-            fmt = str(f["format"]).lower()
-            how = next((v for key, v in _YAW_FLAGS.items() if key in fmt or (key == "wpilog" and "wpilib" in fmt)),
-                       f"the {f['format']} reader reads no gyro")
-            out.append(f"The log has no gyro here: {how} to check the wheel odometry against it.")
+        if f["kind"] in _FINDING_LINES:
+            out += _FINDING_LINES[f["kind"]](f, s, th)
     if s["moving"]["samples_moving"] and not any(f["severity"] == "check" for f in s["findings"]):
         out.append("Nothing else stands out by the rules below.")
     return out
@@ -305,6 +385,51 @@ def _moving_sections(s: dict) -> list[str]:
     return lines
 
 
+def _estimator_lines(est: dict, plots: list[str]) -> list[str]:
+    """The estimators' table on the whole log (quality, valid λ̂, cost) and their plots."""
+    lines: list[str] = []
+    lines += ["", "## Estimators on this log, all samples (moving and standing)", "",
+              "As `azimut bench-estimators` compares them on D2, over every sample: qua of eq. (28)–(29), the "
+              "share of finite unit λ̂, and the cost of each method's `estimate_eta` calls (λ̂, μ̂ and qua) on this "
+              "log, this machine.", "",
+              "| method | qua min % | qua mean % | gap to ORACLE | valid unit λ̂ | µs/sample | samples/s | × NE |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    ne = est["methods"].get("NE", {}).get("us_per_sample")
+    for m, r in est["methods"].items():
+        ratio = r["us_per_sample"] / ne if ne else None
+        lines.append(f"| {m} | {r['qua_min']:.2f} | {r['qua_mean']:.2f} | {_fmt(r.get('gap_to_oracle_mean'), '.3f')} "
+                     f"| {100 * r['valid_unit']:.2f}% | {r['us_per_sample']:.2f} | {r['samples_per_s']:,.0f} | "
+                     f"{_fmt(ratio, '.1f')} |")
+    if est["IT_at_least_as_good_fraction"]:
+        lines += ["", "IT's qua ≥ the other method's at a sample: " + ", ".join(
+            f"{m} {100 * v:.2f}%" for m, v in est["IT_at_least_as_good_fraction"].items())]
+    for name, title in (("steer_space.png", "Measured steering against the constraining surface (paper Fig. 10)"),
+                        ("qua_time.png", "qua over time per estimator (paper Fig. 11)")):
+        if name in plots:
+            lines += ["", f"## {title}", "", f"![{title}]({name})"]
+    return lines
+
+
+def _odometry_lines(odo: dict, plots: list[str]) -> list[str]:
+    """The dead reckoning against the reference pose, where the log has one, and its plot."""
+    lines: list[str] = []
+    lines += ["", f"## Odometry (dead reckoning with {odo['method']})", ""]
+    d = odo["drift"]
+    if d is None:
+        lines.append("The log has no reference pose (CSV columns x, y, theta; ROS --truth-topic; wpilog "
+                     "--truth-entry): the dead-reckoned pose starts at the origin and is not compared.")
+    else:
+        lines += [f"Against the reference pose ({odo['reference']}), from the first sample it covers:", "",
+                  "| samples | duration [s] | distance [m] | final error [m] | RMS error [m] | max error [m] | "
+                  "final heading error [deg] | drift [% of distance] |", "|---:|---:|---:|---:|---:|---:|---:|---:|",
+                  f"| {d['samples']} | {d['duration_s']:.2f} | {d['distance_m']:.3f} | {d['final_error_m']:.4f} | "
+                  f"{d['rms_error_m']:.4f} | {d['max_error_m']:.4f} | "
+                  f"{math.degrees(d['final_heading_error_rad']):.2f} | {_fmt(100 * d['drift_per_m'], '.2f')} |"]
+    if "odometry.png" in plots:
+        lines += ["", "![odometry](odometry.png)"]
+    return lines
+
+
 def report_markdown(s: dict, plots: list[str]) -> str:
     """``report.md`` from the :func:`summary`."""
     log, sm, est, odo = s["log"], s["samples"], s["estimators"], s["odometry"]
@@ -333,39 +458,8 @@ def report_markdown(s: dict, plots: list[str]) -> str:
     lines += _moving_sections(s)
     if "motion.png" in plots:
         lines += ["", "![quality, steering departure and turn rates over time, moving shaded](motion.png)"]
-    lines += ["", "## Estimators on this log, all samples (moving and standing)", "",
-              "As `azimut bench-estimators` compares them on D2, over every sample: qua of eq. (28)–(29), the "
-              "share of finite unit λ̂, and the cost of each method's `estimate_eta` calls (λ̂, μ̂ and qua) on this "
-              "log, this machine.", "",
-              "| method | qua min % | qua mean % | gap to ORACLE | valid unit λ̂ | µs/sample | samples/s | × NE |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|"]
-    ne = est["methods"].get("NE", {}).get("us_per_sample")
-    for m, r in est["methods"].items():
-        ratio = r["us_per_sample"] / ne if ne else None
-        lines.append(f"| {m} | {r['qua_min']:.2f} | {r['qua_mean']:.2f} | {_fmt(r.get('gap_to_oracle_mean'), '.3f')} "
-                     f"| {100 * r['valid_unit']:.2f}% | {r['us_per_sample']:.2f} | {r['samples_per_s']:,.0f} | "
-                     f"{_fmt(ratio, '.1f')} |")
-    if est["IT_at_least_as_good_fraction"]:
-        lines += ["", "IT's qua ≥ the other method's at a sample: " + ", ".join(
-            f"{m} {100 * v:.2f}%" for m, v in est["IT_at_least_as_good_fraction"].items())]
-    for name, title in (("steer_space.png", "Measured steering against the constraining surface (paper Fig. 10)"),
-                        ("qua_time.png", "qua over time per estimator (paper Fig. 11)")):
-        if name in plots:
-            lines += ["", f"## {title}", "", f"![{title}]({name})"]
-    lines += ["", f"## Odometry (dead reckoning with {odo['method']})", ""]
-    d = odo["drift"]
-    if d is None:
-        lines.append("The log has no reference pose (CSV columns x, y, theta; ROS --truth-topic; wpilog "
-                     "--truth-entry): the dead-reckoned pose starts at the origin and is not compared.")
-    else:
-        lines += [f"Against the reference pose ({odo['reference']}), from the first sample it covers:", "",
-                  "| samples | duration [s] | distance [m] | final error [m] | RMS error [m] | max error [m] | "
-                  "final heading error [deg] | drift [% of distance] |", "|---:|---:|---:|---:|---:|---:|---:|---:|",
-                  f"| {d['samples']} | {d['duration_s']:.2f} | {d['distance_m']:.3f} | {d['final_error_m']:.4f} | "
-                  f"{d['rms_error_m']:.4f} | {d['max_error_m']:.4f} | "
-                  f"{math.degrees(d['final_heading_error_rad']):.2f} | {_fmt(100 * d['drift_per_m'], '.2f')} |"]
-    if "odometry.png" in plots:
-        lines += ["", "![odometry](odometry.png)"]
+    lines += _estimator_lines(est, plots)
+    lines += _odometry_lines(odo, plots)
     lines += ["", f"Machine: {s['machine']}, Python {s['python']}.", ""]
     return "\n".join(lines)
 
