@@ -96,8 +96,20 @@ class FO(IntEnum):
     HOLDING = 9  #: 1.0: a track hold keeps the robot still
 
 
-#: rows of a packed track (:func:`_pack`)
-_S, _X, _Y, _TH, _V, _PSI, _DX, _DY, _DTH, _KAPPA = range(10)
+class TP(IntEnum):
+    """Rows of a track as the followers read it (:func:`_pack`): the six of
+    :meth:`azimut_env.tracks.Track.packed`, then the path derivatives the feed-forward needs."""
+
+    S = 0  #: progress s [m]
+    X = 1  #: reference x [m]
+    Y = 2  #: reference y [m]
+    TH = 3  #: reference heading θ [rad]
+    V = 4  #: reference speed [m/s]
+    PSI = 5  #: path direction ψ [rad]
+    DX = 6  #: dx/ds
+    DY = 7  #: dy/ds
+    DTH = 8  #: dθ/ds [rad/m]
+    KAPPA = 9  #: path curvature [1/m]
 
 
 # ----------------------------------------------------------------------------- compiled stages
@@ -107,9 +119,9 @@ _S, _X, _Y, _TH, _V, _PSI, _DX, _DY, _DTH, _KAPPA = range(10)
 def _project(P, closed, length, rho, px, py, pth, hint, has_hint):
     """``Track.project(pose, s_hint)`` (back 0.5 m, ahead 1 m); the whole track without a hint."""
     if has_hint:
-        return project_window_kernel(P[_S], P[_X], P[_Y], P[_TH], closed, length, rho, px, py, pth, hint, 0.5, 1.0,
-                                     True)
-    S, X, Y, TH = P[_S], P[_X], P[_Y], P[_TH]
+        return project_window_kernel(P[TP.S], P[TP.X], P[TP.Y], P[TP.TH], closed, length, rho, px, py, pth, hint,
+                                     0.5, 1.0, True)
+    S, X, Y, TH = P[TP.S], P[TP.X], P[TP.Y], P[TP.TH]
     m = S.shape[0]
     best = 1e300
     bi = 0
@@ -182,24 +194,24 @@ def _feed_forward(P, stops, cusps, closed, length, rho, c, s, reached, finished,
     """The preview point s_ff, its capped speed v_ff and the reference world twist there into
     ``ref`` (3,) (zero once finished); also the reference pose and ψ at s into ``ref[3:7]``
     (x_r, y_r, θ_r, ψ)."""
-    S = P[_S]
+    S = P[TP.S]
     sw = _wrap_s(s, closed, length)
-    x_r, y_r, th_r = np_interp1(S, P[_X], sw), np_interp1(S, P[_Y], sw), np_interp1(S, P[_TH], sw)
-    v_r = np_interp1(S, P[_V], sw) * c[FC.SPEED_SCALE]
+    x_r, y_r, th_r = np_interp1(S, P[TP.X], sw), np_interp1(S, P[TP.Y], sw), np_interp1(S, P[TP.TH], sw)
+    v_r = np_interp1(S, P[TP.V], sw) * c[FC.SPEED_SCALE]
     s_ff = s + max(v_r * c[FC.PREVIEW], c[FC.PREVIEW_MIN])
     if not closed:
         s_ff = min(s_ff, length)
-    psi = np_interp1(S, P[_PSI], sw)
-    if abs(wrap_pi(np_interp1(S, P[_PSI], _wrap_s(s_ff, closed, length)) - psi)) > c[FC.CORNER_ANGLE]:
+    psi = np_interp1(S, P[TP.PSI], sw)
+    if abs(wrap_pi(np_interp1(S, P[TP.PSI], _wrap_s(s_ff, closed, length)) - psi)) > c[FC.CORNER_ANGLE]:
         s_ff = min(s + c[FC.PREVIEW_MIN], length) if not closed else s + c[FC.PREVIEW_MIN]
     sffw = _wrap_s(s_ff, closed, length)
-    v_ff = np_interp1(S, P[_V], sffw) * c[FC.SPEED_SCALE]
+    v_ff = np_interp1(S, P[TP.V], sffw) * c[FC.SPEED_SCALE]
     stop = s_ff + 0.05  # np.linspace(s, s_ff + 0.05, 6): k·step + s, the last one the end itself
     step = (stop - s) / 5.0
     kappa = 0.0
     for k in range(6):
         x = k * 1.0 * step + s if k < 5 else stop
-        kappa = max(kappa, abs(np_interp1(S, P[_KAPPA], _wrap_s(x, closed, length))))
+        kappa = max(kappa, abs(np_interp1(S, P[TP.KAPPA], _wrap_s(x, closed, length))))
     if 1e-6 < kappa < 20.0:  # sharper turns (radius < 5 cm) are corners, handled as stops
         v_ff = min(v_ff, math.sqrt(c[FC.MAX_LATERAL_ACCEL] / kappa))
     d = _distance_to_stop(stops, closed, length, s, c[FC.CORNER_WINDOW])
@@ -209,9 +221,9 @@ def _feed_forward(P, stops, cusps, closed, length, rho, c, s, reached, finished,
     if finished:
         ref[0], ref[1], ref[2] = 0.0, 0.0, 0.0
     else:
-        ref[0] = np_interp1(S, P[_DX], sffw) * v_ff
-        ref[1] = np_interp1(S, P[_DY], sffw) * v_ff
-        ref[2] = np_interp1(S, P[_DTH], sffw) * v_ff
+        ref[0] = np_interp1(S, P[TP.DX], sffw) * v_ff
+        ref[1] = np_interp1(S, P[TP.DY], sffw) * v_ff
+        ref[2] = np_interp1(S, P[TP.DTH], sffw) * v_ff
         if cusps.shape[0]:
             cusp_feed_forward(S, cusps, rho, closed, length, s_ff, max(reached, s), v_ff, ref)
     ref[3], ref[4], ref[5], ref[6] = x_r, y_r, th_r, psi
@@ -283,7 +295,8 @@ def follow_kernel(packs, stops, holds, cusps, tracks, cfg, state, poses, rows, d
         px, py, pth = poses[i, 0], poses[i, 1], poses[i, 2]
         s = _project(P, closed, length, tracks[i, FT.RHO], px, py, pth, st[FS.PROGRESS], st[FS.HAS_PROGRESS] != 0)
         if cusps[i].shape[0]:
-            s = cusp_progress(P[_S], P[_X], P[_Y], P[_TH], tracks[i, FT.RHO], closed, length, cusps[i], px, py, pth, s)
+            s = cusp_progress(P[TP.S], P[TP.X], P[TP.Y], P[TP.TH], tracks[i, FT.RHO], closed, length, cusps[i], px,
+                              py, pth, s)
         st[FS.PROGRESS] = s
         st[FS.HAS_PROGRESS] = 1.0
         finished = s >= length - 1e-6  # Track.finished
@@ -316,7 +329,7 @@ class FollowerBatchOutput(NamedTuple):
 
 
 def _pack(track: Track) -> np.ndarray:
-    """(10, m): s, x, y, heading, speed, tangent, dx/ds, dy/ds, dθ/ds, curvature."""
+    """(10, m): the rows :class:`TP` names."""
     return np.ascontiguousarray(np.vstack([track.packed(), track.dxy_ds[:, 0], track.dxy_ds[:, 1], track.dth_ds,
                                            track.curvature]).astype(np.float64))
 
@@ -346,7 +359,7 @@ class BatchFollower:
         self.tracks = np.zeros((num, len(FT)))
         self.tracks[:, FT.LENGTH] = 1.0
         dummy = np.zeros((10, 2))
-        dummy[_S] = [0.0, 1.0]
+        dummy[TP.S] = [0.0, 1.0]
         self._packs = array_list([dummy] * num)
         self._stops = array_list([np.zeros(0)] * num)
         self._holds = array_list([np.zeros((2, 0))] * num)

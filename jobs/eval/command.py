@@ -61,7 +61,7 @@ __all__ = ["DEFAULT_CONTROLLERS", "POLICY_PREFIXES", "MOVING_MU", "EpisodeLog", 
 #: baselines (the plain WPILib-style one and the setpoint generator, the strongest)
 DEFAULT_CONTROLLERS = ("icr", "twist", "twist-setpoint")
 #: Default evaluation order: the paper track first.
-DEFAULT_TRACKS = ("paper", "circle", "figure8", "square", "crab", "random")
+DEFAULT_TRACKS = TRACK_NAMES  #: the built-in tracks (azimut_env.tracks), paper first
 
 
 def arg_tracks(text: str) -> list[str]:
