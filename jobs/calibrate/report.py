@@ -45,14 +45,12 @@ def _code_forms(result: dict) -> list[str]:
     return lines
 
 
-def report_markdown(result: dict, elapsed_s: float) -> str:
+def _summary_lines(result: dict) -> list[str]:
+    """The robot, the samples, IT's quality before and after, and what the log fixes (common offset,
+    wheel factors), with the fit's notes."""
     mods, before, after, cur = result["modules"], result["before"], result["after"], result["current"]
     sm = result["samples"]
-    lines = [f"# azimut calibrate: {result['log'].get('path', '')}", ""]
-    for w in result.get("warnings", []):
-        lines.append(f"**Check before pasting:** {w}")
-    if result.get("warnings"):
-        lines.append("")
+    lines: list[str] = []
     rob = result["robot"]
     conv = result["log"].get("steer_convention") or ("heading" if "states_entry" in result["log"] else "beta")
     lines.append(f"Robot: {rob['n']} modules ({', '.join(rob['modules'])}) at α = "
@@ -83,6 +81,13 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
         lines.append(f"Note: {note}")
     lines.append(f"Fit: {result['fit']['iterations']} Gauss–Newton iterations, RMS residual "
                  f"{result['fit']['rms_residual_deg']:.2f}° per sample (outliers included; Huber-weighted in the fit).")
+    return lines
+
+
+def _offsets_table(result: dict) -> list[str]:
+    """The offsets and wheel factors per module, with their uncertainties."""
+    mods, cur = result["modules"], result["current"]
+    lines: list[str] = []
     lines += ["", "## Offsets and wheel factors", "",
               "Uncertainty: the standard error of the fit, and half the difference between the fits on the first "
               "and second halves of the moving samples (errors that repeat through the log show in neither; '-' "
@@ -96,6 +101,13 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
                      + (f"{m['change_from_current_deg']:+.3f} | " if cur else "")
                      + f"{m['wheel_scale']:.4f} | {m['wheel_scale_std']:.4f} | "
                      f"{_f(m['wheel_scale_halves_spread'], '.4f')} |")
+    return lines
+
+
+def _before_after_table(result: dict) -> list[str]:
+    """IT's quality and each module's departure as logged, with the current offsets and calibrated."""
+    mods, before, after, cur = result["modules"], result["before"], result["after"], result["current"]
+    lines: list[str] = []
     lines += ["", "## Before and after (moving samples)", "",
               "Departure: the measured steering angle minus the constraining surface at IT's estimate, per module "
               "[deg]: signed mean / mean |·| / 95th percentile.", "",
@@ -108,6 +120,19 @@ def report_markdown(result: dict, elapsed_s: float) -> str:
                                                                    fig["departure_p95_deg"])]
         lines.append(f"| {label} | {100 * fig['qua_IT_mean']:.3f} | {100 * fig['qua_IT_p5']:.3f} | "
                      + " | ".join(deps) + " |")
+    return lines
+
+
+def report_markdown(result: dict, elapsed_s: float) -> str:
+    """``report.md``: warnings, summary, the offsets table, before and after, the code forms."""
+    lines = [f"# azimut calibrate: {result['log'].get('path', '')}", ""]
+    for w in result.get("warnings", []):
+        lines.append(f"**Check before pasting:** {w}")
+    if result.get("warnings"):
+        lines.append("")
+    lines += _summary_lines(result)
+    lines += _offsets_table(result)
+    lines += _before_after_table(result)
     lines += [""] + _code_forms(result)
     lines += ["Apply it to an estimate: `azimut estimate LOG ... --calibration calibration.json`.", "",
               f"Calibrated in {elapsed_s:.1f} s (reading included); machine "
