@@ -30,6 +30,67 @@ __all__ = ["Track"]
 #: beyond it an angle has no digits left for its fraction of a turn
 _MAX_HEADING = 1e6
 
+
+def _checked_samples(xy, heading, speed, closed: bool):
+    """The track's samples checked (finite, speed >= 0), heading and speed broadcast to (M,), the
+    heading unwrapped; a closed track gets its closing sample appended, so that interpolation runs
+    over the full loop."""
+    xy = check_real_array("Track.xy", xy)
+    th = check_real_array("Track.heading", heading)
+    v = check_real_array("Track.speed", speed)
+    if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
+        raise ValueError(f"Track.xy must have shape (M >= 2, 2), got {xy.shape}")
+    m = xy.shape[0]
+    th = np.broadcast_to(th, (m,)).copy()
+    v = np.broadcast_to(v, (m,)).copy()
+    if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(th)) and np.all(np.isfinite(v))):
+        raise ValueError("Track samples must be finite")
+    if np.any(v < 0):
+        raise ValueError("Track.speed must be >= 0")
+    th = np.unwrap(th)
+    if closed:
+        # append the closing sample so that interpolation runs over the full loop
+        xy = np.vstack([xy, xy[:1]])
+        th = np.append(th, th[0] + 2 * np.pi * np.round((th[-1] - th[0]) / (2 * np.pi)))
+        v = np.append(v, v[0])
+    return xy, th, v
+
+
+def _tangent(xy: np.ndarray, th: np.ndarray, dl: np.ndarray) -> np.ndarray:
+    """The path direction per sample [rad], carried through zero-length segments (the heading
+    where the whole track is a rotation in place); not unwrapped."""
+    seg_dir = atan2(np.diff(xy[:, 1]), np.diff(xy[:, 0]))
+    valid = dl > 1e-9
+    tangent = np.empty(xy.shape[0])
+    if np.any(valid):
+        idx = np.where(valid, np.arange(valid.size), -1)
+        idx = np.maximum.accumulate(idx)
+        first = int(np.argmax(valid))
+        idx[idx < 0] = first
+        seg = seg_dir[idx]
+        tangent[:-1] = seg
+        tangent[-1] = seg[-1]
+    else:
+        tangent[:] = th  # pure rotation: use the heading as direction
+    return tangent
+
+
+def _derivatives(xy: np.ndarray, th: np.ndarray, s: np.ndarray, closed: bool):
+    """d(x, y)/ds and dθ/ds at the samples."""
+    # derivatives at the samples: central differences (one-sided at the ends; across the
+    # closing sample of a loop), interpolated linearly in between by reference_twist
+    if closed and xy.shape[0] > 3:
+        ext_s = np.concatenate([[-(s[-1] - s[-2])], s, [s[-1] + s[1]]])
+        ext_xy = np.vstack([xy[-2:-1], xy, xy[1:2]])
+        ext_th = np.concatenate([[th[-2] - (th[-1] - th[0])], th, [th[1] + (th[-1] - th[0])]])
+        dxy_ds = np.gradient(ext_xy, ext_s, axis=0)[1:-1]
+        dth_ds = np.gradient(ext_th, ext_s)[1:-1]
+    else:
+        dxy_ds = np.gradient(xy, s, axis=0)
+        dth_ds = np.gradient(th, s)
+    return dxy_ds, dth_ds
+
+
 @dataclass(frozen=True, eq=False)
 class Track:
     """A reference track (see the module docstring).
@@ -71,24 +132,7 @@ class Track:
             raise TypeError(f"Track.name must be a str, got {type(self.name).__name__}")
         object.__setattr__(self, "closed", check_bool("Track.closed", self.closed))
         object.__setattr__(self, "progress_radius", check_positive("Track.progress_radius", self.progress_radius))
-        xy = check_real_array("Track.xy", self.xy)
-        th = check_real_array("Track.heading", self.heading)
-        v = check_real_array("Track.speed", self.speed)
-        if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
-            raise ValueError(f"Track.xy must have shape (M >= 2, 2), got {xy.shape}")
-        m = xy.shape[0]
-        th = np.broadcast_to(th, (m,)).copy()
-        v = np.broadcast_to(v, (m,)).copy()
-        if not (np.all(np.isfinite(xy)) and np.all(np.isfinite(th)) and np.all(np.isfinite(v))):
-            raise ValueError("Track samples must be finite")
-        if np.any(v < 0):
-            raise ValueError("Track.speed must be >= 0")
-        th = np.unwrap(th)
-        if self.closed:
-            # append the closing sample so that interpolation runs over the full loop
-            xy = np.vstack([xy, xy[:1]])
-            th = np.append(th, th[0] + 2 * np.pi * np.round((th[-1] - th[0]) / (2 * np.pi)))
-            v = np.append(v, v[0])
+        xy, th, v = _checked_samples(self.xy, self.heading, self.speed, self.closed)
         dl = np.hypot(*np.diff(xy, axis=0).T)
         dth = np.diff(th)
         ds = np.sqrt(dl**2 + (self.progress_radius * dth) ** 2)
@@ -101,35 +145,11 @@ class Track:
             raise ValueError("Track has no extent (all samples identical)")
         s = np.concatenate([[0.0], np.cumsum(ds)])
         path = np.concatenate([[0.0], np.cumsum(dl)])
-        # path direction per sample, carried through zero-length segments
-        seg_dir = atan2(np.diff(xy[:, 1]), np.diff(xy[:, 0]))
-        valid = dl > 1e-9
-        tangent = np.empty(xy.shape[0])
-        if np.any(valid):
-            idx = np.where(valid, np.arange(valid.size), -1)
-            idx = np.maximum.accumulate(idx)
-            first = int(np.argmax(valid))
-            idx[idx < 0] = first
-            seg = seg_dir[idx]
-            tangent[:-1] = seg
-            tangent[-1] = seg[-1]
-        else:
-            tangent[:] = th  # pure rotation: use the heading as direction
-        tangent = np.unwrap(tangent)
+        tangent = np.unwrap(_tangent(xy, th, dl))
         curv = np.zeros(xy.shape[0])
         dpsi = np.diff(tangent)
         curv[1:] = np.where(dl > 1e-6, dpsi / np.maximum(dl, 1e-6), 0.0)
-        # derivatives at the samples: central differences (one-sided at the ends; across the
-        # closing sample of a loop), interpolated linearly in between by reference_twist
-        if self.closed and xy.shape[0] > 3:
-            ext_s = np.concatenate([[-(s[-1] - s[-2])], s, [s[-1] + s[1]]])
-            ext_xy = np.vstack([xy[-2:-1], xy, xy[1:2]])
-            ext_th = np.concatenate([[th[-2] - (th[-1] - th[0])], th, [th[1] + (th[-1] - th[0])]])
-            dxy_ds = np.gradient(ext_xy, ext_s, axis=0)[1:-1]
-            dth_ds = np.gradient(ext_th, ext_s)[1:-1]
-        else:
-            dxy_ds = np.gradient(xy, s, axis=0)
-            dth_ds = np.gradient(th, s)
+        dxy_ds, dth_ds = _derivatives(xy, th, s, self.closed)
         for name, value in dict(xy=xy, heading=th, speed=v, s=s, path_length=path, tangent=tangent,
                                 curvature=curv, dxy_ds=dxy_ds, dth_ds=dth_ds).items():
             value.setflags(write=False)
