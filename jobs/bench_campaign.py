@@ -86,7 +86,76 @@ def _metrics(records) -> list[str]:
     return [json.dumps(r["result"]["metrics"], sort_keys=True) if r["status"] == "ok" else "failed" for r in records]
 
 
+def _start_ray(workers: int, wall: dict) -> bool:
+    """Ray started for the campaign (its start counted in Ray's wall time) unless it runs already;
+    returns whether this call started it."""
+    import logging
+
+    import ray
+
+    if ray.is_initialized():
+        return False
+    t0 = time.perf_counter()
+    ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+    wall["ray"] += time.perf_counter() - t0  # the instance's start is part of Ray's cost
+    return True
+
+
+def _run_rounds(rounds: list, names: list[str], workers: int, wall: dict, cpu: dict, load: dict,
+                records: dict) -> None:
+    """Each round run by every executor, the order alternating round by round; wall time, task CPU,
+    load and records accumulated per executor."""
+    with tempfile.TemporaryDirectory(prefix="azimut-bench-campaign-") as tmp:
+        for k, chunk in enumerate(rounds):
+            order = names if k % 2 == 0 else names[::-1]
+            for name in order:
+                t0 = time.perf_counter()
+                recs = run_tasks(chunk, os.path.join(tmp, f"{name}-{k}"), executor=name,
+                                 workers=1 if name == "serial" else workers)
+                wall[name] += time.perf_counter() - t0
+                cpu[name] += sum(r.get("cpu_s", 0.0) for r in recs)
+                load[name].append(os.getloadavg()[0])
+                records[name] += recs
+            print(f"round {k + 1}/{len(rounds)}: " + ", ".join(f"{nm} {wall[nm]:.1f} s" for nm in names)
+                  + " (cumulative)", flush=True)
+
+
+def _ideal_wall(rounds: list, serial: list[dict], workers: int) -> float:
+    """The best a parallel run could do, from the serial task times: per round, the longer of the
+    longest task and the round's work shared by the workers."""
+    ideal = 0.0
+    for chunk in rounds:
+        ids = {t.id for t in chunk}
+        times = [r.get("elapsed_s", 0.0) for r in serial if r["id"] in ids]
+        ideal += max(max(times), sum(times) / workers)
+    return ideal
+
+
+def _print_table(names: list[str], workers: int, n: int, wall: dict, cpu: dict, load: dict, records: dict,
+                 ideal: float, headroom: list[float], failed: int) -> None:
+    """The results: one row per executor (wall, speed-up, CPU, load, identical metrics), the ideal
+    and the machine's headroom."""
+    print()
+    print(f"{'executor':<10} {'workers':>7} {'wall [s]':>9} {'episodes/s':>11} {'speed-up':>9} {'task CPU [s]':>13} "
+          f"{'cores used':>11} {'load avg':>9}  identical metrics")
+    for name in names:
+        same = _metrics(records[name]) == _metrics(records["serial"])
+        w = 1 if name == "serial" else workers
+        print(f"{name:<10} {w:>7} {wall[name]:>9.1f} {n / wall[name]:>11.3f} {wall['serial'] / wall[name]:>8.2f}x "
+              f"{cpu[name]:>13.1f} {cpu[name] / wall[name]:>11.2f} {sum(load[name]) / len(load[name]):>9.1f}  "
+              f"{'yes' if same else 'NO'}")
+    print(f"ideal on {workers} workers from the serial task times (longest task or work / workers, per round): "
+          f"{ideal:.1f} s, {wall['serial'] / ideal:.2f}x; longest episode "
+          f"{max(r.get('elapsed_s', 0) for r in records['serial']):.1f} s")
+    print(f"machine headroom ({workers} pure-Python loops against 1, same moment): {headroom[0]:.2f}x before, "
+          f"{headroom[1]:.2f}x after the campaign")
+    print(f"(speed-up: serial wall time / wall time, same run; task CPU: the episodes' CPU time summed; cores used: "
+          f"task CPU / wall, what the run got of the machine; load avg: 1-min load average after each round; "
+          f"bar 1.7x for 2 workers on 2 cores; {failed} episodes failed)")
+
+
 def run(args: argparse.Namespace) -> int:
+    """The benchmark (module docstring): rounds of episodes by every executor, then the table."""
     tasks = episode_tasks(args.controllers, args.tracks, args.seeds, max_time=args.max_time)
     n = len(tasks)
     names = ["serial"] + [resolve_executor(ex, args.workers, None) for ex in args.executors]
@@ -107,63 +176,20 @@ def run(args: argparse.Namespace) -> int:
     cpu = dict.fromkeys(names, 0.0)
     load: dict[str, list[float]] = {k: [] for k in names}
     records: dict[str, list] = {k: [] for k in names}
-    ray_started = False
-    if "ray" in names:
-        import logging
-
-        import ray
-
-        if not ray.is_initialized():
-            t0 = time.perf_counter()
-            ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False,
-                     logging_level=logging.WARNING)
-            wall["ray"] += time.perf_counter() - t0  # the instance's start is part of Ray's cost
-            ray_started = True
+    ray_started = _start_ray(args.workers, wall) if "ray" in names else False
     try:
-        with tempfile.TemporaryDirectory(prefix="azimut-bench-campaign-") as tmp:
-            for k, chunk in enumerate(rounds):
-                order = names if k % 2 == 0 else names[::-1]
-                for name in order:
-                    t0 = time.perf_counter()
-                    recs = run_tasks(chunk, os.path.join(tmp, f"{name}-{k}"), executor=name,
-                                     workers=1 if name == "serial" else args.workers)
-                    wall[name] += time.perf_counter() - t0
-                    cpu[name] += sum(r.get("cpu_s", 0.0) for r in recs)
-                    load[name].append(os.getloadavg()[0])
-                    records[name] += recs
-                print(f"round {k + 1}/{len(rounds)}: " + ", ".join(f"{nm} {wall[nm]:.1f} s" for nm in names)
-                      + " (cumulative)", flush=True)
+        _run_rounds(rounds, names, args.workers, wall, cpu, load, records)
     finally:
         if ray_started:
+            import ray
+
             ray.shutdown()
     headroom.append(machine_headroom(args.workers))
-    # the best a parallel run could do, from the serial task times: per round, the longer of the
-    # longest task and the round's work shared by the workers
-    ideal = 0.0
-    for chunk in rounds:
-        ids = {t.id for t in chunk}
-        times = [r.get("elapsed_s", 0.0) for r in records["serial"] if r["id"] in ids]
-        ideal += max(max(times), sum(times) / args.workers)
+    ideal = _ideal_wall(rounds, records["serial"], args.workers)
     key = {t.id: i for i, t in enumerate(tasks)}
     for name in names:
         records[name].sort(key=lambda r: key[r["id"]])
     failed = sum(r["status"] != "ok" for r in records["serial"])
-    print()
-    print(f"{'executor':<10} {'workers':>7} {'wall [s]':>9} {'episodes/s':>11} {'speed-up':>9} {'task CPU [s]':>13} "
-          f"{'cores used':>11} {'load avg':>9}  identical metrics")
-    for name in names:
-        same = _metrics(records[name]) == _metrics(records["serial"])
-        w = 1 if name == "serial" else args.workers
-        print(f"{name:<10} {w:>7} {wall[name]:>9.1f} {n / wall[name]:>11.3f} {wall['serial'] / wall[name]:>8.2f}x "
-              f"{cpu[name]:>13.1f} {cpu[name] / wall[name]:>11.2f} {sum(load[name]) / len(load[name]):>9.1f}  "
-              f"{'yes' if same else 'NO'}")
-    print(f"ideal on {args.workers} workers from the serial task times (longest task or work / workers, per round): "
-          f"{ideal:.1f} s, {wall['serial'] / ideal:.2f}x; longest episode "
-          f"{max(r.get('elapsed_s', 0) for r in records['serial']):.1f} s")
-    print(f"machine headroom ({args.workers} pure-Python loops against 1, same moment): {headroom[0]:.2f}x before, "
-          f"{headroom[1]:.2f}x after the campaign")
-    print(f"(speed-up: serial wall time / wall time, same run; task CPU: the episodes' CPU time summed; cores used: "
-          f"task CPU / wall, what the run got of the machine; load avg: 1-min load average after each round; "
-          f"bar 1.7x for 2 workers on 2 cores; {failed} episodes failed)")
+    _print_table(names, args.workers, n, wall, cpu, load, records, ideal, headroom, failed)
     ok = all(_metrics(records[nm]) == _metrics(records["serial"]) for nm in names)
     return 0 if ok and failed == 0 else 1
