@@ -126,6 +126,52 @@ def robustness_inputs(geom: RobotGeometry, n_random: int, seed: int = 7) -> dict
     return out
 
 
+def _method_row(m: str, fn, q: np.ndarray, geom: RobotGeometry, batched_s: float, single_s: float) -> dict:
+    """One method's row on one dataset: quality (min, mean), valid unit λ̂, the times per point, and
+    IT's iterations, starts and convergence; ``_qua`` holds the per-point quality."""
+    lam = fn(q)
+    qua = _quality_of(lam, q, geom) * 100
+    row = {
+        "qua_min": float(qua.min()), "qua_mean": float(qua.mean()),
+        "valid_unit": float(_valid_unit(lam).mean()),
+        "batched_us": 1e6 * batched_s, "single_us": 1e6 * single_s,
+    }
+    if m in ("IT", "IT+"):
+        _, diag = estimate_icr_it(q, geom, ITParams() if m == "IT" else IT_BEST, diagnostics=True)
+        row["iterations_mean"] = float(diag.iterations.mean())
+        row["starts_mean"] = float(diag.starts_tried.mean())
+        row["converged"] = float(diag.converged.mean())
+    row["_qua"] = qua
+    return row
+
+
+def _dataset_result(q: np.ndarray, fns: dict, methods, geom: RobotGeometry, repeat: int, single_calls: int) -> dict:
+    """Every method on one dataset: its row (:func:`_method_row`) with the ratios to NE and the gap
+    to ORACLE, how often IT is at least as good, and the Fig. 11 order statistics."""
+    batched = _time_batch(fns, q, repeat)
+    single = _time_single(fns, q, single_calls)
+    table = {m: _method_row(m, fns[m], q, geom, batched[m], single[m]) for m in methods}
+    ne_b, ne_s = table["NE"]["batched_us"], table["NE"]["single_us"]
+    for row in table.values():
+        row["batched_vs_NE"] = row["batched_us"] / ne_b
+        row["single_vs_NE"] = row["single_us"] / ne_s
+        row["points_per_s"] = 1e6 / row["batched_us"]
+        if "ORACLE" in table:
+            row["gap_to_oracle_mean"] = table["ORACLE"]["qua_mean"] - row["qua_mean"]
+    if "IT" in table and "IT+" in table:
+        table["IT+"]["cost_vs_IT"] = table["IT+"]["batched_us"] / table["IT"]["batched_us"]
+    # per-point dominance: is IT at least as good as each other method at every point?
+    dom = {}
+    for m in methods if "IT" in table else ():
+        if m not in ("IT", "ORACLE"):
+            dom[m] = float(np.mean(table["IT"]["_qua"] >= table[m]["_qua"] - 1e-9))
+    order = {f"{a}>={b}": order_stats(table[a]["_qua"], table[b]["_qua"]) for a, b in FIG11_PAIRS
+             if a in table and b in table}
+    for row in table.values():
+        row.pop("_qua")
+    return {"n_points": len(q), "methods": table, "IT_at_least_as_good_fraction": dom, "fig11_order": order}
+
+
 def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_000_000, seed: int = 0,
                   single_calls: int = 2000, repeat: int = 7, d2_source: str = "auto",
                   methods: tuple[str, ...] = METHOD_ORDER, log=print) -> dict:
@@ -152,44 +198,7 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
     }
     for name, q in datasets.items():
         log(f"[{name}] {len(q)} points ...")
-        batched = _time_batch(fns, q, repeat)
-        single = _time_single(fns, q, single_calls)
-        table = {}
-        for m in methods:
-            lam = fns[m](q)
-            qua = _quality_of(lam, q, geom) * 100
-            row = {
-                "qua_min": float(qua.min()), "qua_mean": float(qua.mean()),
-                "valid_unit": float(_valid_unit(lam).mean()),
-                "batched_us": 1e6 * batched[m], "single_us": 1e6 * single[m],
-            }
-            if m in ("IT", "IT+"):
-                _, diag = estimate_icr_it(q, geom, ITParams() if m == "IT" else IT_BEST, diagnostics=True)
-                row["iterations_mean"] = float(diag.iterations.mean())
-                row["starts_mean"] = float(diag.starts_tried.mean())
-                row["converged"] = float(diag.converged.mean())
-            row["_qua"] = qua
-            table[m] = row
-        ne_b, ne_s = table["NE"]["batched_us"], table["NE"]["single_us"]
-        for row in table.values():
-            row["batched_vs_NE"] = row["batched_us"] / ne_b
-            row["single_vs_NE"] = row["single_us"] / ne_s
-            row["points_per_s"] = 1e6 / row["batched_us"]
-            if "ORACLE" in table:
-                row["gap_to_oracle_mean"] = table["ORACLE"]["qua_mean"] - row["qua_mean"]
-        if "IT" in table and "IT+" in table:
-            table["IT+"]["cost_vs_IT"] = table["IT+"]["batched_us"] / table["IT"]["batched_us"]
-        # per-point dominance: is IT at least as good as each other method at every point?
-        dom = {}
-        for m in methods if "IT" in table else ():
-            if m not in ("IT", "ORACLE"):
-                dom[m] = float(np.mean(table["IT"]["_qua"] >= table[m]["_qua"] - 1e-9))
-        order = {f"{a}>={b}": order_stats(table[a]["_qua"], table[b]["_qua"]) for a, b in FIG11_PAIRS
-                 if a in table and b in table}
-        for row in table.values():
-            row.pop("_qua")
-        results["datasets"][name] = {"n_points": len(q), "methods": table, "IT_at_least_as_good_fraction": dom,
-                                     "fig11_order": order}
+        results["datasets"][name] = _dataset_result(q, fns, methods, geom, repeat, single_calls)
 
     log(f"[robustness] {n_random} random inputs plus singular, parallel and at-the-stops inputs ...")
     rob = {}
