@@ -199,6 +199,29 @@ def run_episodes(controller: Controller, tracks: str | Track | Sequence[str | Tr
         env.close()
 
 
+def _horizons(controller: Controller, tracks, max_time: float | None, dt: float) -> list[int]:
+    """Each robot's step limit: ``max_time``, else three times the track's nominal duration at the
+    controller's ``speed_scale`` (checked) plus 10 s."""
+    scale = getattr(controller, "speed_scale", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"controller {controller.name!r}: speed_scale must be a finite number > 0, got {scale!r}")
+    return [int(math.ceil((max_time if max_time is not None else 3.0 * nominal_duration(t, scale) + 10.0) / dt))
+            for t in tracks]
+
+
+def _restart(controller: Controller, env: AzimutVectorEnv, check: SetpointLimitCheck, over: np.ndarray):
+    """The robots ``over`` that the env ended while others run: reset, one by one on their track,
+    with the limit check and the controller reset for them; returns the new observation."""
+    num = env.num_envs
+    for i in over:
+        mask = np.zeros(num, dtype=np.bool_)
+        mask[i] = True
+        obs, _ = env.reset(options={"reset_mask": mask, "track": env.tracks[i]})
+    check.reset(over, env.measured_beta, env.measured_phidot)
+    controller.reset(env, over)
+    return obs
+
+
 def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], options: list[dict],
           max_time: float | None, progress: bool) -> list[EpisodeLog]:
     num, n, dt, name = len(seeds), env.n, env.control_period, controller.name
@@ -206,12 +229,8 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
     check = SetpointLimitCheck(env.limits, dt, num, n)  # the first period differenced against the reset's
     check.reset(np.arange(num), env.measured_beta, env.measured_phidot)  # measured state
     controller.reset(env, np.arange(num))
-    scale = getattr(controller, "speed_scale", 1.0)
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
-        raise ValueError(f"controller {name!r}: speed_scale must be a finite number > 0, got {scale!r}")
     lengths = [t.length for t in env.tracks]
-    horizons = [int(math.ceil((max_time if max_time is not None else 3.0 * nominal_duration(t, scale) + 10.0) / dt))
-                for t in env.tracks]
+    horizons = _horizons(controller, env.tracks, max_time, dt)
     logs = [EpisodeLog(name, t, dt) for t in env.tracks]
     recs: list[dict] = [{} for _ in range(num)]
     ret: list[float | None] = [None] * num
@@ -253,12 +272,7 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
         alive[ended] = False
         over = np.flatnonzero(terminated | truncated)
         if over.size and alive.any():  # the env ended these: on, unlogged, in fresh episodes (module docstring)
-            for i in over:
-                mask = np.zeros(num, dtype=np.bool_)
-                mask[i] = True
-                obs, _ = env.reset(options={"reset_mask": mask, "track": env.tracks[i]})
-            check.reset(over, env.measured_beta, env.measured_phidot)
-            controller.reset(env, over)
+            obs = _restart(controller, env, check, over)
         k += 1
     if progress and sys.stderr.isatty():
         sys.stderr.write("\n")
