@@ -174,84 +174,68 @@ def _finding_motion(f: dict, s: dict, th: dict) -> list[str]:
 
 def _finding_quality(f: dict, s: dict, th: dict) -> list[str]:
     """How well the wheels agree while moving, by the estimator's quality."""
-    out: list[str] = []
     how = ("agree well" if f["qua_p5"] >= 97 else "mostly agree" if f["qua_mean"] >= th["fight_qua"] * 100
            else "often disagree")
     rms = s["moving"]["departure"]["median_rms_deg"]
-    out.append(f"While moving, the wheels {how}: {f['method']}'s quality {f['qua_mean']:.1f}% on average, "
-               f"at least {f['qua_p5']:.1f}% in 95% of the moving samples (lowest {f['qua_min']:.0f}%); "
-               f"typically the steering is {rms:.1f}° RMS off one common turning centre."
-               + (" If these are raw absolute-encoder angles (before your code's offsets), `azimut calibrate` "
-                  "fits the offsets." if f["qua_mean"] < _RAW_HINT_QUA else ""))
-    return out
+    return [f"While moving, the wheels {how}: {f['method']}'s quality {f['qua_mean']:.1f}% on average, "
+            f"at least {f['qua_p5']:.1f}% in 95% of the moving samples (lowest {f['qua_min']:.0f}%); "
+            f"typically the steering is {rms:.1f}° RMS off one common turning centre."
+            + (" If these are raw absolute-encoder angles (before your code's offsets), `azimut calibrate` "
+               "fits the offsets." if f["qua_mean"] < _RAW_HINT_QUA else "")]
 
 
 def _finding_module_offset(f: dict, s: dict, th: dict) -> list[str]:
     """One module's steering offset explains the departure."""
-    out: list[str] = []
-    out.append(f"Module {f['module']} reads {f['offset_deg']:+.1f}° off the others while moving (that one "
-               f"offset explains the steering departure: {f['rms_deg']:.2f}° RMS → "
-               f"{f['rms_without_deg']:.2f}°; "
-               f"its own departure {f['mean_deg']:+.1f}° mean, {f['p95_abs_deg']:.1f}° p95): check its "
-               "steering offset (`azimut calibrate` fits it).")
-    return out
+    return [f"Module {f['module']} reads {f['offset_deg']:+.1f}° off the others while moving (that one "
+            f"offset explains the steering departure: {f['rms_deg']:.2f}° RMS → "
+            f"{f['rms_without_deg']:.2f}°; "
+            f"its own departure {f['mean_deg']:+.1f}° mean, {f['p95_abs_deg']:.1f}° p95): check its "
+            "steering offset (`azimut calibrate` fits it)."]
 
 
 def _finding_steering_disagree(f: dict, s: dict, th: dict) -> list[str]:
     """The modules disagree and no single offset explains it."""
-    out: list[str] = []
     mods = _list([f"{m} {v:+.1f}°" for m, v in zip(f["modules"], f["median_deg"])])
-    out.append(f"The modules' angles disagree while moving (median departure {mods}) and no single module's "
-               "offset explains it: check the steering offsets and the module positions in the robot file.")
-    return out
+    return [f"The modules' angles disagree while moving (median departure {mods}) and no single module's "
+            "offset explains it: check the steering offsets and the module positions in the robot file."]
 
 
 def _finding_fight(f: dict, s: dict, th: dict) -> list[str]:
     """The stretches where the wheels fight."""
-    out: list[str] = []
     sts = _list([f"{_span(st)} (quality {st['qua_mean']:.0f}%)" for st in f["stretches"]])
-    out.append(f"Stretches where the wheels fight while moving ({f['method']}'s quality below "
-               f"{100 * th['fight_qua']:.0f}% for {th['stretch_min_s']} s or more): {sts}.")
-    return out
+    return [f"Stretches where the wheels fight while moving ({f['method']}'s quality below "
+            f"{100 * th['fight_qua']:.0f}% for {th['stretch_min_s']} s or more): {sts}."]
 
 
 def _finding_frozen(f: dict, s: dict, th: dict) -> list[str]:
     """A module's signal frozen while the robot moves."""
-    out: list[str] = []
     what = "steering angle" if f["signal"] == "steering" else "wheel speed"
-    out.append(f"Module {f['module']}'s {what} is frozen for {f['t1_s'] - f['t0_s']:.1f} s ({_span(f)}, "
-               f"exactly {f['value']:.4g}) while the robot moves and the other modules' change: a stale or "
-               "disconnected sensor, or a signal logged on change that stopped?")
-    return out
+    return [f"Module {f['module']}'s {what} is frozen for {f['t1_s'] - f['t0_s']:.1f} s ({_span(f)}, "
+            f"exactly {f['value']:.4g}) while the robot moves and the other modules' change: a stale or "
+            "disconnected sensor, or a signal logged on change that stopped?"]
 
 
 def _finding_noisy(f: dict, s: dict, th: dict) -> list[str]:
     """A module's steering angle noisy at rest."""
-    out: list[str] = []
-    out.append(f"Module {f['module']}'s steering angle is noisy at rest: {f['rms_deg']:.2f}° RMS from "
-               f"sample to sample, against {f['others_median_deg']:.2f}° for the others: a loose encoder "
-               "or magnet, or electrical noise?")
-    return out
+    return [f"Module {f['module']}'s steering angle is noisy at rest: {f['rms_deg']:.2f}° RMS from "
+            f"sample to sample, against {f['others_median_deg']:.2f}° for the others: a loose encoder "
+            "or magnet, or electrical noise?"]
 
 
 def _finding_gyro_scale(f: dict, s: dict, th: dict) -> list[str]:
     """The wheel odometry turns more or less than the gyro."""
-    out: list[str] = []
     more = "more" if f["slope"] > 1 else "less"
-    out.append(f"Wheel odometry turns {100 * abs(f['slope'] - 1):.0f}% {more} than the gyro (slope "
-               f"{f['slope']:.3f} over {f['turning_s']:.0f} s of turning): check the wheel radius and the "
-               "module positions (track width) in the robot file, or the gyro's scale"
-               + ("; fix the steering offsets first, they bias the odometry's turn rate too."
-                  if any(g["kind"] in ("module_offset", "steering_disagree") for g in s["findings"]) else "."))
-    return out
+    return [f"Wheel odometry turns {100 * abs(f['slope'] - 1):.0f}% {more} than the gyro (slope "
+            f"{f['slope']:.3f} over {f['turning_s']:.0f} s of turning): check the wheel radius and the "
+            "module positions (track width) in the robot file, or the gyro's scale"
+            + ("; fix the steering offsets first, they bias the odometry's turn rate too."
+               if any(g["kind"] in ("module_offset", "steering_disagree") for g in s["findings"]) else ".")]
 
 
 def _finding_gyro_agree(f: dict, s: dict, th: dict) -> list[str]:
     """The wheels and the gyro agree on the turn rate."""
-    out: list[str] = []
-    out.append(f"The wheels and the gyro agree on the turn rate while moving: slope {f['slope']:.3f}, "
-               f"RMS difference {f['rms_diff_rad_s']:.3f} rad/s.")
-    return out
+    return [f"The wheels and the gyro agree on the turn rate while moving: slope {f['slope']:.3f}, "
+            f"RMS difference {f['rms_diff_rad_s']:.3f} rad/s."]
 
 
 def _finding_gyro_no_turn(f: dict, s: dict, th: dict) -> list[str]:
@@ -273,22 +257,18 @@ def _finding_gyro_no_turn(f: dict, s: dict, th: dict) -> list[str]:
 
 def _finding_gyro_disagree(f: dict, s: dict, th: dict) -> list[str]:
     """The stretches where the gyro and the wheels disagree."""
-    out: list[str] = []
     sts = _list([f"{_span(st)} (gyro {st['gyro_rad_s']:+.2f}, wheels {st['wheels_rad_s']:+.2f} rad/s)"
                  for st in f["stretches"]], 3)
-    out.append(f"The gyro and the wheels disagree on the turn rate {sts}: slip, a skid, a push, or a "
-               "wheel speed of the wrong sign?")
-    return out
+    return [f"The gyro and the wheels disagree on the turn rate {sts}: slip, a skid, a push, or a "
+            "wheel speed of the wrong sign?"]
 
 
 def _finding_no_gyro(f: dict, s: dict, th: dict) -> list[str]:
     """The log has no gyro, and the flag that would read one."""
-    out: list[str] = []
     fmt = str(f["format"]).lower()
     how = next((v for key, v in _YAW_FLAGS.items() if key in fmt or (key == "wpilog" and "wpilib" in fmt)),
                f"the {f['format']} reader reads no gyro")
-    out.append(f"The log has no gyro here: {how} to check the wheel odometry against it.")
-    return out
+    return [f"The log has no gyro here: {how} to check the wheel odometry against it."]
 
 
 #: the sentence(s) of each kind of finding, by kind (:func:`diagnosis_lines`)
