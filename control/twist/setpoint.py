@@ -86,6 +86,7 @@ from azimut_env.validation import check_fields
 from control.commands import WheelCommand
 from control.icr.config import Mode
 from control.limits import ActuatorLimits
+from control.twist.batch import TwistBatchBase
 from control.twist.wpilib import discretize_twist
 from estimation.geometry import RobotGeometry
 from estimation.libm import atan2, hypot
@@ -379,7 +380,7 @@ class SetpointController:
                                                    "mode": int(mode), "events": self.events})
 
 
-class SetpointBatch:
+class SetpointBatch(TwistBatchBase):
     """N setpoint generators stepped by row in one compiled call
     (:func:`control.twist.setpoint_compiled.setpoint_step_kernel`, :meth:`SetpointController.step`
     of each robot, bit for bit), with the commands in (M, n) arrays.
@@ -388,15 +389,13 @@ class SetpointBatch:
         num: robots N; geom, limits, dt [s], config: as :class:`SetpointController`.
     """
 
+    config_type = SetpointConfig
+
     def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
                  config: SetpointConfig | None = None) -> None:
-        if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
-            raise ValueError(f"num must be an int >= 1, got {num!r}")
-        if config is not None and not isinstance(config, SetpointConfig):
-            raise TypeError(f"config must be a SetpointConfig or None, got {type(config).__name__}")
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
-        self.num, self.geom, self.limits, self.dt, self.config = int(num), geom, limits, float(dt), config
+        #: per robot: the chassis setpoint (N, 3), the last commands β, β̇, φ̇ (N, n), whether it
+        #: was stopping first, and its stop-first sequences since reset
+        super().__init__(num, geom, limits, dt, config)
         cfg = config or SetpointConfig()
         self._flags = np.array([cfg.discretize, cfg.offset_correction, cfg.cosine_compensation], dtype=np.bool_)
         self._params = np.array([cfg.speed_deadband, cfg.zero_twist,
@@ -405,32 +404,16 @@ class SetpointBatch:
                                  limits.wheel_accel_max * cfg.wheel_accel_scale, cfg.slip_speed,
                                  cfg.stop_hysteresis])
         self._search = np.array([cfg.grid, cfg.iterations], dtype=np.int64)
-        n = geom.n
-        #: per robot: the chassis setpoint (N, 3), the last commands β, β̇, φ̇ (N, n), whether it
-        #: was stopping first, and its stop-first sequences since reset
-        self.twist, self.beta = np.zeros((self.num, 3)), np.zeros((self.num, n))
-        self.rate, self.phidot = np.zeros((self.num, n)), np.zeros((self.num, n))
         self.stopping = np.zeros(self.num, dtype=np.bool_)
         self.events = np.zeros(self.num, dtype=np.int64)
-        self._ready = np.zeros(self.num, dtype=np.bool_)
-
-    @property
-    def ready(self) -> np.ndarray:
-        """(N,) bool: the robots reset at least once (only those can be stepped)."""
-        return self._ready.copy()
 
     def reset(self, rows, beta, phidot) -> None:
         """Restart the robots ``rows`` from their measured β, φ̇ (M, n), at rest (as
         :meth:`SetpointController.reset`)."""
         rows = np.asarray(rows, dtype=np.intp)
-        beta = np.asarray(beta, dtype=np.float64).reshape(rows.size, self.geom.n)
-        self.twist[rows] = 0.0
-        self.beta[rows] = beta if self.geom.unlimited_steering else self.geom.wrap_steering(beta)
-        self.rate[rows] = 0.0
-        self.phidot[rows] = np.asarray(phidot, dtype=np.float64).reshape(rows.size, self.geom.n)
+        super().reset(rows, beta, phidot)
         self.stopping[rows] = False
         self.events[rows] = 0
-        self._ready[rows] = True
 
     def step(self, rows, twists, beta_meas) -> WheelCommand:
         """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
@@ -438,16 +421,8 @@ class SetpointBatch:
         setpoints, ``s`` (M,), ``stop`` (M,) bool, ``decoupled`` (M, n) bool."""
         from control.twist.setpoint_compiled import setpoint_step_kernel
 
-        idx = np.arange(self.num, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
-        if not self._ready[idx].all():
-            raise RuntimeError("a robot of this batch was never reset: call reset() first")
+        idx, twists, beta_meas = self._step_inputs(rows, twists, beta_meas)
         g, M = self.geom, idx.size
-        twists = np.ascontiguousarray(twists, dtype=np.float64)
-        beta_meas = np.ascontiguousarray(beta_meas, dtype=np.float64)
-        if twists.shape != (M, 3):
-            raise ValueError(f"twists must have shape ({M}, 3), got {twists.shape}")
-        if beta_meas.shape != (M, g.n):
-            raise ValueError(f"beta_meas must have shape ({M}, {g.n}), got {beta_meas.shape}")
         out = np.empty((5, M, g.n))
         twist_out, s_out = np.empty((M, 3)), np.empty(M)
         mode, stop = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.bool_)
@@ -457,8 +432,5 @@ class SetpointBatch:
                                     g.axis_xy, g.b, g.r, float(g.steer_min), float(g.steer_max),
                                     bool(g.unlimited_steering), self.dt, out[0], out[1], out[2], out[3], out[4],
                                     twist_out, s_out, mode, stop, decoupled)
-        if code:
-            raise ValueError("twist must be finite" if code == 1 else "beta_meas must be finite")
-        return WheelCommand(beta=out[0], phidot=out[1], beta_rate=out[2], beta_accel=out[3], phiddot=out[4],
-                            mode=mode, events=self.events[idx].copy(),
-                            info={"twist": twist_out, "s": s_out, "stop": stop, "decoupled": decoupled})
+        return self._command(code, out, mode=mode, events=self.events[idx].copy(),
+                             info={"twist": twist_out, "s": s_out, "stop": stop, "decoupled": decoupled})

@@ -46,6 +46,7 @@ import numpy as np
 from azimut_env.validation import check_bool, check_fields
 from control.commands import WheelCommand
 from control.limits import ActuatorLimits
+from control.twist.batch import TwistBatchBase
 from estimation.geometry import RobotGeometry
 from estimation.libm import atan2, hypot
 
@@ -237,7 +238,7 @@ class SwerveController:
                             phiddot=phiddot, info={"twist": tw_k})
 
 
-class SwerveBatch:
+class SwerveBatch(TwistBatchBase):
     """N baselines stepped by row in one compiled call (:func:`control.twist.compiled.swerve_step_kernel`,
     :meth:`SwerveController.step` of each robot, bit for bit), with the commands in (M, n) arrays.
 
@@ -245,59 +246,26 @@ class SwerveBatch:
         num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`.
     """
 
+    config_type = SwerveConfig
+
     def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
                  config: SwerveConfig | None = None) -> None:
-        if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
-            raise ValueError(f"num must be an int >= 1, got {num!r}")
-        if config is not None and not isinstance(config, SwerveConfig):
-            raise TypeError(f"config must be a SwerveConfig or None, got {type(config).__name__}")
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+        #: per robot: the slew-limited twist (N, 3) and the last commands β, β̇, φ̇ (N, n)
+        super().__init__(num, geom, limits, dt, config)
         from control.twist.compiled import FLAGS
 
-        self.num, self.geom, self.limits, self.dt, self.config = int(num), geom, limits, float(dt), config
         cfg = config or SwerveConfig()
         self._flags = np.array([getattr(cfg, name) for name in FLAGS], dtype=np.bool_)
         self._slew = SwerveController(geom, limits, dt, cfg)._slew
         self._deadband = float(cfg.speed_deadband)
-        n = geom.n
-        #: per robot: the slew-limited twist (N, 3) and the last commands β, β̇, φ̇ (N, n)
-        self.twist, self.beta = np.zeros((self.num, 3)), np.zeros((self.num, n))
-        self.rate, self.phidot = np.zeros((self.num, n)), np.zeros((self.num, n))
-        self._ready = np.zeros(self.num, dtype=np.bool_)
-
-    @property
-    def ready(self) -> np.ndarray:
-        """(N,) bool: the robots reset at least once (only those can be stepped)."""
-        return self._ready.copy()
-
-    def reset(self, rows, beta, phidot) -> None:
-        """Restart the robots ``rows`` from their measured β, φ̇ (M, n), at rest (as
-        :meth:`SwerveController.reset`)."""
-        rows = np.asarray(rows, dtype=np.intp)
-        beta = np.asarray(beta, dtype=np.float64)
-        self.twist[rows] = 0.0
-        beta = beta.reshape(rows.size, self.geom.n)
-        self.beta[rows] = beta if self.geom.unlimited_steering else self.geom.wrap_steering(beta)
-        self.rate[rows] = 0.0
-        self.phidot[rows] = np.asarray(phidot, dtype=np.float64).reshape(rows.size, self.geom.n)
-        self._ready[rows] = True
 
     def step(self, rows, twists, beta_meas) -> WheelCommand:
         """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
         (M, 3) given their measured β (M, n); ``info["twist"]`` (M, 3) the discretised twists."""
         from control.twist.compiled import swerve_step_kernel
 
-        idx = np.arange(self.num, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
-        if not self._ready[idx].all():
-            raise RuntimeError("a robot of this batch was never reset: call reset() first")
+        idx, twists, beta_meas = self._step_inputs(rows, twists, beta_meas)
         g, M = self.geom, idx.size
-        twists = np.ascontiguousarray(twists, dtype=np.float64)
-        beta_meas = np.ascontiguousarray(beta_meas, dtype=np.float64)
-        if twists.shape != (M, 3):
-            raise ValueError(f"twists must have shape ({M}, 3), got {twists.shape}")
-        if beta_meas.shape != (M, g.n):
-            raise ValueError(f"beta_meas must have shape ({M}, {g.n}), got {beta_meas.shape}")
         out = np.empty((5, M, g.n))
         twist_out = np.empty((M, 3))
         code = swerve_step_kernel(idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self._slew,
@@ -305,7 +273,4 @@ class SwerveBatch:
                                   float(g.steer_max), bool(g.unlimited_steering), float(self.limits.wheel_speed_max),
                                   self.dt, out[0], out[1],
                                   out[2], out[3], out[4], twist_out)
-        if code:
-            raise ValueError("twist must be finite" if code == 1 else "beta_meas must be finite")
-        return WheelCommand(beta=out[0], phidot=out[1], beta_rate=out[2], beta_accel=out[3], phiddot=out[4],
-                            info={"twist": twist_out})
+        return self._command(code, out, info={"twist": twist_out})
