@@ -266,16 +266,22 @@ def _finish(task: Task, rec: dict, attempts: int) -> dict:
     return out
 
 
+def _settle(unit: list[Task], recs, attempt: int, retries: int, retry, pending: deque):
+    """A unit's records: each task to try again goes back to the front of ``pending`` (alone, with
+    its next attempt); the others are yielded as (task, record, attempt)."""
+    for task, rec in zip(unit, recs):
+        again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
+        if again is not None:
+            pending.appendleft(([task], again))
+        else:
+            yield task, rec, attempt
+
+
 def _serial(units, threads, retries, retry):
     pending = deque((unit, 1) for unit in units)
     while pending:
         unit, attempt = pending.popleft()
-        for task, rec in zip(unit, _execute_unit(*_unit_args(unit), threads)):
-            again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
-            if again is not None:
-                pending.appendleft(([task], again))  # a failed task again, alone
-            else:
-                yield task, rec, attempt
+        yield from _settle(unit, _execute_unit(*_unit_args(unit), threads), attempt, retries, retry, pending)
 
 
 def _process(units, workers, threads, retries, retry):
@@ -309,12 +315,7 @@ def _process(units, workers, threads, retries, retry):
                     recs = [dict(_lost(exc), isolate=True) for _ in unit]
                     slots[i].shutdown(wait=False, cancel_futures=True)
                     slots[i] = None
-                for task, rec in zip(unit, recs):
-                    again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
-                    if again is not None:
-                        pending.appendleft(([task], again))
-                    else:
-                        yield task, rec, attempt
+                yield from _settle(unit, recs, attempt, retries, retry, pending)
     finally:
         for ex in slots:
             if ex is not None:
@@ -373,12 +374,7 @@ def _ray(units, workers, threads, retries, ray_address, retry):
                     recs = ray.get(ref)
                 except ray.exceptions.RayError as exc:  # worker crashed, node lost, object lost
                     recs = [dict(_lost(exc), isolate=True) for _ in unit]
-                for task, rec in zip(unit, recs):
-                    again = _again(unit, rec, attempt, retries, retry) if rec["status"] != "ok" else None
-                    if again is not None:
-                        pending.appendleft(([task], again))
-                    else:
-                        yield task, rec, attempt
+                yield from _settle(unit, recs, attempt, retries, retry, pending)
     finally:
         for ref in running:
             ray.cancel(ref, force=True)
