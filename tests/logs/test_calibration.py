@@ -85,15 +85,17 @@ def _sim_logs(robot: str, seeds=(0, 1, 2), tracks=("figure8", "square", "crab"))
     left out of the physics: the robot's code knows its own geometry (it drives without fighting)
     and its log records raw angles and speeds, off by the offsets injected below."""
     from azimut_env.task.config import resolve_params
-    from control.controller import make_controller
     from control.export import robot_description
+    from control.path_controllers import ICRPathController
     from control.rollout import run_episodes
 
     params = resolve_params(None, None, 1.0, robot, "paper")
     imp = dataclasses.replace(params.imperfections, steer_offset=(), radius_error=(), steer_offset_std=0.0,
                               radius_error_std=0.0)
     params = dataclasses.replace(params, imperfections=imp)
-    logs = run_episodes(make_controller("icr"), list(tracks), list(seeds),
+    # the ICR controller without its look-ahead: the tolerances below were measured on its episodes
+    # (with it, tri's square under this randomisation stalls in one of the seeds: docs/not-done.md)
+    logs = run_episodes(ICRPathController(lookahead=None), list(tracks), list(seeds),
                         env_kwargs={"params": params, "domain_randomization": 0.2})
     geom, modules = robot_description(robot)
     ts, bs, ps, t0 = [], [], [], 0
