@@ -110,6 +110,14 @@ class _ControllerWrapper(gym.Wrapper):
         self._ctl.reset(self._view, _ROW)
         return obs, info
 
+    def step(self, action):
+        """One step: the action checked (finite, of the action space's shape) and clipped to [-1, 1]."""
+        a = check_real_array("action", action)
+        size = self.action_space.shape[0]
+        if a.shape != (size,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be a finite ({size},) array, got {action!r}")
+        return self._drive(np.clip(a, -1.0, 1.0))
+
     def _drive(self, a: np.ndarray):
         """One step with the clipped action ``a``."""
         if not self._ctl.ready[0]:
@@ -144,12 +152,6 @@ class ICRTargetAction(_ControllerWrapper):
         self.mu_max, self.signed_mu, self.min_norm = self._ctl.mu_max, self._ctl.signed_mu, self._ctl.min_norm
         self.action_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
 
-    def step(self, action):
-        a = check_real_array("action", action)
-        if a.shape != (4,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be a finite (4,) array, got {action!r}")
-        return self._drive(np.clip(a, -1.0, 1.0))
-
 
 class TwistAction(_ControllerWrapper):
     """Action = chassis-frame twist; see the module docstring.
@@ -167,9 +169,3 @@ class TwistAction(_ControllerWrapper):
                          v_max=v_max, w_max=w_max)
         self.scale = self._ctl.scale
         self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
-
-    def step(self, action):
-        a = check_real_array("action", action)
-        if a.shape != (3,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be a finite (3,) array, got {action!r}")
-        return self._drive(np.clip(a, -1.0, 1.0))
