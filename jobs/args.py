@@ -260,14 +260,19 @@ def arg_output_path(*, directory: bool = False) -> Callable[[str], str]:
 
 
 
+def _checked(check, text: str) -> str:
+    """``check(text)``, its ``ValueError`` as argparse's refusal (the message as it is)."""
+    try:
+        return check(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def arg_robot(text: str) -> str:
     """``type=`` of ``--robot``: a preset's name (``azimut_env.robot_file.PRESET_NAMES``)."""
     from azimut_env.robot_file import check_preset_name
 
-    try:
-        return check_preset_name(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    return _checked(check_preset_name, text)
 
 
 def arg_robot_file(text: str) -> str:
@@ -287,10 +292,7 @@ def arg_imperfections(text: str) -> str:
     """``type=`` of ``--imperfections``: a preset of :mod:`azimut_env.imperfections`."""
     from azimut_env.imperfections import check_imperfections
 
-    try:
-        return check_imperfections(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    return _checked(check_imperfections, text)
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, imperfections: bool = False,
