@@ -216,7 +216,13 @@ def _drive(driver: str, track: str, seed: int, speed: float, params: RobotParams
     env_kwargs = {"substeps": substeps, "params": params}
     if sensors is not None:
         env_kwargs["sensors"] = sensors
-    return run_episode(make_controller(driver, speed_scale=speed), track, seed=seed, env_kwargs=env_kwargs)
+    if driver == "icr":  # the study's ICR driver is the controller without its look-ahead (measured on it)
+        from control.path_controllers import ICRPathController
+
+        controller = ICRPathController(speed, lookahead=None)
+    else:
+        controller = make_controller(driver, speed_scale=speed)
+    return run_episode(controller, track, seed=seed, env_kwargs=env_kwargs)
 
 
 def _check_run(driver: str, track: str) -> None:

@@ -392,6 +392,20 @@ def _rows_array(rows, num: int) -> np.ndarray:
     return np.arange(num, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
 
 
+def _plan_rows(x, name: str, shape: tuple[int, ...], allowed: tuple[float, ...]) -> np.ndarray:
+    """A plan input: numbers of ``shape``, each one of ``allowed`` (a cell's sides, a flag)."""
+    try:
+        arr = np.ascontiguousarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an array of numbers of shape {shape}") from None
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isin(arr, allowed)):
+        bad = arr[~np.isin(arr, allowed)][0]
+        raise ValueError(f"{name} must hold only {', '.join(f'{a:g}' for a in allowed)}; got {bad!r}")
+    return arr
+
+
 def _float_rows(x, name: str, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.ascontiguousarray(x, dtype=np.float64)
     if arr.shape != shape:
@@ -443,8 +457,9 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     if lam_d.shape[0] != M:
         raise ValueError(f"lam_d must have shape ({M}, 3)")
     mu_d = _float_rows(mu_d, "mu_d", (M,))
-    plan = np.zeros((M, n)) if plan_side is None else _float_rows(plan_side, "plan_side", (M, n))
-    excursion = np.zeros(M) if plan_excursion is None else _float_rows(plan_excursion, "plan_excursion", (M,))
+    plan = np.zeros((M, n)) if plan_side is None else _plan_rows(plan_side, "plan_side", (M, n), (-1.0, 0.0, 1.0))
+    excursion = np.zeros(M) if plan_excursion is None else _plan_rows(plan_excursion, "plan_excursion", (M,),
+                                                                      (0.0, 1.0))
     c = constants if constants is not None else compiled_constants(geom, limits, config, dt)
     fields = state.__dataclass_fields__
     state0 = tuple(getattr(state, name) for name in fields)

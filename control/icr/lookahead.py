@@ -108,6 +108,11 @@ class LookaheadConfig:
         check_positive_fields(self, "max_hold_angle", "spacing", "swing_window", "steer_rate_fraction", "stall_time")
         check_positive_fields(self, "miss_cost", "switch_overhead", "excursion_margin", "stall_distance",
                               allow_zero=True)
+        for name, lo, hi in (("spacing", 0.001, 0.1), ("steer_rate_fraction", 0.0, 1.0),
+                             ("max_hold_angle", 0.0, math.pi), ("swing_window", 0.0, 1.0)):
+            value = getattr(self, name)
+            if not lo <= value <= hi:
+                raise ValueError(f"LookaheadConfig.{name} must be in [{lo:g}, {hi:g}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -223,19 +228,23 @@ def _viterbi(hold, betas, speeds, w, decel, overhead, rate, accel, choice):
     for j in range(1, M):
         brake = speeds[j] / decel + overhead
         for c in range(C):
+            if not hold[j, c] < np.inf:  # no hold in c here: c is not a state of sample j
+                new[c] = _INF
+                back[j, c] = c
+                continue
             best = cost[c]
             arg = c
             for d in range(C):
                 if d == c or cost[d] >= _INF:
                     continue
+                # the wheels turn from their angles in d at the previous sample (where the robot stopped)
                 turn = 0.0
                 for k in range(n):
-                    turn = max(turn, _turn_time(abs(betas[j, c, k] - betas[j, d, k]), rate, accel))
+                    turn = max(turn, _turn_time(abs(betas[j, c, k] - betas[j - 1, d, k]), rate, accel))
                 total = cost[d] + brake + turn
                 if total < best:
                     best, arg = total, d
-            h = hold[j, c]
-            new[c] = best + w * h if h < np.inf else _INF
+            new[c] = best + w * hold[j, c]
             back[j, c] = arg
         for c in range(C):
             cost[c] = new[c]
@@ -295,7 +304,7 @@ def plan_cells(track, geom: RobotGeometry, limits: ActuatorLimits, *, speed_scal
                    | {c for row in lam for c in _signature(row, N, tol=0.0)})
     sides = np.array(cells, dtype=np.float64)
     hold = np.empty((s.size, sides.shape[0]))
-    betas = np.empty((s.size, sides.shape[0], geom.n))
+    betas = np.zeros((s.size, sides.shape[0], geom.n))  # read only where the hold is finite
     _hold_costs(lam, mus, dts, sides, N, hold_margin, cfg.max_hold_angle, E, P, float(geom.steer_max), hold, betas)
     choice = np.empty(s.size, dtype=np.int64)
     cost = _viterbi(hold, betas, speed, cfg.miss_cost, decel, cfg.switch_overhead,

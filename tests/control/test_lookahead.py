@@ -211,3 +211,30 @@ def test_without_lookahead_the_controller_is_unchanged():
                      max_time=8.0)[0]
     assert np.array_equal(a.beta_cmd, b.beta_cmd)
     assert ICRPathController(lookahead=None).icr_config == ICRControllerConfig()
+
+
+def test_plan_inputs_take_only_sides_and_flags():
+    ctl = BatchICRController(1, GEOM, LIMITS, 0.02)
+    lam = np.array([[0.0, 0.0, 1.0]])
+    ctl.reset([0], lam, np.zeros((1, GEOM.n)), np.zeros((1, GEOM.n)))
+    args = (None, lam, np.zeros(1), np.zeros((1, GEOM.n)), np.zeros((1, GEOM.n)), lam, np.zeros(1))
+    for bad in (np.full((1, GEOM.n), np.nan), np.full((1, GEOM.n), 0.5), [["a"] * GEOM.n]):
+        with pytest.raises(ValueError, match="plan_side"):
+            ctl.step(*args, plan_side=bad)
+    with pytest.raises(ValueError, match="plan_excursion"):
+        ctl.step(*args, plan_side=np.ones((1, GEOM.n)), plan_excursion=np.array([np.nan]))
+    for field, value in (("spacing", 1e-6), ("steer_rate_fraction", 5.0), ("max_hold_angle", 10.0)):
+        with pytest.raises(ValueError, match=f"LookaheadConfig.{field}"):
+            LookaheadConfig(**{field: value})
+
+
+def test_the_plan_is_the_same_every_time():
+    """The plan reads no uninitialised memory (a cell without a hold at a sample is no state there):
+    planning a track twice, and the same episode twice, give the same bits."""
+    tri = robot_of({"robot": "tri"})
+    track = named_track("spin", tri)
+    a = plan_cells(track, tri.geometry, tri.limits)
+    b = plan_cells(track, tri.geometry, tri.limits)
+    assert np.array_equal(a.start, b.start) and np.array_equal(a.side, b.side) and a.cost == b.cost
+    logs = [run_episodes(ICRPathController(), ["crab"], [0], max_time=6.0)[0] for _ in range(3)]
+    assert all(np.array_equal(logs[0].pose, log.pose) for log in logs[1:])
