@@ -22,7 +22,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
 
-COMMIT = "d63bdab"
+COMMIT = "f517eb0"
 DATE = "2026-11-29"
 MACHINE = "the project's shared 2-CPU x86_64 virtual machine (AMD EPYC), Python 3.11"
 PREVIOUS_REV = "1fe18b7"  # the commit that wrote the previous page (its runs at 9be52e4)
