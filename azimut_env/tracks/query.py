@@ -90,6 +90,25 @@ def wrap_progress(s, closed, length):
     return min(max(s, 0.0), length)
 
 
+@njit(cache=True, inline="always")
+def segment_step(X, Y, TH, rho, bi, m, px, py, pth) -> tuple[bool, float]:
+    """The refinement of a projection at sample ``bi`` along the segment that starts there (the
+    last one at the track's end): (whether the segment has a length, the step along it [m],
+    clipped to ± its length), in the metric ‖Δxy‖² + (ρ Δθ)²."""
+    i2 = min(bi, m - 2)
+    sx = X[i2 + 1] - X[i2]
+    sy = Y[i2 + 1] - Y[i2]
+    st = rho * (TH[i2 + 1] - TH[i2])
+    seg = math.sqrt(sx * sx + sy * sy + st * st)
+    if not seg > 0:
+        return False, 0.0
+    rx = px - X[bi]
+    ry = py - Y[bi]
+    rt = rho * wrap_pi(pth - TH[bi])
+    step = (rx * sx + ry * sy + rt * st) / seg
+    return True, min(max(step, -seg), seg)
+
+
 @njit(cache=True)
 def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, always_wrap):
     """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
@@ -132,17 +151,9 @@ def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint,
             bi = i
             boff = off
     s = S[bi] + boff + base
-    i2 = min(bi, m - 2)
-    sx = X[i2 + 1] - X[i2]
-    sy = Y[i2 + 1] - Y[i2]
-    st = rho * (TH[i2 + 1] - TH[i2])
-    seg = math.sqrt(sx * sx + sy * sy + st * st)
-    if seg > 0:
-        rx = px - X[bi]
-        ry = py - Y[bi]
-        rt = rho * wrap_pi(pth - TH[bi])
-        step = (rx * sx + ry * sy + rt * st) / seg
-        s += min(max(step, -seg), seg)
+    moved, step = segment_step(X, Y, TH, rho, bi, m, px, py, pth)
+    if moved:
+        s += step
     if not closed:
         s = min(max(s, 0.0), length)
     return s

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from azimut_env.tracks import Track, np_interp1, project_window_kernel, wrap_pi
+from azimut_env.tracks.query import segment_step
 from azimut_env.typed_lists import array_list, set_item
 from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
 from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress, merge_stops
@@ -134,14 +135,9 @@ def _project(P, closed, length, rho, px, py, pth, hint, has_hint):
             best = c
             bi = i
     s = S[bi] + 0.0 + 0.0
-    i2 = min(bi, m - 2)
-    sx = X[i2 + 1] - X[i2]
-    sy = Y[i2 + 1] - Y[i2]
-    st = rho * (TH[i2 + 1] - TH[i2])
-    seg = math.sqrt(sx * sx + sy * sy + st * st)
-    if seg > 0:
-        step = ((px - X[bi]) * sx + (py - Y[bi]) * sy + rho * wrap_pi(pth - TH[bi]) * st) / seg
-        s += min(max(step, -seg), seg)
+    moved, step = segment_step(X, Y, TH, rho, bi, m, px, py, pth)
+    if moved:
+        s += step
     if not closed:
         s = min(max(s, 0.0), length)
     return s
