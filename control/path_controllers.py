@@ -34,6 +34,7 @@ from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig
 from control.icr.feasibility import reference_stop_mask
+from control.icr.kernel_constants import stop_circle_normals
 from control.icr.lookahead import (
     CellPlan,
     LookaheadConfig,
@@ -41,7 +42,6 @@ from control.icr.lookahead import (
     plan_cells,
     plan_sides,
     plan_table,
-    stop_circle_normals,
 )
 from control.twist.setpoint import SetpointBatch, SetpointConfig
 from control.twist.wpilib import SwerveBatch, SwerveConfig
@@ -151,6 +151,7 @@ class ICRPathController(_PathFollowing):
         self._segment = np.zeros(0, dtype=np.int64)
         self._best = np.zeros(0)  # each robot's farthest progress [m] and the time since it grew [s]
         self._stalled = np.zeros(0)
+        self._off = np.zeros(0, dtype=np.bool_)  # steered without its plan (after a stall)
         self._normals = np.zeros((0, 3))
 
     def _stop_mask(self, env):
@@ -183,7 +184,8 @@ class ICRPathController(_PathFollowing):
             self._segment = np.concatenate([self._segment, np.zeros(grow, dtype=np.int64)])
             self._best = np.concatenate([self._best, np.zeros(grow)])
             self._stalled = np.concatenate([self._stalled, np.zeros(grow)])
-        self._segment[i], self._best[i], self._stalled[i] = 0, -np.inf, 0.0
+            self._off = np.concatenate([self._off, np.zeros(grow, dtype=np.bool_)])
+        self._segment[i], self._best[i], self._stalled[i], self._off[i] = 0, -np.inf, 0.0, False
         self._normals = stop_circle_normals(env.geometry)
         if plan is None or not self.follower_stops:
             return track, None
@@ -202,19 +204,19 @@ class ICRPathController(_PathFollowing):
         targets = self._targets(env)
         lam_hat, mu_hat = env.estimated_eta
         plan = excursion = None
-        if self.lookahead is not None and any(p is not None for p in self._plans):
-            if self._table is None:
-                self._table = plan_table(self._plans, env.tracks, env.geometry.n)
+        if self.lookahead is not None and self._table is None:
+            self._table = plan_table(self._plans, env.tracks, env.geometry.n)
+        if self.lookahead is not None and self._table.counts.any():
             plan, excursion = plan_sides(self._table, targets.progress, targets.lam, self._normals, self._segment)
             # a robot whose progress stalls (a reference the plan's cells cannot follow near a change
             # of cell) is steered without its plan for the rest of its episode
             ahead = targets.progress > self._best + self.lookahead.stall_distance
             self._best = np.where(ahead, targets.progress, self._best)
-            self._stalled = np.where(ahead | targets.holding | targets.finished | (self._stalled < 0),
-                                     np.minimum(self._stalled, 0.0), self._stalled + env.control_period)
-            self._stalled[self._stalled > self.lookahead.stall_time] = -1.0
-            plan[self._stalled < 0] = 0.0
-            excursion[self._stalled < 0] = 0.0
+            self._stalled = np.where(ahead | targets.holding | targets.finished, 0.0,
+                                     self._stalled + env.control_period)
+            self._off |= self._stalled > self.lookahead.stall_time
+            plan[self._off] = 0.0
+            excursion[self._off] = 0.0
         return self._with_holds(self.controller.step(None, lam_hat, mu_hat, env.measured_beta, env.measured_phidot,
                                                      targets.lam, targets.mu, plan_side=plan,
                                                      plan_excursion=excursion))

@@ -162,6 +162,16 @@ class FollowerOutput:
     holding: bool = False
 
 
+def reference_lambdas(track: Track, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's chassis-frame ICR λ (M, 3) at progress ``s`` (M,) and the twist's norm at
+    unit progress speed (M,) (0 where the reference does not move; λ does not depend on the speed)."""
+    tw = track.reference_twist(s, speed=np.ones_like(s))
+    th = track.sample(s)[:, 2]
+    c, sn = np.cos(th), np.sin(th)
+    body = np.stack([c * tw[:, 0] + sn * tw[:, 1], -sn * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)
+    return eta_from_twist(body)
+
+
 def merge_stops(stops: np.ndarray, extra, track: Track) -> np.ndarray:
     """The sorted union of ``stops`` and ``extra`` progress values [m] (None: none; wrapped into one
     lap on a closed track); ``ValueError`` if an extra one is not finite."""
@@ -232,12 +242,9 @@ class PathFollower:
         psi = np.asarray(tr.tangent_at(grid))
         mask = np.abs(wrap_angle(np.diff(psi))) > 0.5 * cfg.corner_angle
         if stop_mask is not None:
-            tw = tr.reference_twist(grid, speed=np.ones_like(grid))
-            th = tr.sample(grid)[:, 2]
-            c, sn = np.cos(th), np.sin(th)
-            body = np.stack([c * tw[:, 0] + sn * tw[:, 1], -sn * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)
-            moving = np.linalg.norm(body, axis=1) > 1e-9
-            lam, _ = eta_from_twist(body[moving])
+            lam, unit_mu = reference_lambdas(tr, grid)
+            moving = unit_mu > 1e-9
+            lam = lam[moving]
             sub = np.asarray(stop_mask(lam), dtype=bool)
             idx = np.flatnonzero(moving)
             extra = np.zeros(grid.size - 1, dtype=bool)

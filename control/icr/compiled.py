@@ -57,10 +57,10 @@ from control.icr.kernels import (
     L_HEADROOM_WSM,
     L_UNLIMITED,
     arc_check_row,
-    cell_hold_row,
     dot3,
     in_cell,
     nearest1,
+    nearest_in_cell,
     norm3,
     project_off_axes_row,
     slerp3,
@@ -154,21 +154,11 @@ def _clamp_mu(c, ws, lam_d, mu_d) -> float:
 
 
 @njit(cache=True)
-def _plan_target(c, side, ld, out) -> None:
-    """The point of the planned cell ``side`` nearest to ±λ_d (λ_d itself when inside; λ_d when no
-    point is found) into ``out``: where a reconfiguration into that cell aims."""
-    if in_cell(ld, side, c.normals):
-        out[0], out[1], out[2] = ld[0], ld[1], ld[2]
-        return
-    margin = c.tune[C_HOLD_MARGIN]
-    a1 = cell_hold_row(side, ld, c.normals, margin, out)
-    neg = np.empty(3)
-    other = np.empty(3)
-    neg[0], neg[1], neg[2] = -ld[0], -ld[1], -ld[2]
-    a2 = cell_hold_row(side, neg, c.normals, margin, other)
-    if a2 >= 0.0 and (a1 < 0.0 or a2 < a1):
-        out[0], out[1], out[2] = other[0], other[1], other[2]
-    elif a1 < 0.0:
+def _plan_target(c, side, ld, out, neg, other) -> None:
+    """The point of the planned cell ``side`` nearest to ±λ_d (:func:`nearest_in_cell`; λ_d itself
+    when none is found) into ``out``: where a reconfiguration into that cell aims. ``neg``,
+    ``other``: (3,) work space."""
+    if nearest_in_cell(side, ld, c.normals, c.tune[C_HOLD_MARGIN], out, neg, other) < 0.0:
         out[0], out[1], out[2] = ld[0], ld[1], ld[2]
 
 
@@ -295,7 +285,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
         recon = mode == _RECONFIGURING
         if recon and not has_rl:
             if planned and not in_cell(s_lam, plan[m], normals, math.sin(tune[C_STOP_HYST])):  # the plan's change
-                _plan_target(c, plan[m], ld, rlam)
+                _plan_target(c, plan[m], ld, rlam, hp, cell)
             else:
                 rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]
             has_rl = True
@@ -311,7 +301,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
                     pass  # going where the plan wants
                 elif planned and in_cell(ld, plan[m], normals):
                     if far > tune[C_FREEZE]:
-                        _plan_target(c, plan[m], ld, rlam)
+                        _plan_target(c, plan[m], ld, rlam, hp, cell)
                 elif far > tune[C_FREEZE] and _must_stop(c, ws, rlam, ld) and _differs(rlam, ld, md,
                                                                                       tune[C_HOLD_SPEED]):
                     rlam[0], rlam[1], rlam[2] = ld[0], ld[1], ld[2]

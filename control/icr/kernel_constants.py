@@ -94,6 +94,14 @@ _NAMES = [name for name, _, _ in FIELDS]
 _NEW = structref_constructor(_TYPE, _NAMES, __file__, __name__)
 
 
+def stop_circle_normals(geom: RobotGeometry) -> np.ndarray:
+    """(n, 3) the unit normals of the wheels' stop circles (:func:`control.icr.kernels.stop_normals`)."""
+    normals = np.empty((geom.n, 3))
+    stop_normals(np.ascontiguousarray(geom.a_minus_l, dtype=np.float64),
+                 np.ascontiguousarray(geom.a_perp, dtype=np.float64), float(geom.steer_max), normals)
+    return normals
+
+
 def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig,
                        dt: float) -> ICRConstants:
     """The struct of (geom, limits, config, dt): every constant the step reads, computed in Python
@@ -128,8 +136,7 @@ def compiled_constants(geom: RobotGeometry, limits: ActuatorLimits, config: ICRC
                      config.stop_hold_angle, config.stop_hold_margin, config.planned_hold_distance],
                     dtype=np.float64)
     E, P = np.ascontiguousarray(geom.a_minus_l, dtype=np.float64), np.ascontiguousarray(geom.a_perp, dtype=np.float64)
-    normals = np.empty((geom.n, 3))
-    stop_normals(E, P, float(geom.steer_max), normals)
+    normals = stop_circle_normals(geom)
     values = dict(E=E, P=P, b=np.ascontiguousarray(geom.b, dtype=np.float64),
                   r=np.ascontiguousarray(geom.r, dtype=np.float64), steer_min=float(geom.steer_min),
                   steer_max=float(geom.steer_max), s_unit=np.ascontiguousarray(geom.s_unit, dtype=np.float64),

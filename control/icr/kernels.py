@@ -375,6 +375,24 @@ def in_cell(lam, side, N, tol=0.0) -> bool:
 
 
 @njit(cache=True)
+def nearest_in_cell(side, lam, N, margin, out, neg, other) -> float:
+    """The point of the cell ``side`` nearest to λ as a point of Λ (to λ or to −λ) into ``out``:
+    λ itself, angle 0, when it is in the closed cell; else the nearer of the two hold points
+    (:func:`cell_hold_row`), returning its angle, or −1.0 (``out`` untouched) when neither has a
+    candidate. ``neg``, ``other``: (3,) work space."""
+    if in_cell(lam, side, N):
+        out[0], out[1], out[2] = lam[0], lam[1], lam[2]
+        return 0.0
+    a1 = cell_hold_row(side, lam, N, margin, out)
+    neg[0], neg[1], neg[2] = -lam[0], -lam[1], -lam[2]
+    a2 = cell_hold_row(side, neg, N, margin, other)
+    if a2 >= 0.0 and (a1 < 0.0 or a2 < a1):
+        out[0], out[1], out[2] = other[0], other[1], other[2]
+        return a2
+    return a1
+
+
+@njit(cache=True)
 def stop_hold_row(lam_in, lam_d_in, N, margin, out) -> float:
     """The point of λ's *cell* nearest to λ_d, into ``out`` (3,); returns its angle to λ_d [rad],
     or −1.0 (``out`` untouched) when λ_d is in the cell or no candidate is.

@@ -53,14 +53,14 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from control.icr.kernels import cell_hold_row, in_cell, steering_row, stop_normals
+from control.follow.path_follower import reference_lambdas
+from control.icr.kernel_constants import stop_circle_normals
+from control.icr.kernels import in_cell, nearest_in_cell, steering_row
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
-from estimation.hrep import eta_from_twist
 from estimation.validation import check_fields, check_positive_fields
 
-__all__ = ["LookaheadConfig", "CellPlan", "PlanTable", "plan_cells", "plan_table", "plan_sides", "capped_track",
-           "stop_circle_normals"]
+__all__ = ["LookaheadConfig", "CellPlan", "PlanTable", "plan_cells", "plan_table", "plan_sides", "capped_track"]
 
 _INF = 1e18
 
@@ -87,10 +87,7 @@ class LookaheadConfig:
         stall_distance, stall_time: a robot whose progress grows by less than ``stall_distance``
             [m] in ``stall_time`` [s] (outside the track's holds) is steered without its plan for
             the rest of its episode: near a change of cell, a reference neither cell follows can
-            hold it still (the safety net; the summary counts how often it fires).
-        rate_fraction, accel_fraction: the fractions of the steering rate and acceleration limits
-            a reconfiguration turns wheels at (the ICR controller's ``reconfig_rate_fraction`` and
-            ``reconfig_accel_fraction``; :func:`plan_cells` takes them from its config).
+            hold it still (the safety net).
     """
 
     miss_cost: float = 40.0
@@ -147,25 +144,6 @@ class CellPlan:
         return self.start[1:]
 
 
-def stop_circle_normals(geom: RobotGeometry) -> np.ndarray:
-    """(n, 3) the unit normals of the wheels' stop circles (:func:`control.icr.kernels.stop_normals`)."""
-    N = np.empty((geom.n, 3))
-    stop_normals(np.ascontiguousarray(geom.a_minus_l, dtype=np.float64),
-                 np.ascontiguousarray(geom.a_perp, dtype=np.float64), float(geom.steer_max), N)
-    return N
-
-
-def reference_lambdas(track, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The reference's chassis-frame ICR λ (M, 3) at progress ``s`` (M,) and whether it moves
-    there (M,) bool (λ does not depend on the speed: the twist at unit progress speed)."""
-    tw = track.reference_twist(s, speed=np.ones_like(s))
-    th = track.sample(s)[:, 2]
-    c, sn = np.cos(th), np.sin(th)
-    body = np.stack([c * tw[:, 0] + sn * tw[:, 1], -sn * tw[:, 0] + c * tw[:, 1], tw[:, 2]], axis=1)
-    lam, mu = eta_from_twist(body)
-    return lam, mu
-
-
 def _signature(lam: np.ndarray, N: np.ndarray, tol: float = 1e-3) -> list[tuple[int, ...]]:
     """The cells λ lies in or on the rim of: its sign pattern (first entry +1, the canonical one
     of the pair ±pattern), with both signs for circles it is within ``tol`` of."""
@@ -188,22 +166,11 @@ def _hold_costs(lams, mus, dts, sides, N, margin, max_angle, E, P, steer_max, co
     fill = np.zeros(n)
     for j in range(M):
         for c in range(C):
-            if in_cell(lams[j], sides[c], N):
-                p[0], p[1], p[2] = lams[j, 0], lams[j, 1], lams[j, 2]
-                cost[j, c] = 0.0
-            else:
-                a1 = cell_hold_row(sides[c], lams[j], N, margin, p)
-                for k in range(3):
-                    neg[k] = -lams[j, k]
-                a2 = cell_hold_row(sides[c], neg, N, margin, scratch)
-                if a2 >= 0.0 and (a1 < 0.0 or a2 < a1):
-                    a1 = a2
-                    p[0], p[1], p[2] = scratch[0], scratch[1], scratch[2]
-                if a1 < 0.0 or (a1 > max_angle and abs(mus[j]) > 0.05):
-                    cost[j, c] = np.inf
-                    continue
-                chord = 2.0 * math.sin(0.5 * a1)
-                cost[j, c] = abs(mus[j]) * chord * dts[j]
+            angle = nearest_in_cell(sides[c], lams[j], N, margin, p, neg, scratch)
+            if angle < 0.0 or (angle > max_angle and abs(mus[j]) > 0.05):
+                cost[j, c] = np.inf
+                continue
+            cost[j, c] = abs(mus[j]) * (2.0 * math.sin(0.5 * angle)) * dts[j]  # μ ‖λ − p‖ Δt
             steering_row(p, E, P, steer_max, fill, False, betas[j, c], scratch)
 
 

@@ -8,8 +8,10 @@ from azimut_env.task.config import robot_of
 from azimut_env.tracks import Track
 from azimut_env.tracks.scenarios import named_track
 from control.episode import episode_metrics
+from control.follow.path_follower import reference_lambdas
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig, Mode
+from control.icr.kernel_constants import stop_circle_normals
 from control.icr.kernels import in_cell
 from control.icr.lookahead import (
     CellPlan,
@@ -18,8 +20,6 @@ from control.icr.lookahead import (
     plan_cells,
     plan_sides,
     plan_table,
-    reference_lambdas,
-    stop_circle_normals,
 )
 from control.path_controllers import PATH_ICR_CONFIG, ICRPathController, SetpointPathController
 from control.rollout import run_episodes
