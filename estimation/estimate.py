@@ -1,4 +1,9 @@
-"""One entry point for every ICR estimator: :func:`estimate_icr`."""
+"""One entry point for every ICR estimator: :func:`estimate_icr`.
+
+IT, IT+, ORACLE and the μ̂ / S(λ̂) fit of :func:`estimate_eta` run over the samples in blocks,
+one per thread (``num_threads``, :mod:`estimation.threads`; None: the cores this process may
+use). A sample's estimate does not depend on its block: the same bits for any count.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +19,7 @@ from estimation.kinematics import _eta_kernel
 from estimation.operational import ls_kernel_batch, ne_kernel_batch, ns_batch
 from estimation.oracle import OracleParams, oracle_kernel_batch, oracle_tables
 from estimation.quality import QUALITY_F
+from estimation.threads import BlockKernel, check_threads
 from estimation.validation import check_nonnegative
 
 __all__ = ["METHODS", "ITDiagnostics", "estimate_icr", "estimate_icr_it", "estimate_eta", "estimate_eta_rows",
@@ -88,7 +94,34 @@ class ITDiagnostics:
     distance: np.ndarray
 
 
-def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams):
+@njit(cache=True)
+def _it_block(q, E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter, accept_d2, lam,
+              d2, iters, starts, conv, periodic, lo, hi):
+    """:func:`~estimation.it.it_kernel_batch` on the samples ``lo`` to ``hi - 1`` (a block)."""
+    it_kernel_batch(q[lo:hi], E, P, steer_max, eps_delta, eps_lambda, max_iter, min_step, n_starts, race_iter,
+                    accept_d2, lam[lo:hi], d2[lo:hi], iters[lo:hi], starts[lo:hi], conv[lo:hi], periodic)
+
+
+@njit(cache=True)
+def _oracle_block(q, E, P, steer_max, grid, grid_beta, s_unit, refine, lam, d2, periodic, lo, hi):
+    """:func:`~estimation.oracle.oracle_kernel_batch` on the samples ``lo`` to ``hi - 1``."""
+    oracle_kernel_batch(q[lo:hi], E, P, steer_max, grid, grid_beta, s_unit, refine, lam[lo:hi], d2[lo:hi], periodic)
+
+
+@njit(cache=True)
+def _eta_block(lam, q, phidot, E, P, b, r, steer_max, mu_tol, f, beta, mu, qua, periodic, lo, hi):
+    """:func:`~estimation.kinematics._eta_kernel` (μ̂, S(λ̂), qua, the sign) on samples ``lo`` to ``hi - 1``."""
+    _eta_kernel(lam[lo:hi], q[lo:hi], phidot[lo:hi], E, P, b, r, steer_max, mu_tol, f, beta[lo:hi], mu[lo:hi],
+                qua[lo:hi], np.empty(E.shape[0]), periodic)
+
+
+#: the estimators over blocks of samples (a block: at least 64 samples, ~100 µs of IT)
+_IT = BlockKernel(_it_block, min_rows=64)
+_ORACLE = BlockKernel(_oracle_block, min_rows=8)
+_ETA = BlockKernel(_eta_block, min_rows=256)
+
+
+def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams, threads: int = 1):
     """IT's kernel on validated (N, n) angles: λ (N, 3), not yet canonical, and diagnostics."""
     N = flat.shape[0]
     lam = np.empty((N, 3))
@@ -96,14 +129,14 @@ def _it_flat(flat: np.ndarray, geom: RobotGeometry, params: ITParams):
     iters = np.empty(N, dtype=np.int64)
     starts = np.empty(N, dtype=np.int64)
     conv = np.empty(N, dtype=np.bool_)
-    it_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, params.eps_delta, params.eps_lambda,
-                    int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
-                    params.accept_d2(geom.n), lam, d2, iters, starts, conv, geom.unlimited_steering)
+    _IT.run(threads, N, flat, geom.a_minus_l, geom.a_perp, float(geom.steer_max), params.eps_delta,
+            params.eps_lambda, int(params.max_iter), params.min_step, int(params.n_starts), params.race_iter_or_paper,
+            params.accept_d2(geom.n), lam, d2, iters, starts, conv, bool(geom.unlimited_steering))
     return lam, d2, iters, starts, conv
 
 
 def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params: ITParams | None,
-                   oracle_params: OracleParams) -> np.ndarray:
+                   oracle_params: OracleParams, threads: int = 1) -> np.ndarray:
     """Every method on validated (N, n) angles: λ (N, 3), not yet canonical."""
     if it_params is not None and not isinstance(it_params, ITParams):
         raise TypeError(f"it_params must be ITParams or None, got {type(it_params).__name__}")
@@ -111,7 +144,7 @@ def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params
         raise TypeError(f"oracle_params must be OracleParams, got {type(oracle_params).__name__}")
     if method in ("IT", "IT+"):
         params = it_params if it_params is not None else (IT_PAPER if method == "IT" else IT_BEST)
-        return _it_flat(flat, geom, params)[0]
+        return _it_flat(flat, geom, params, threads)[0]
     lam = np.empty((flat.shape[0], 3))
     if method == "NE":
         ne_kernel_batch(flat, geom.a_minus_l, geom.a_perp, lam)
@@ -122,13 +155,14 @@ def _estimate_flat(flat: np.ndarray, geom: RobotGeometry, method: str, it_params
     else:
         grid, grid_beta = oracle_tables(geom, oracle_params)
         d2 = np.empty(flat.shape[0])
-        oracle_kernel_batch(flat, geom.a_minus_l, geom.a_perp, geom.steer_max, grid, grid_beta,
-                            np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2,
-                            geom.unlimited_steering)
+        _ORACLE.run(threads, flat.shape[0], flat, geom.a_minus_l, geom.a_perp, float(geom.steer_max), grid,
+                    grid_beta, np.ascontiguousarray(geom.s_unit), int(oracle_params.refine), lam, d2,
+                    bool(geom.unlimited_steering))
     return lam
 
 
-def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnostics: bool = False):
+def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnostics: bool = False, *,
+                    num_threads: int | None = None):
     """IT, Algorithm 1 (§3.1). See :mod:`estimation.it`.
 
     Args:
@@ -137,14 +171,16 @@ def estimate_icr_it(q, geom: RobotGeometry, params: ITParams = IT_PAPER, diagnos
         geom: the robot.
         params: thresholds; defaults reproduce the paper, ``IT_BEST`` is the improved variant.
         diagnostics: also return an :class:`ITDiagnostics`.
+        num_threads: threads (blocks of samples; None: the cores this process may use).
 
     Returns:
         λ̂ (3,) or (N, 3), canonical sign (:func:`canonical_lambda`), and the diagnostics if asked.
     """
     if not isinstance(params, ITParams):
         raise TypeError(f"params must be ITParams, got {type(params).__name__}")
+    threads = check_threads(num_threads)
     flat, batch = _prepare(q, geom)
-    lam, d2, iters, starts, conv = _it_flat(flat, geom, params)
+    lam, d2, iters, starts, conv = _it_flat(flat, geom, params, threads)
     _canonicalize_batch(lam)
     lam = lam.reshape(batch + (3,))
     if not diagnostics:
@@ -159,7 +195,7 @@ def _check_method(method: str) -> None:
 
 
 def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
-                 oracle_params: OracleParams = ORACLE_DEFAULT) -> np.ndarray:
+                 oracle_params: OracleParams = ORACLE_DEFAULT, num_threads: int | None = None) -> np.ndarray:
     """Estimate the ICR λ̂ ∈ Λ from measured steering angles q.
 
     Args:
@@ -169,19 +205,22 @@ def estimate_icr(q, geom: RobotGeometry, method: str = "IT", *, it_params: ITPar
             (§3.2.1), "LS" (§3.2.2), "NS" (§3.2.3) or "ORACLE" (exhaustive projection, the yardstick).
         it_params: thresholds for "IT" (default ``IT_PAPER``) or "IT+" (default ``IT_BEST``).
         oracle_params: search density for "ORACLE".
+        num_threads: threads of IT, IT+ and ORACLE (blocks of samples; None: the cores this
+            process may use; any count gives the same bits).
 
     Returns:
         (3,) or (N, 3) unit vectors with the canonical sign of :func:`canonical_lambda`.
     """
     _check_method(method)
+    threads = check_threads(num_threads)
     flat, batch = _prepare(q, geom)
-    lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
+    lam = _estimate_flat(flat, geom, method, it_params, oracle_params, threads)
     _canonicalize_batch(lam)
     return lam.reshape(batch + (3,))
 
 
 def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_params: ITParams | None = None,
-                 mu_tol: float = 1e-3, oracle_params: OracleParams = ORACLE_DEFAULT
+                 mu_tol: float = 1e-3, oracle_params: OracleParams = ORACLE_DEFAULT, num_threads: int | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The H state η̂ = (λ̂, μ̂) from the sensors: steering angles q and wheel speeds φ̇.
 
@@ -192,6 +231,7 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
 
     Args:
         q: (n,) or (N, n) measured steering angles [rad]; phidot: same shape, wheel speeds [rad/s].
+        method, it_params, oracle_params, num_threads: as :func:`estimate_icr`.
 
     Returns:
         ``(λ̂, μ̂, S(λ̂), qua)``: (3,)/(N, 3); scalar/(N,); the steering configuration of the
@@ -208,6 +248,7 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
     """
     _check_method(method)
     mu_tol = check_nonnegative("mu_tol [m/s]", mu_tol)
+    threads = check_threads(num_threads)
     flat, batch, shift = _prepare(q, geom, shifts=True)
     ph = np.array(_real_array(phidot, "phidot"), dtype=np.float64)  # a private copy: the kernel scales it in place
     if ph.shape != np.shape(q):
@@ -222,12 +263,12 @@ def estimate_eta(q, phidot, geom: RobotGeometry, method: str = "IT", *, it_param
         # the other stop without turning its speed is the behaviour the default figures were
         # measured with, kept as it is.)
         ph = np.where(np.mod(np.rint(shift / np.pi), 2.0) != 0.0, -ph, ph)
-    lam = _estimate_flat(flat, geom, method, it_params, oracle_params)
+    lam = _estimate_flat(flat, geom, method, it_params, oracle_params, threads)
     beta = np.empty_like(flat)
     mu = np.empty(flat.shape[0])
     qua = np.empty(flat.shape[0])
-    _eta_kernel(lam, flat, ph, geom.a_minus_l, geom.a_perp, geom.b, geom.r, geom.steer_max,
-                float(mu_tol), QUALITY_F, beta, mu, qua, np.empty(geom.n), geom.unlimited_steering)
+    _ETA.run(threads, flat.shape[0], lam, flat, ph, geom.a_minus_l, geom.a_perp, geom.b, geom.r, float(geom.steer_max),
+             float(mu_tol), QUALITY_F, beta, mu, qua, bool(geom.unlimited_steering))
     if shift is not None and geom.unlimited_steering:
         beta += shift  # S(λ̂) as the angles nearest the measured ones
     return lam.reshape(batch + (3,)), mu.reshape(batch), beta.reshape(batch + (geom.n,)), qua.reshape(batch)
