@@ -75,6 +75,13 @@ class AzimutFrontEnd:
         return self.task.physics
 
     @property
+    def num_threads(self) -> int:
+        """Threads of the compiled physics and step pipeline (``num_threads`` given, or the cores
+        this process may use); the controllers' batched steps take the same. Any count gives the
+        same bits."""
+        return self.task.physics.num_threads
+
+    @property
     def limits(self) -> ActuatorLimits:
         """The actuator limits (steering rate/accel/torque, wheel speed/accel/torque)."""
         return self.params.limits

@@ -14,19 +14,17 @@ static obstacles. The pieces:
 * :mod:`azimut_env.physics.layout`: the names of the columns of every state and parameter array;
 * :mod:`azimut_env.physics.stability`: the stability budget that bounds the substep (checked here at
   construction and on a change of mass);
-* :mod:`azimut_env.physics.body_io`: the batched reads and writes of the pymunk bodies;
-* :mod:`azimut_env.physics.contacts`: the substeps through pymunk's contact solver (obstacles);
-* :mod:`azimut_env.physics.obstacles`: the obstacles and the collision shapes;
+* :mod:`azimut_env.physics.body_io`, ``contacts``, ``obstacles``: the batched reads and writes of
+  the pymunk bodies, the substeps through pymunk's contact solver, the obstacles and shapes;
 * :mod:`azimut_env.physics.blowup`, ``energy_check``: the blow-up limits and codes of :meth:`AzimutPhysics.check`.
 
 Without obstacles the whole control period (all substeps, all robots) is one compiled call
-(:func:`~azimut_env.physics.kernels.step_kernel`) that integrates the chassis too; pymunk's
-bodies are read before it and written after it. With obstacles pymunk integrates the chassis:
-each substep the kernel's velocity change is handed to pymunk as a force and torque, and
+(:func:`~azimut_env.physics.kernels.step_kernel`, blocks of robots on ``num_threads`` threads)
+that integrates the chassis too; pymunk's bodies are read before it and written after it. With
+obstacles (and only then do robots have collision shapes) pymunk integrates the chassis: each
+substep the kernel's velocity change is handed to pymunk as a force and torque, and
 ``space.step`` integrates them and resolves the contacts (Chipmunk moves the position with the
-velocity of the start of the substep, then updates the velocity: explicit Euler for the chassis
-pose while in the presence of obstacles).
-Robots have collision shapes (:mod:`azimut_env.physics.obstacles`) only when there are obstacles.
+velocity of the start of the substep, then updates the velocity: explicit Euler for the chassis).
 
 Per-robot parameters live in arrays (``wheel_params``, columns :class:`WP`) so that domain
 randomisation can vary them robot by robot (:meth:`AzimutPhysics.set_wheel_params`,
@@ -42,6 +40,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from functools import partial
 
 import numpy as np
 import pymunk
@@ -52,13 +51,14 @@ from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.physics.body_io import BodyIO
 from azimut_env.physics.contacts import lap, step_with_contacts
 from azimut_env.physics.energy_check import EnergyCheck
-from azimut_env.physics.kernels import step_kernel, summary_kernel
+from azimut_env.physics.kernels import STEP_BLOCKS, SUMMARY_BLOCKS
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, FT, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
 from azimut_env.physics.modules import mechanical_energy, module_impulse_response
 from azimut_env.physics.obstacles import Obstacle, add_obstacle_shape, add_robot_shape, overlapping_shapes
 from azimut_env.physics.stability import check_load_scale, check_stability, stability_figures
 from azimut_env.physics.tire import TS
 from azimut_env.physics.wheel_params import default_wheel_params
+from estimation.threads import check_threads
 
 __all__ = ["AzimutPhysics", "Obstacle", "BlowUpLimits", "BlowUp", "default_wheel_params", "WP", "MS", "JS", "TS",
            "ACC", "BODY", "CMD", "CS", "FT", "RS", "WS"]
@@ -75,6 +75,8 @@ class AzimutPhysics:
         blowup: thresholds of :meth:`check`.
         solver_iterations: pymunk solver iterations per substep (obstacle contacts only since the
             steering modules left pymunk; kept as a knob).
+        num_threads: threads of the compiled substeps and summary, blocks of robots (:mod:`estimation.threads`;
+            None: the cores this process may use); any count gives the same bits.
 
     State accessors return arrays with a leading robot axis N. The state of record between steps
     is the pymunk chassis bodies (pose, velocity) plus ``joint_state`` (β, module rates),
@@ -82,21 +84,18 @@ class AzimutPhysics:
     """
 
     def __init__(self, params: RobotParams | None = None, n_robots: int = 1, control_period: float = 0.02,
-                 substeps: int = 8, blowup: BlowUpLimits | None = None, solver_iterations: int = 20) -> None:
+                 substeps: int = 8, blowup: BlowUpLimits | None = None, solver_iterations: int = 20,
+                 num_threads: int | None = None) -> None:
         self.params = params if params is not None else RobotParams()
-        if int(n_robots) != n_robots or n_robots < 1:
-            raise ValueError(f"n_robots must be a positive integer, got {n_robots!r}")
+        for name, value in (("n_robots", n_robots), ("substeps", substeps), ("solver_iterations", solver_iterations)):
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if not (math.isfinite(control_period) and control_period > 0):
             raise ValueError(f"control_period must be > 0 [s], got {control_period!r}")
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
-        self.n_robots = int(n_robots)
+        self.n_robots, self.substeps, self.solver_iterations = int(n_robots), int(substeps), int(solver_iterations)
         self.n = self.params.n
         self.control_period = float(control_period)
-        self.substeps = int(substeps)
-        if int(solver_iterations) != solver_iterations or solver_iterations < 1:
-            raise ValueError(f"solver_iterations must be a positive integer, got {solver_iterations!r}")
-        self.solver_iterations = int(solver_iterations)
+        self.num_threads = check_threads(num_threads)
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
         self._energy_check = EnergyCheck(self.n_robots, self.blowup)
@@ -159,10 +158,11 @@ class AzimutPhysics:
 
     def _summarize(self, sl: slice = slice(None)) -> None:
         """The summary rows ``sl`` (all robots by default) from the state (:func:`summary_kernel`)."""
-        lim = self.blowup
-        summary_kernel(self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl], self.wheel_params[sl],
-                       self.enabled[sl], self._axis_xy, self.n, 1.0 / self.substeps, SLIP_MEMORY_TIME, lim.speed,
-                       lim.yaw_rate, lim.spin, lim.position, self.summary[sl], self.wheel_summary[sl])
+        lim, out = self.blowup, self.summary[sl]
+        SUMMARY_BLOCKS.run(self.num_threads, out.shape[0], self._state[sl], self.joint_state[sl], self.motor_state[sl],
+                           self.acc[sl], self.wheel_params[sl], self.enabled[sl], self._axis_xy, self.n,
+                           1.0 / self.substeps, SLIP_MEMORY_TIME, lim.speed, lim.yaw_rate, lim.spin, lim.position, out,
+                           self.wheel_summary[sl])
 
     def _read_state(self) -> np.ndarray:
         self._io.read()
@@ -403,7 +403,7 @@ class AzimutPhysics:
             t = lap(tm, "read", t)
         state = self._state
         if not self.obstacles:  # the whole control period in one compiled call
-            step_kernel(state, *args, self.substeps, True)
+            STEP_BLOCKS.run(self.num_threads, self.n_robots, state, *args, self.substeps, True)
             if tm is not None:
                 t = lap(tm, "force", t)
             self._io.write()
@@ -411,7 +411,7 @@ class AzimutPhysics:
                 t = lap(tm, "write", t)
         else:  # pymunk integrates the bodies (forces from the kernel's velocity change) and resolves contacts
             t = step_with_contacts(self.space, self._io, self._before, self.body_inertia, self.substeps, self.dt,
-                                   step_kernel, args, tm, t)
+                                   partial(STEP_BLOCKS.run, self.num_threads, self.n_robots), args, tm, t)
         self._summarize()
         self._energy_check.after(self)
         if tm is not None:

@@ -93,8 +93,9 @@ from azimut_env.physics.modules import (
     stribeck_torque,
 )
 from azimut_env.physics.tire import TS, tire_step_kernel
+from estimation.threads import BlockKernel
 
-__all__ = ["step_kernel", "summary_kernel"]
+__all__ = ["step_kernel", "summary_kernel", "STEP_BLOCKS", "SUMMARY_BLOCKS"]
 
 _CS_COUNT = len(CS)
 
@@ -110,8 +111,9 @@ def _wrap_two_pi(x: float) -> float:
 # helpers it would cost a call per wheel per substep or reorder float operations (bit-identity).
 @njit(cache=True, error_model="numpy")
 def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, transfer, com_h, restitution, dc, drive_dc,
-                n, dt, substeps, integrate):
-    """``substeps`` substeps of every robot (see the module docstring for the equations).
+                n, dt, substeps, integrate, lo, hi):
+    """``substeps`` substeps of the robots ``lo`` to ``hi - 1`` (see the module docstring for the
+    equations; a block of :class:`estimation.threads.BlockKernel`, its work arrays its own).
 
     state (rows, CS): chassis pose and velocity in the world, robot i at row i, updated in place
     (velocities always; positions too when ``integrate``, else pymunk moves the bodies). js
@@ -126,7 +128,6 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
     drive motors' torque–speed line (``WheelParams.drive_model == "dc"``) on top of their current
     limit.
     """
-    n_robots = ms.shape[0]
     omega_new = np.empty(n)
     # the coupled modules' mass matrix (modules.py): B (n, 3), D (n,), S⁻¹, generalised forces, responses
     B = np.zeros((n, 3))
@@ -142,7 +143,7 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
     fric_g = np.ones(n)
     fric_body = np.zeros((n, 3))
     fric_joint = np.zeros((n, n))
-    for i in range(n_robots):
+    for i in range(lo, hi):
         mass = body[i, BODY.MASS]
         inertia = body[i, BODY.MOMENT]
         on = en[i]
@@ -365,8 +366,9 @@ def step_kernel(state, js, ms, ts, cmd, wp, en, acc, body, accel, axis_xy, trans
 # work arrays across robots; split, it would allocate or pass them around and repeat the loops.
 @njit(cache=True)
 def summary_kernel(state, js, ms, acc, wp, en, axis_xy, n, inv_sub, memory, speed_max, yaw_rate_max, spin_max,
-                   position_max, out_r, out_w):
-    """Per-step derived quantities for all robots, one call: out_r (N, RS) and out_w (N, n, WS).
+                   position_max, out_r, out_w, lo, hi):
+    """Per-step derived quantities of the robots ``lo`` to ``hi - 1``: out_r (N, RS) and out_w
+    (N, n, WS) (a block of :class:`estimation.threads.BlockKernel`, its work arrays its own).
 
     Null-space force: the tire forces F (2n, chassis frame) give the net wrench W = G F; the
     least-norm forces with the same wrench are F* = Gᵀ (G Gᵀ)⁻¹ W, and ‖F − F*‖ is their null-space
@@ -377,13 +379,12 @@ def summary_kernel(state, js, ms, acc, wp, en, axis_xy, n, inv_sub, memory, spee
     :mod:`azimut_env.physics.antagonism`). The blow-up code (:class:`~azimut_env.physics.blowup.BlowUp`)
     compares with the ``*_max`` limits.
     """
-    n_robots = ms.shape[0]
     P = np.zeros((n, 2))
     F = np.zeros((n, 2))
     gams = np.zeros(n)
     d_long = np.zeros(n)
     d_lat = np.zeros(n)
-    for i in range(n_robots):
+    for i in range(lo, hi):
         x, y, th = state[i, CS.X], state[i, CS.Y], state[i, CS.TH]
         vx, vy, w = state[i, CS.VX], state[i, CS.VY], state[i, CS.W]
         c, s = math.cos(th), math.sin(th)
@@ -480,3 +481,9 @@ def summary_kernel(state, js, ms, acc, wp, en, axis_xy, n, inv_sub, memory, spee
         elif pmax > position_max:
             code = BlowUp.POSITION.value
         out_r[i, RS.CODE] = code
+
+
+#: the substeps and the summary over blocks of robots, one per thread (:mod:`estimation.threads`;
+#: a block: at least 4 robots, about 20 µs of substeps; the summary's blocks at least 16)
+STEP_BLOCKS = BlockKernel(step_kernel, min_rows=4)
+SUMMARY_BLOCKS = BlockKernel(summary_kernel, min_rows=16)

@@ -22,6 +22,7 @@ from azimut_env.params import RobotParams, SensorParams
 from azimut_env.task.localisation import LocalisationParams, check_pose_source
 from azimut_env.task.reward import OFF_TRACK, RENAMED_TERMS, check_reward_weights, default_reward_weights
 from azimut_env.validation import check_fields, check_int, check_nonnegative, check_positive, check_range
+from estimation.threads import check_threads
 
 __all__ = ["TaskConfig", "resolve_params", "robot_label", "robot_of", "task_settings", "front_signature",
            "TASK_CONFIG_FIELDS", "LEGACY_WEIGHT_KEYWORDS", "V1_REWARD_WEIGHTS", "v1_kwargs"]
@@ -64,6 +65,9 @@ class TaskConfig:
             :mod:`azimut_env.task.localisation`).
         localisation: :class:`~azimut_env.task.localisation.LocalisationParams` (used with
             ``pose_source="odometry"``).
+        num_threads: threads of the compiled physics and step pipeline, each taking a block of
+            robots (:mod:`estimation.threads`); None (default): the cores this process may use.
+            Any count gives the same bits; one robot (the single env) runs on one.
     """
 
     control_period: float = 0.02
@@ -84,6 +88,7 @@ class TaskConfig:
     action_latency: int = 0
     pose_source: str = "true"
     localisation: LocalisationParams = field(default_factory=LocalisationParams)
+    num_threads: int | None = None
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -107,6 +112,8 @@ class TaskConfig:
         fix("lookahead_spacing", check_positive("lookahead_spacing", self.lookahead_spacing))
         fix("action_latency", check_int("action_latency", self.action_latency, min_value=0, max_value=1000))
         check_pose_source(self.pose_source)
+        if self.num_threads is not None:
+            fix("num_threads", check_threads(self.num_threads))
         if not isinstance(self.localisation, LocalisationParams):
             raise TypeError(f"localisation must be LocalisationParams, got {type(self.localisation).__name__}")
 

@@ -119,7 +119,7 @@ class AzimutTask:
         n, N = self.n, self.n_robots
         self.physics = AzimutPhysics(params, n_robots=N, control_period=config.control_period,
                                      substeps=config.substeps, blowup=BlowUpLimits(),
-                                     solver_iterations=config.solver_iterations)
+                                     solver_iterations=config.solver_iterations, num_threads=config.num_threads)
         self.physics.set_obstacles(obstacles)
         self.default_obstacles = self.physics.obstacles
         self.track_spec = track
@@ -143,6 +143,7 @@ class AzimutTask:
                                                        config.heading_scale, config.antagonism_cap)
         self.sensors = SensorState(params.sensors, config.control_period, N, n,
                                    wrap_angles=params.geometry.unlimited_steering)
+        self.sensors.num_threads = self.physics.num_threads
         # the last readings, by the names the task uses (the sensors' arrays, written in place)
         self.beta_m, self.phidot_m, self.motor_m = self.sensors.beta, self.sensors.phidot, self.sensors.motor
         # the pose source (azimut_env.task.localisation): with "odometry", the pose estimates and the
@@ -170,8 +171,9 @@ class AzimutTask:
         p = self._pipelines
         if p is None or p[0].jit != self.jit:
             ta, ns = task_arrays(self, self.jit)
-            p = self._pipelines = (Pipeline(step_stages(self, self.jit), ta, ns, self.jit),
-                                   Pipeline(reset_stages(self, self.jit), ta, ns, self.jit))
+            threads = self.physics.num_threads
+            p = self._pipelines = (Pipeline(step_stages(self, self.jit), ta, ns, self.jit, threads),
+                                   Pipeline(reset_stages(self, self.jit), ta, ns, self.jit, threads))
         return p
 
     # ------------------------------------------------------------------ reset

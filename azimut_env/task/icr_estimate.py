@@ -22,18 +22,19 @@ MU_TOL = 1e-3
 
 @njit(cache=True)
 def estimate(ta, rows, action):
-    """The IT estimate of the robots of ``rows`` (every robot: one call over all rows; else robot
-    by robot, the same bits)."""
+    """The IT estimate of the robots of ``rows``: one call per run of consecutive rows (every
+    robot: one call), the same bits as robot by robot."""
     n_rows = rows.shape[0]
-    every = rows.all()
-    for j in range(1 if every else n_rows):
-        if every:
-            a, b = 0, n_rows
-        elif rows[j]:
-            a, b = j, j + 1
-        else:
+    a = 0
+    while a < n_rows:
+        if not rows[a]:
+            a += 1
             continue
+        b = a + 1
+        while b < n_rows and rows[b]:
+            b += 1
         _eta_it_rows(ta.beta_m[a:b], ta.phidot_m[a:b], ta.a_minus_l, ta.a_perp, ta.b, ta.r, ta.steer_min,
                      ta.steer_max, ta.unlimited, ta.eps_delta, ta.eps_lambda, ta.max_iter, ta.min_step, ta.n_starts,
                      ta.race, ta.accept_d2, MU_TOL, QUALITY_F, ta.lam_hat[a:b], ta.mu_hat[a:b], ta.beta_est[a:b],
                      ta.qua[a:b])
+        a = b

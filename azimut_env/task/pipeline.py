@@ -21,9 +21,12 @@ observe            :mod:`azimut_env.task.observation` (its table)      both
 (the ``info`` dict is built afterwards from its table, :mod:`azimut_env.task.info`). A
 :class:`Pipeline` runs the stages in order for any mask of rows: the consecutive compiled stages
 as one generated compiled function (a step of the single env with the true pose: one call), a
-Python stage (odometry) between them. With ``jit=False`` it runs the same stages as plain Python
-(their ``py_func``, the generated ones from the same source): the reference the tests compare
-the compiled path with, bit for bit (``tests/azimut_env/test_compiled_step.py``).
+Python stage (odometry) between them. The compiled function runs the robots in contiguous blocks,
+one per thread (:class:`estimation.threads.BlockKernel`: each block every stage in order on its
+rows; a stage touches only the rows it is given, so any thread count gives the same bits). With
+``jit=False`` it runs the same stages as plain Python (their ``py_func``, the generated ones from
+the same source): the reference the tests compare the compiled path with, bit for bit
+(``tests/azimut_env/test_compiled_step.py``).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from azimut_env.task import sensors
 from azimut_env.task.actions import remember_action
@@ -42,6 +46,7 @@ from azimut_env.task.observation import observe_kernel
 from azimut_env.task.reward import reward_kernel
 from azimut_env.task.termination import start_episode, terminate_kernel
 from azimut_env.task.track_state import track
+from estimation.threads import BlockKernel
 
 __all__ = ["Pipeline", "step_stages", "reset_stages"]
 
@@ -65,11 +70,28 @@ def _is_compiled(stage: Callable) -> bool:
     return hasattr(stage, "py_func")
 
 
+@njit(cache=True)
+def block_rows(rows, lo, hi):
+    """The row mask ``rows`` (N,) restricted to robots ``lo`` to ``hi - 1`` (``rows`` itself when
+    that is all of them)."""
+    if lo == 0 and hi == rows.shape[0]:
+        return rows
+    block = np.zeros_like(rows)
+    block[lo:hi] = rows[lo:hi]
+    return block
+
+
 def _fuse(stages: Sequence[Callable]) -> Callable:
-    """One compiled function calling the compiled ``stages`` in order."""
-    lines = ["def _f(ta, rows, action):"] + [f"    _stage_{j}(ta, rows, action)" for j in range(len(stages))]
-    namespace = {f"_stage_{j}": s for j, s in enumerate(stages)}
+    """One compiled function ``(ta, rows, action, lo, hi)`` calling the compiled ``stages`` in
+    order on the rows of ``rows`` from ``lo`` to ``hi - 1``."""
+    lines = ["def _f(ta, rows, action, lo, hi):", "    block = _block_rows(rows, lo, hi)"] + \
+        [f"    _stage_{j}(ta, block, action)" for j in range(len(stages))]
+    namespace = {"_block_rows": block_rows, **{f"_stage_{j}": s for j, s in enumerate(stages)}}
     return generated_function("_pipeline", "\n".join(lines) + "\n", namespace, __file__, __name__)
+
+
+#: the fewest robots a thread takes in a pipeline call (a block must outweigh waking a thread)
+MIN_BLOCK_ROWS = 4
 
 
 class Pipeline:
@@ -79,19 +101,22 @@ class Pipeline:
         stages: the stage functions (:func:`step_stages`, :func:`reset_stages`).
         ta: the compiled struct (None with ``jit=False``); ns: the same fields by name.
         jit: False: every stage as plain Python (``py_func``), the reference path.
+        num_threads: threads of the compiled stages (blocks of at least :data:`MIN_BLOCK_ROWS`
+            robots; checked where it entered, :class:`~azimut_env.task.config.TaskConfig`).
     """
 
-    def __init__(self, stages: Sequence[Callable], ta: Any, ns: Any, jit: bool = True) -> None:
+    def __init__(self, stages: Sequence[Callable], ta: Any, ns: Any, jit: bool = True, num_threads: int = 1) -> None:
         self.stages = tuple(stages)
         self.ta, self.ns, self.jit = ta, ns, jit
-        calls: list[tuple[Callable, Any]] = []
+        self.num_threads = num_threads
+        calls: list[tuple[Any, Any]] = []
         group: list[Callable] = []
         for stage in (*self.stages, None):
             if jit and stage is not None and _is_compiled(stage):
                 group.append(stage)
                 continue
             if group:
-                calls.append((_fuse(group) if len(group) > 1 else group[0], ta))
+                calls.append((BlockKernel(_fuse(group), MIN_BLOCK_ROWS), ta))
                 group = []
             if stage is not None:
                 calls.append((py_func(stage), ns))
@@ -99,7 +124,10 @@ class Pipeline:
 
     def __call__(self, rows: np.ndarray, action: np.ndarray) -> None:
         for fn, arrays in self._calls:
-            fn(arrays, rows, action)
+            if isinstance(fn, BlockKernel):
+                fn.run(self.num_threads, rows.shape[0], arrays, rows, action)
+            else:
+                fn(arrays, rows, action)
 
     def run_timed(self, rows: np.ndarray, action: np.ndarray, times: dict[str, float],
                   label: Callable[[Callable], str]) -> None:

@@ -22,6 +22,7 @@ from numba.typed import List as NumbaList
 
 from azimut_env.params import SensorParams
 from azimut_env.physics.layout import MS, WS
+from estimation.threads import BlockKernel
 
 # plain-int columns (numba folds them; the IntEnums stay the names)
 _WS_BETA, _MS_THETA, _MS_PHI, _MS_PHIDOT = int(WS.BETA), int(MS.THETA), int(MS.PHI), int(MS.PHIDOT)
@@ -151,16 +152,21 @@ def measure_batch(beta, motor, phi, phi_prev, phidot, dt: float, params: SensorP
 
 
 @njit(cache=True)
-def _draw_normals_kernel(rngs, rows, out):
-    """out[i] (3, n) = rngs[i].standard_normal((3, n)) for the rows where ``rows`` is True: the
-    same numbers, in the same order, as NumPy's (numba's Generator runs NumPy's algorithms on the
-    same bit generator state)."""
-    for i in range(len(rngs)):
+def _draw_normals_kernel(rngs, rows, out, lo, hi):
+    """out[i] (3, n) = rngs[i].standard_normal((3, n)) for the rows ``lo`` to ``hi - 1`` where
+    ``rows`` is True: the same numbers, in the same order, as NumPy's (numba's Generator runs
+    NumPy's algorithms on the same bit generator state; each robot its own generator, so a block
+    of robots per thread draws the same numbers)."""
+    for i in range(lo, hi):
         if rows[i]:
             rng = rngs[i]
             for j in range(out.shape[1]):
                 for k in range(out.shape[2]):
                     out[i, j, k] = rng.standard_normal()
+
+
+#: the draws over blocks of robots (a block: at least 32 robots)
+_DRAW_NORMALS = BlockKernel(_draw_normals_kernel, min_rows=32)
 
 
 class SensorState:
@@ -187,6 +193,8 @@ class SensorState:
         self.phi_prev = np.zeros((n_robots, n))
         self.normals = np.zeros((n_robots, 3, n))
         self._out = np.empty((n_robots, 3, n))
+        #: threads of the compiled draw (the task sets its own; any count draws the same numbers)
+        self.num_threads = 1
 
     def draw_bias(self, i: int, rng: np.random.Generator) -> None:
         """Robot i's steering encoder offsets for a new episode (n normal draws when the bias is on)."""
@@ -203,7 +211,7 @@ class SensorState:
         same streams). ``all_rows``: ``rows`` selects every robot."""
         normals = self.normals
         if isinstance(rngs, NumbaList):
-            _draw_normals_kernel(rngs, rows, normals)
+            _DRAW_NORMALS.run(self.num_threads, len(rngs), rngs, rows, normals)
         elif all_rows:
             for i, rng in enumerate(rngs):
                 rng.standard_normal(out=normals[i])
