@@ -49,7 +49,14 @@ import numpy as np
 from control.commands import WheelCommand
 
 __all__ = ["Controller", "ControllerSpecError", "register_controller", "make_controller", "check_spec",
-           "controller_names", "is_prefixed"]
+           "controller_names", "is_prefixed", "env_threads"]
+
+
+def env_threads(env: Any) -> int:
+    """The threads a batched controller's compiled step takes: the env's own (``num_threads`` of
+    the vector env, :mod:`estimation.threads`), 1 for an env without that attribute. Any count
+    gives the same commands."""
+    return int(getattr(env, "num_threads", 1))
 
 
 @runtime_checkable
@@ -69,6 +76,9 @@ class Controller(Protocol):
     workers: a controller that is not independent gives results that depend on ``--workers``
     and on which episodes share a batch, silently. :func:`control.checks.check_batch_independence`
     runs two robots as a batch and each alone and says where they differ.
+
+    A batched controller runs its compiled step on the env's threads (:func:`env_threads`): its
+    rows in blocks, one per thread, which independence makes the same bits for any count.
 
     The episode loop checks what ``act`` returns (:func:`control.commands.checked_command`) and
     counts the commanded limits the set-points exceed from the set-points themselves

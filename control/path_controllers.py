@@ -29,6 +29,7 @@ import numpy as np
 
 from azimut_env.tracks import SCENARIO_NAMES
 from control.commands import WheelCommand
+from control.controller import env_threads
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollower, PathFollowerConfig
 from control.icr.batch import BatchICRController
@@ -96,7 +97,7 @@ class _PathFollowing:
         num = int(np.shape(env.measured_beta)[0])
         if self.followers is None or self.followers.num != num:
             self.followers = BatchFollower(num, self.follower_config, stop_mask=self._stop_mask(env),
-                                           dt=env.control_period)
+                                           dt=env.control_period, num_threads=env_threads(env))
         tracks, progress = env.tracks, np.atleast_1d(env.progress)
         for i in rows:
             cfg = self.follower_config
@@ -196,7 +197,7 @@ class ICRPathController(_PathFollowing):
         self._reset_followers(env, rows)
         if self.controller is None or self.controller.num != self.followers.num:
             self.controller = BatchICRController(self.followers.num, env.geometry, env.limits, env.control_period,
-                                                 self.icr_config)
+                                                 self.icr_config, self.followers.num_threads)
         lam_hat, _ = env.estimated_eta
         self.controller.reset(rows, lam_hat[rows], env.measured_beta[rows], env.measured_phidot[rows])
 
@@ -245,7 +246,7 @@ class TwistPathController(_PathFollowing):
         self._reset_followers(env, rows)
         if self.controller is None or self.controller.num != self.followers.num:
             self.controller = SwerveBatch(self.followers.num, env.geometry, env.limits, env.control_period,
-                                          self.swerve_config)
+                                          self.swerve_config, self.followers.num_threads)
         self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
 
     def act(self, env, obs) -> WheelCommand:
@@ -276,7 +277,7 @@ class SetpointPathController(_PathFollowing):
         self._reset_followers(env, rows)
         if self.controller is None or self.controller.num != self.followers.num:
             self.controller = SetpointBatch(self.followers.num, env.geometry, env.limits, env.control_period,
-                                            self.setpoint_config)
+                                            self.setpoint_config, self.followers.num_threads)
         self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
 
     def act(self, env, obs) -> WheelCommand:

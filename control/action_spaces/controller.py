@@ -22,8 +22,9 @@ import numpy as np
 
 from azimut_env.validation import check_bool, check_positive, check_range
 from control.action_spaces.shaping import SHAPED_TARGET_CONFIG, initial_frame
-from control.action_spaces.targets import rate_targets, residual_targets, shaped_targets
+from control.action_spaces.targets import RATE_TARGETS, RESIDUAL_TARGETS, SHAPED_TARGETS
 from control.commands import WheelCommand
+from control.controller import env_threads
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollowerConfig
 from control.icr.batch import BatchICRController
@@ -102,8 +103,10 @@ class ActionController:
         geom, limits, dt = env.geometry, env.limits, env.control_period
         self.num = N = int(np.shape(env.measured_beta)[0])
         self.geometry, self.limits, self.dt = geom, limits, float(dt)
-        self.icr = BatchICRController(N, geom, limits, dt, self.icr_config) if controller == "icr" else None
-        self.swerve = SwerveBatch(N, geom, limits, dt, swerve_config) if controller == "swerve" else None
+        #: threads of the compiled target and controller steps (the env's: :func:`~control.controller.env_threads`)
+        self.threads = threads = env_threads(env)
+        self.icr = BatchICRController(N, geom, limits, dt, self.icr_config, threads) if controller == "icr" else None
+        self.swerve = SwerveBatch(N, geom, limits, dt, swerve_config, threads) if controller == "swerve" else None
         # icr_rate's integrated target λ_s, μ_s and tangent frame; push past a stop (icr_rate and
         # shaped absolute targets, which step from the controller's own reference λ)
         self._lam_s = np.tile([0.0, 0.0, 1.0], (N, 1))
@@ -112,7 +115,7 @@ class ActionController:
         self._push = np.zeros(N)
         stop_mask = functools.partial(reference_stop_mask, geom=geom, axis_margin=self.icr_config.axis_margin)
         # residual only: the path followers of all robots, one compiled call per step
-        self.follower = BatchFollower(N, self.follower_config, stop_mask, dt) if action == "residual" else None
+        self.follower = BatchFollower(N, self.follower_config, stop_mask, dt, threads) if action == "residual" else None
         self._cos_margin = float(np.cos(self.icr_config.axis_margin))
 
     @property
@@ -151,12 +154,14 @@ class ActionController:
                  bool(geom.unlimited_steering))
         if self.kind == "residual":  # the pose the observation saw, as every controller (true_pose: evaluation only)
             twists = self.follower.step(env.estimated_pose, rows)
-            residual_targets(twists, a, self.residual_angle, self.residual_mu, *shape, lam_d, mu_d, held)
+            RESIDUAL_TARGETS.run(self.threads, twists.shape[0], twists, a, self.residual_angle, self.residual_mu,
+                                 *shape, lam_d, mu_d, held)
             return lam_d, mu_d, held
         idx = rows.astype(np.int64)
         if self.kind == "icr_rate":
-            rate_targets(idx, a, self._lam_s, self._e1, self._push, self._mu_s, self.lambda_rate_max, self.mu_accel,
-                         self.mu_max, dt, self.cross_push, *shape, lam_d, mu_d, held)
+            RATE_TARGETS.run(self.threads, idx.shape[0], idx, a, self._lam_s, self._e1, self._push, self._mu_s,
+                             self.lambda_rate_max, self.mu_accel, self.mu_max, dt, self.cross_push, *shape, lam_d,
+                             mu_d, held)
             return lam_d, mu_d, held
         if self.kind == "icr_target":
             lam_t, mu_t = icr_target_from_action(a, self.mu_max, self.min_norm, self.signed_mu)
@@ -167,8 +172,9 @@ class ActionController:
         # one bounded step ahead of the controller's own reference λ; unsigned ICR targets: λ_d is
         # the direction of motion (μ_d ≥ 0), else the nearer representative
         lam_t, mu_t = np.ascontiguousarray(lam_t), np.ascontiguousarray(mu_t, dtype=np.float64)
-        shaped_targets(idx, self.icr.state.lam, lam_t, mu_t, self._push, self.kind == "twist" or self.signed_mu,
-                       self.target_rate * dt, self.cross_push, *shape, lam_d, mu_d, held)
+        SHAPED_TARGETS.run(self.threads, idx.shape[0], idx, self.icr.state.lam, lam_t, mu_t, self._push,
+                           self.kind == "twist" or self.signed_mu, self.target_rate * dt, self.cross_push, *shape,
+                           lam_d, mu_d, held)
         return lam_d, mu_d, held
 
     def command(self, env, actions: np.ndarray, rows: np.ndarray) -> WheelCommand:

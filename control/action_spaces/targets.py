@@ -26,8 +26,9 @@ import numpy as np
 from numba import njit
 
 from control.icr.kernels import dot3, norm3, sphere_angle3, steering_row
+from estimation.threads import BlockKernel
 
-__all__ = ["residual_targets", "rate_targets", "shaped_targets"]
+__all__ = ["residual_targets", "rate_targets", "shaped_targets", "RESIDUAL_TARGETS", "RATE_TARGETS", "SHAPED_TARGETS"]
 
 
 @njit(cache=True)
@@ -92,11 +93,12 @@ def _advance(lam, prop, push, cross_push, E, P, steer_max, s_unit, cos_margin, u
 
 @njit(cache=True)
 def residual_targets(twists, actions, residual_angle, residual_mu, E, P, steer_max, s_unit, cos_margin, unlimited,
-                     lam_out, mu_out, held_out) -> None:
-    """The residual action space's targets of M robots: the follower's chassis twists (M, 3) and
-    the clipped actions (M, 3) -> λ_d (M, 3), μ_d (M,), held (M,)."""
+                     lam_out, mu_out, held_out, lo, hi) -> None:
+    """The residual action space's targets of robots ``lo`` to ``hi - 1`` of M (a block of
+    :class:`estimation.threads.BlockKernel`): the follower's chassis twists (M, 3) and the clipped
+    actions (M, 3) -> λ_d (M, 3), μ_d (M,), held (M,)."""
     lam_f, frame, prop = np.empty(3), np.empty(3), np.empty(3)
-    for m in range(twists.shape[0]):
+    for m in range(lo, hi):
         v0, v1, v2 = -twists[m, 1], twists[m, 0], twists[m, 2]  # estimation.hrep.eta_from_twist
         mu = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         if mu > 0:
@@ -112,12 +114,12 @@ def residual_targets(twists, actions, residual_angle, residual_mu, E, P, steer_m
 
 @njit(cache=True)
 def rate_targets(rows, actions, lam_s, e1, push, mu_s, lambda_rate_max, mu_accel, mu_max, dt, cross_push, E, P,
-                 steer_max, s_unit, cos_margin, unlimited, lam_out, mu_out, held_out) -> None:
-    """The ICR-rate action space's step for the robots ``rows``: the clipped actions (M, 3) move
-    each robot's (λ_s, μ_s) and tangent frame e₁ ((N, …), updated in place); λ_d (M, 3),
-    μ_d (M,), held (M,) out."""
+                 steer_max, s_unit, cos_margin, unlimited, lam_out, mu_out, held_out, lo, hi) -> None:
+    """The ICR-rate action space's step for the robots ``rows[lo:hi]`` (a block; ``rows``
+    distinct): the clipped actions (M, 3) move each robot's (λ_s, μ_s) and tangent frame e₁
+    ((N, …), updated in place); λ_d (M, 3), μ_d (M,), held (M,) out."""
     prop, e = np.empty(3), np.empty(3)
-    for m in range(rows.shape[0]):
+    for m in range(lo, hi):
         i = rows[m]
         lam = lam_s[i]
         _exp_step(lam, e1[i], actions[m, 0] * lambda_rate_max, actions[m, 1] * lambda_rate_max, dt, prop)
@@ -141,12 +143,12 @@ def rate_targets(rows, actions, lam_s, e1, push, mu_s, lambda_rate_max, mu_accel
 
 @njit(cache=True)
 def shaped_targets(rows, lam_ref, lam_t, mu_t, push, nearer, max_angle, cross_push, E, P, steer_max, s_unit,
-                   cos_margin, unlimited, lam_out, mu_out, held_out) -> None:
-    """:func:`~control.action_spaces.shaping.shape_target` for the robots ``rows``: the
+                   cos_margin, unlimited, lam_out, mu_out, held_out, lo, hi) -> None:
+    """:func:`~control.action_spaces.shaping.shape_target` for the robots ``rows[lo:hi]`` (a block): the
     controller's reference λ (N, 3), the absolute targets (M, 3), (M,) and each robot's push
     (N,, updated in place) -> λ_s (M, 3), μ_t (M,), held (M,)."""
     tgt, prop = np.empty(3), np.empty(3)
-    for m in range(rows.shape[0]):
+    for m in range(lo, hi):
         i = rows[m]
         lam = lam_ref[i]
         mu = mu_t[m]
@@ -172,3 +174,9 @@ def shaped_targets(rows, lam_ref, lam_t, mu_t, push, nearer, max_angle, cross_pu
         push[i] = p
         held_out[m] = held
         mu_out[m] = mu
+
+
+#: the three target stages over blocks of robots (a block: at least 32 robots, ~20 µs)
+RESIDUAL_TARGETS = BlockKernel(residual_targets, min_rows=32)
+RATE_TARGETS = BlockKernel(rate_targets, min_rows=32)
+SHAPED_TARGETS = BlockKernel(shaped_targets, min_rows=32)

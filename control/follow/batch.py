@@ -37,6 +37,7 @@ from azimut_env.tracks.query import segment_step
 from azimut_env.typed_lists import array_list, set_item
 from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
 from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress, merge_stops
+from estimation.threads import BlockKernel, check_threads
 
 __all__ = ["BatchFollower", "FollowerBatchOutput", "FC", "FS", "FT", "FO"]
 
@@ -277,14 +278,15 @@ def _eta(out):
 
 
 @njit(cache=True)
-def follow_kernel(packs, stops, holds, cusps, tracks, cfg, state, poses, rows, dt, out):
-    """``PathFollower.step`` of the robots ``rows`` (M,) at ``poses`` (N, 3): robot i's packed
+def follow_kernel(packs, stops, holds, cusps, tracks, cfg, state, poses, rows, dt, out, lo, hi):
+    """``PathFollower.step`` of the robots ``rows[lo:hi]`` (a block of
+    :class:`estimation.threads.BlockKernel`; ``rows`` (M,) distinct) at ``poses`` (N, 3): robot i's packed
     track ``packs[i]`` (10, m), stop points ``stops[i]``, holds ``holds[i]`` (2, h), cusps ``cusps[i]``
     (:func:`~control.follow.cusps.cusp_table`), track scalars
     ``tracks[i]`` (columns :class:`FT`), gains ``cfg[i]`` (:class:`FC`) and state ``state[i]``
     (:class:`FS`, updated in place); one output row per robot of ``rows`` into ``out`` (M, len(FO))."""
     ref = np.empty(7)
-    for r in range(rows.shape[0]):
+    for r in range(lo, hi):
         i = rows[r]
         P, c, st, o = packs[i], cfg[i], state[i], out[r]
         closed, length = tracks[i, FT.CLOSED] != 0, tracks[i, FT.LENGTH]
@@ -310,6 +312,9 @@ def follow_kernel(packs, stops, holds, cusps, tracks, cfg, state, poses, rows, d
 
 
 # ----------------------------------------------------------------------------- Python side
+
+#: the followers' step over blocks of robots (a block: at least 8 robots)
+_FOLLOW = BlockKernel(follow_kernel, min_rows=8)
 
 
 class FollowerBatchOutput(NamedTuple):
@@ -340,9 +345,12 @@ class BatchFollower:
     Args:
         num: N. config: the followers' gains (each robot's may be replaced at its reset).
         stop_mask: as :class:`~control.follow.path_follower.PathFollower`. dt: control period [s].
+        num_threads: threads of the compiled step (None: the cores this process may use; any
+            count gives the same bits).
     """
 
-    def __init__(self, num: int, config: PathFollowerConfig | None = None, stop_mask=None, dt: float = 0.02) -> None:
+    def __init__(self, num: int, config: PathFollowerConfig | None = None, stop_mask=None, dt: float = 0.02,
+                 num_threads: int | None = None) -> None:
         self.config = config or PathFollowerConfig()
         if not isinstance(self.config, PathFollowerConfig):
             raise TypeError(f"config must be a PathFollowerConfig or None, got {type(config).__name__}")
@@ -350,6 +358,8 @@ class BatchFollower:
             raise ValueError(f"dt must be finite and > 0, got {dt!r}")
         self.stop_mask, self.dt = stop_mask, float(dt)
         self.num = int(num)
+        #: threads of the compiled step (blocks of robots; None given: the cores this process may use)
+        self.num_threads = check_threads(num_threads)
         self.cfg = np.tile(_config_row(self.config), (num, 1))
         self.state = np.zeros((num, len(FS)))
         self.tracks = np.zeros((num, len(FT)))
@@ -409,9 +419,11 @@ class BatchFollower:
     def _run(self, poses: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
         """The kernel's (len(rows), len(FO)) outputs of the robots ``rows`` (default all)."""
         rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.int64)
+        if self.num_threads > 1 and np.unique(rows).size != rows.size:
+            raise ValueError("rows must be distinct robots")
         out = np.empty((rows.size, len(FO)))
-        follow_kernel(self._packs, self._stops, self._holds, self._cusps, self.tracks, self.cfg, self.state,
-                      np.ascontiguousarray(poses, dtype=np.float64), rows, self.dt, out)
+        _FOLLOW.run(self.num_threads, rows.size, self._packs, self._stops, self._holds, self._cusps, self.tracks,
+                    self.cfg, self.state, np.ascontiguousarray(poses, dtype=np.float64), rows, self.dt, out)
         return out
 
     def step_all(self, poses: np.ndarray, rows: np.ndarray | None = None) -> FollowerBatchOutput:

@@ -24,6 +24,7 @@ from control.icr.config import ICRControllerConfig, Mode
 from control.icr.state import ICRBatchState, initial_state_batch
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
+from estimation.threads import check_threads
 
 __all__ = ["BatchICRController"]
 
@@ -45,10 +46,12 @@ class BatchICRController:
     Args:
         num: robots N. geom: the robot; limits: actuator limits; dt: control period [s];
         config: tuning (default :class:`~control.icr.config.ICRControllerConfig`).
+        num_threads: threads of the compiled step (None: the cores this process may use; any
+            count gives the same bits).
     """
 
     def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float,
-                 config: ICRControllerConfig | None = None) -> None:
+                 config: ICRControllerConfig | None = None, num_threads: int | None = None) -> None:
         if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 1:
             raise ValueError(f"num must be an int >= 1, got {num!r}")
         if not isinstance(geom, RobotGeometry):
@@ -61,6 +64,8 @@ class BatchICRController:
             raise ValueError(f"dt must be finite and > 0, got {dt!r}")
         self.num, self.geom, self.limits, self.dt = int(num), geom, limits, float(dt)
         self.config = config or ICRControllerConfig()
+        #: threads of the compiled step (blocks of robots)
+        self.num_threads = check_threads(num_threads)
         self.state = _blank_state(self.num, geom.n)
         self._constants = compiled_constants(geom, limits, self.config, self.dt)
         #: (N,) bool: the robots reset at least once (only those can be stepped)
@@ -91,6 +96,6 @@ class BatchICRController:
         self.state, cmd = compiled_control_step_batch(self.state, lam_hat, mu_hat, beta, phidot, lam_d, mu_d, self.geom,
                                                       self.limits, self.config, self.dt, rows=rows,
                                                       constants=self._constants, plan_side=plan_side,
-                                                      plan_excursion=plan_excursion)
+                                                      plan_excursion=plan_excursion, num_threads=self.num_threads)
         return WheelCommand(beta=cmd.beta, phidot=cmd.phidot, beta_rate=cmd.beta_rate, beta_accel=cmd.beta_accel,
                             phiddot=cmd.phiddot, info=cmd.info, mode=cmd.info["mode"], events=cmd.info["events"])

@@ -75,6 +75,7 @@ from control.icr.kernels_motion import coordinated_row, reconfigure_row
 from control.icr.state import ICRBatchState
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
+from estimation.threads import BlockKernel
 
 __all__ = ["compiled_control_step_batch", "compiled_constants"]
 
@@ -163,14 +164,16 @@ def _plan_target(c, side, ld, out, neg, other) -> None:
 
 
 @njit(cache=True)
-def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
-    """The step of the robots ``rows``: ``c`` the constants; ``state0`` and ``state1`` the fields of
+def _step_kernel(rows, c, state0, state1, inputs, outputs, lo, hi) -> None:
+    """The step of the robots ``rows[lo:hi]`` (a block of :class:`estimation.threads.BlockKernel`;
+    its work space its own; the inputs checked by :func:`_validate` first): ``c`` the constants;
+    ``state0`` and ``state1`` the fields of
     the state before and after the step, in :class:`~control.icr.state.ICRBatchState`'s order
     ((N, …) arrays, ``state1`` already a copy of ``state0``); ``inputs`` (λ̂, μ̂, β, φ̇, λ_d, μ_d,
     planned cell (M, n): ±1 per stop circle, all 0 without a plan; planned excursion (M,): 1.0 where
     the plan expects the target outside that cell) and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c,
     λ_target, μ_target, axis_cap, event, κ, saturated, held) are (M, …), row m of them is robot
-    rows[m]. Returns 0, or (nothing written) 1 + the index of the first failed input check in :data:`_ERRORS`."""
+    rows[m] (distinct robots)."""
     # One long function on purpose: the whole step of a robot (target, modes, commands) reads and
     # writes one work space row by row in a single compiled call, with no allocation per robot;
     # the building blocks it calls (kernels.py, kernels_motion.py) are the named stages, and
@@ -182,9 +185,6 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
     lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in, plan, excursion = inputs
     beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event_out, kappa_out, saturated, \
         held_out = outputs
-    code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in)
-    if code:
-        return code
     E, P, s_unit, normals, lim, tune, dt = c.E, c.P, c.s_unit, c.normals, c.lim, c.tune, c.dt
     steer_max = c.steer_max
     n = E.shape[0]
@@ -197,7 +197,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
     lam_o, lam_rate_o, b1, r1, p1 = ws[WS.LAM1, :3], ws[WS.LAM_RATE1, :3], ws[WS.BETA1, :n], ws[WS.RATE1, :n], \
         ws[WS.PHIDOT1, :n]
     bt, measured_rate, arc = ws[WS.BETA_TARGET, :n], ws[WS.MEASURED_RATE, :n], ws[WS.ARC, :n]
-    for m in range(rows.shape[0]):
+    for m in range(lo, hi):
         i = rows[m]
         for j in range(3):
             lam[j], rlam[j], s_lam[j], s_lam_rate[j] = lam0[i, j], rlam0[i, j], lam0[i, j], lam_rate0[i, j]
@@ -375,7 +375,10 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs) -> int:
         kappa_out[m] = kap
         saturated[m] = sat
         held_out[m] = held
-    return 0
+
+
+#: the step over blocks of robots (a block: at least 4 robots)
+_STEP = BlockKernel(_step_kernel, min_rows=4)
 
 
 def _rows_array(rows, num: int) -> np.ndarray:
@@ -405,8 +408,8 @@ def _float_rows(x, name: str, shape: tuple[int, ...]) -> np.ndarray:
 
 def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d,
                                 geom: RobotGeometry, limits: ActuatorLimits, config: ICRControllerConfig, dt: float,
-                                rows=None, constants=None, plan_side=None,
-                                plan_excursion=None) -> tuple[ICRBatchState, WheelCommand]:
+                                rows=None, constants=None, plan_side=None, plan_excursion=None,
+                                num_threads: int = 1) -> tuple[ICRBatchState, WheelCommand]:
     """One control period of the robots ``rows``: the ICR controller's step (see the module docstring).
 
     Args:
@@ -419,7 +422,9 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
             into it when λ is elsewhere and the target is in it. plan_excursion: (M,) 1.0 where the
             plan expects the target to leave that cell for a while (None: nowhere): there a target
             beyond a stop is held at the cell's rim for up to ``planned_hold_distance`` of missed
-            motion, not ``stop_hold_distance`` (``docs/icr-controller.md`` §6).
+            motion, not ``stop_hold_distance`` (``docs/icr-controller.md`` §6). num_threads: the
+            robots in blocks on this many threads (:mod:`estimation.threads`; checked where it
+            entered; the same bits for any count).
 
     Returns:
         (the new state of all N robots, the (M, n) commands with their ``info``: λ_target, μ_target,
@@ -457,10 +462,13 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     outputs = (np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n)),
                np.empty((M, 3)), np.empty(M), np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64), np.empty(M),
                np.empty(M, dtype=np.bool_), np.empty(M, dtype=np.bool_))
-    code = _step_kernel(idx, c, state0, state1, (lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d, plan, excursion),
-                        outputs)
+    code = _validate(lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d)
     if code:
         raise ValueError(_ERRORS[code - 1])
+    if num_threads > 1 and rows is not None and np.unique(idx).size != M:
+        raise ValueError("rows must be distinct robots")
+    _STEP.run(num_threads, M, idx, c, state0, state1,
+              (lam_hat, mu_hat, beta_meas, phidot_meas, lam_d, mu_d, plan, excursion), outputs)
     new = ICRBatchState(*state1)
     beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event, kap, saturated, held = outputs
     info = {"lam_target": lam_target, "mu_target": mu_target, "axis_cap": axis_cap, "mode": new.mode[idx],

@@ -19,7 +19,9 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["swerve_step_kernel", "FLAGS"]
+from estimation.threads import BlockKernel
+
+__all__ = ["swerve_step_kernel", "SWERVE_STEP", "FLAGS"]
 
 #: the SwerveConfig booleans, in the order of the kernel's ``flags``
 FLAGS = ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling")
@@ -31,21 +33,14 @@ FLAGS = ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_
 @njit(cache=True)
 def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_rate, state_phidot, slew, flags,
                        deadband, alpha, axis_xy, b, r, steer_min, steer_max, unlimited, wheel_speed_max, dt,
-                       beta_out, phidot_out, rate_out, accel_out, phiddot_out, twist_out) -> int:
-    """Step the robots ``rows``: twist targets (M, 3) and measured β (M, n) in, the state (N, …)
-    updated in place, the commands (M, n) and the discretised twists (M, 3) out. Returns 0, or
-    1 (a twist not finite) or 2 (a measured β not finite) before anything is written."""
+                       beta_out, phidot_out, rate_out, accel_out, phiddot_out, twist_out, lo, hi) -> None:
+    """Step the robots ``rows[lo:hi]`` (a block of :class:`estimation.threads.BlockKernel`; the
+    inputs checked finite before): twist targets (M, 3) and measured β (M, n) in, the state
+    (N, …) updated in place, the commands (M, n) and the discretised twists (M, 3) out."""
     n = alpha.shape[0]
-    for m in range(rows.shape[0]):
-        for j in range(3):
-            if not math.isfinite(twists[m, j]):
-                return 1
-        for k in range(n):
-            if not math.isfinite(beta_meas[m, k]):
-                return 2
     heading = np.empty(n)
     speed = np.empty(n)
-    for m in range(rows.shape[0]):
+    for m in range(lo, hi):
         i = rows[m]
         prev = state_twist[i]
         # slew_limit_twist: the (v_x, v_y) vector by at most slew·dt, ω by at most slew_ω·dt
@@ -119,4 +114,7 @@ def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_r
             state_beta[i, k] = beta_out[m, k]
             state_rate[i, k] = rate_out[m, k]
             state_phidot[i, k] = phidot_out[m, k]
-    return 0
+
+
+#: the step over blocks of robots (a block: at least 4 robots; :class:`estimation.threads.BlockKernel`)
+SWERVE_STEP = BlockKernel(swerve_step_kernel, min_rows=4)

@@ -386,16 +386,18 @@ class SetpointBatch(TwistBatchBase):
     of each robot, bit for bit), with the commands in (M, n) arrays.
 
     Args:
-        num: robots N; geom, limits, dt [s], config: as :class:`SetpointController`.
+        num: robots N; geom, limits, dt [s], config: as :class:`SetpointController`; num_threads:
+            threads of the compiled step (None: the cores this process may use; any count gives
+            the same bits).
     """
 
     config_type = SetpointConfig
 
     def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
-                 config: SetpointConfig | None = None) -> None:
+                 config: SetpointConfig | None = None, num_threads: int | None = None) -> None:
         #: per robot: the chassis setpoint (N, 3), the last commands β, β̇, φ̇ (N, n), whether it
         #: was stopping first, and its stop-first sequences since reset
-        super().__init__(num, geom, limits, dt, config)
+        super().__init__(num, geom, limits, dt, config, num_threads)
         cfg = config or SetpointConfig()
         self._flags = np.array([cfg.discretize, cfg.offset_correction, cfg.cosine_compensation], dtype=np.bool_)
         self._params = np.array([cfg.speed_deadband, cfg.zero_twist,
@@ -419,7 +421,7 @@ class SetpointBatch(TwistBatchBase):
         """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
         (M, 3) given their measured β (M, n); ``info``: ``twist`` (M, 3) the new chassis
         setpoints, ``s`` (M,), ``stop`` (M,) bool, ``decoupled`` (M, n) bool."""
-        from control.twist.setpoint_compiled import setpoint_step_kernel
+        from control.twist.setpoint_compiled import SETPOINT_STEP
 
         idx, twists, beta_meas = self._step_inputs(rows, twists, beta_meas)
         g, M = self.geom, idx.size
@@ -427,10 +429,9 @@ class SetpointBatch(TwistBatchBase):
         twist_out, s_out = np.empty((M, 3)), np.empty(M)
         mode, stop = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.bool_)
         decoupled = np.empty((M, g.n), dtype=np.bool_)
-        code = setpoint_step_kernel(idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot,
-                                    self.stopping, self.events, self._flags, self._params, self._search, g.alpha,
-                                    g.axis_xy, g.b, g.r, float(g.steer_min), float(g.steer_max),
-                                    bool(g.unlimited_steering), self.dt, out[0], out[1], out[2], out[3], out[4],
-                                    twist_out, s_out, mode, stop, decoupled)
-        return self._command(code, out, mode=mode, events=self.events[idx].copy(),
+        self._run(SETPOINT_STEP, idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self.stopping,
+                  self.events, self._flags, self._params, self._search, g.alpha, g.axis_xy, g.b, g.r,
+                  float(g.steer_min), float(g.steer_max), bool(g.unlimited_steering), self.dt, out[0], out[1], out[2],
+                  out[3], out[4], twist_out, s_out, mode, stop, decoupled)
+        return self._command(out, mode=mode, events=self.events[idx].copy(),
                              info={"twist": twist_out, "s": s_out, "stop": stop, "decoupled": decoupled})

@@ -19,7 +19,9 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["setpoint_step_kernel"]
+from estimation.threads import BlockKernel
+
+__all__ = ["setpoint_step_kernel", "SETPOINT_STEP"]
 
 TOL = 1e-9  # control.twist.setpoint.TOL
 # columns of the per-module table P
@@ -172,19 +174,12 @@ def _search(table, mask, G, iters, P, F, i, now, state_beta, state_phidot, c2, d
 def setpoint_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_rate, state_phidot, state_stop,
                          state_events, flags, params, search, alpha, axis_xy, b, r, steer_min, steer_max, unlimited,
                          dt, beta_out, phidot_out, rate_out, accel_out, phiddot_out, twist_out, s_out, mode_out,
-                         stop_out, decoupled_out) -> int:
-    """Step the robots ``rows``: twist targets (M, 3) and measured β (M, n) in, the state (N, …)
-    updated in place, the commands (M, n), the chassis setpoints (M, 3), s, modes, stop flags (M,)
-    and decoupled modules (M, n) out. Returns 0, or 1 (a twist not finite) or 2 (a measured β not
-    finite) before anything is written."""
+                         stop_out, decoupled_out, lo, hi) -> None:
+    """Step the robots ``rows[lo:hi]`` (a block of :class:`estimation.threads.BlockKernel`; the
+    inputs checked finite before): twist targets (M, 3) and measured β (M, n) in, the state
+    (N, …) updated in place, the commands (M, n), the chassis setpoints (M, 3), s, modes, stop
+    flags (M,) and decoupled modules (M, n) out."""
     n = alpha.shape[0]
-    for m in range(rows.shape[0]):
-        for j in range(3):
-            if not math.isfinite(twists[m, j]):
-                return 1
-        for k in range(n):
-            if not math.isfinite(beta_meas[m, k]):
-                return 2
     db, zero_twist, phmax, aw = params[0], params[1], params[4], params[5]
     G, iters = search[0], search[1]
     P = np.empty((n, 12))
@@ -193,7 +188,7 @@ def setpoint_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state
     mask = np.empty(n, dtype=np.bool_)
     now = np.empty(n)
     t = np.empty(3)
-    for m in range(rows.shape[0]):
+    for m in range(lo, hi):
         i = rows[m]
         for k in range(n):
             now[k] = beta_meas[m, k]
@@ -308,4 +303,7 @@ def setpoint_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state
             state_beta[i, k] = beta_out[m, k]
             state_rate[i, k] = rate_out[m, k]
             state_phidot[i, k] = phidot_out[m, k]
-    return 0
+
+
+#: the step over blocks of robots (a block: at least 4 robots; :class:`estimation.threads.BlockKernel`)
+SETPOINT_STEP = BlockKernel(setpoint_step_kernel, min_rows=4)

@@ -243,15 +243,17 @@ class SwerveBatch(TwistBatchBase):
     :meth:`SwerveController.step` of each robot, bit for bit), with the commands in (M, n) arrays.
 
     Args:
-        num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`.
+        num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`; num_threads:
+            threads of the compiled step (None: the cores this process may use; any count gives
+            the same bits).
     """
 
     config_type = SwerveConfig
 
     def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
-                 config: SwerveConfig | None = None) -> None:
+                 config: SwerveConfig | None = None, num_threads: int | None = None) -> None:
         #: per robot: the slew-limited twist (N, 3) and the last commands β, β̇, φ̇ (N, n)
-        super().__init__(num, geom, limits, dt, config)
+        super().__init__(num, geom, limits, dt, config, num_threads)
         from control.twist.compiled import FLAGS
 
         cfg = config or SwerveConfig()
@@ -262,15 +264,14 @@ class SwerveBatch(TwistBatchBase):
     def step(self, rows, twists, beta_meas) -> WheelCommand:
         """Set-points of the robots ``rows`` (None: all) for their chassis-frame twist targets
         (M, 3) given their measured β (M, n); ``info["twist"]`` (M, 3) the discretised twists."""
-        from control.twist.compiled import swerve_step_kernel
+        from control.twist.compiled import SWERVE_STEP
 
         idx, twists, beta_meas = self._step_inputs(rows, twists, beta_meas)
         g, M = self.geom, idx.size
         out = np.empty((5, M, g.n))
         twist_out = np.empty((M, 3))
-        code = swerve_step_kernel(idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self._slew,
-                                  self._flags, self._deadband, g.alpha, g.axis_xy, g.b, g.r, float(g.steer_min),
-                                  float(g.steer_max), bool(g.unlimited_steering), float(self.limits.wheel_speed_max),
-                                  self.dt, out[0], out[1],
-                                  out[2], out[3], out[4], twist_out)
-        return self._command(code, out, info={"twist": twist_out})
+        self._run(SWERVE_STEP, idx, twists, beta_meas, self.twist, self.beta, self.rate, self.phidot, self._slew,
+                  self._flags, self._deadband, g.alpha, g.axis_xy, g.b, g.r, float(g.steer_min), float(g.steer_max),
+                  bool(g.unlimited_steering), float(self.limits.wheel_speed_max), self.dt, out[0], out[1], out[2],
+                  out[3], out[4], twist_out)
+        return self._command(out, info={"twist": twist_out})

@@ -289,7 +289,7 @@ def test_the_loop_refuses_what_is_not_a_controller_or_a_command():
 @pytest.mark.parametrize("action", ["residual", "twist"])
 def test_bench_env_times_the_action_controller(action):
     """``azimut bench-env --action`` splits a step into the action controller's stages."""
-    from jobs.bench_env import bench_controller_action
+    from jobs.bench_threads import bench_controller_action
 
     r = bench_controller_action(action, num_envs=2, calls=5, track="circle")
     assert r["steps_per_s"] > 0 and r["targets_us"] > 0 and r["controller_us"] > 0 and r["env_us"] > 0

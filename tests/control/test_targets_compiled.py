@@ -8,8 +8,12 @@ import numpy as np
 import pytest
 
 from control.action_spaces.shaping import advance_target, exp_step, initial_frame, shape_target, transport_frame
-from control.action_spaces.targets import rate_targets, residual_targets, shaped_targets
+from control.action_spaces.targets import RATE_TARGETS, RESIDUAL_TARGETS, SHAPED_TARGETS
 from estimation.hrep import eta_from_twist
+from estimation.threads import max_threads
+
+#: the blocked kernels on 2 threads where numba's pool has them (the same bits as on one)
+THREADS = min(2, max_threads())
 
 MARGIN = np.deg2rad(3.0)
 
@@ -40,7 +44,7 @@ def test_residual_targets(geom, seed):
     twists[:5] = 0.0  # at rest: λ = (0, 0, 1)
     a = rng.uniform(-1, 1, (m, 3))
     lam_d, mu_d, held = np.empty((m, 3)), np.empty(m), np.empty(m, dtype=np.bool_)
-    residual_targets(twists, a, 0.6, 0.1, *_shape_args(geom), lam_d, mu_d, held)
+    RESIDUAL_TARGETS.run(THREADS, m, twists, a, 0.6, 0.1, *_shape_args(geom), lam_d, mu_d, held)
     lam_f, mu_f = eta_from_twist(twists)
     prop = exp_step(lam_f, initial_frame(lam_f), a[:, :2] * 0.6, 1.0)
     want, _, want_held = advance_target(lam_f, prop, np.zeros(m), geom, MARGIN, np.inf)
@@ -62,7 +66,8 @@ def test_rate_targets_over_many_steps(geom):
         rows = np.flatnonzero(rng.random(N) < 0.5).astype(np.int64)
         a = rng.uniform(-1, 1, (rows.size, 3))
         lam_d, mu_d, held = np.empty((rows.size, 3)), np.empty(rows.size), np.empty(rows.size, dtype=np.bool_)
-        rate_targets(rows, a, *state, 8.0, 2.0, 1.0, dt, 0.6, *_shape_args(geom), lam_d, mu_d, held)
+        RATE_TARGETS.run(THREADS, rows.size, rows, a, *state, 8.0, 2.0, 1.0, dt, 0.6, *_shape_args(geom), lam_d, mu_d,
+                         held)
         lam_s, e1 = ref[0][rows], ref[1][rows]
         prop = exp_step(lam_s, e1, a[:, :2] * 8.0, dt)
         new, push, want_held = advance_target(lam_s, prop, ref[2][rows], geom, MARGIN, 0.6)
@@ -89,7 +94,8 @@ def test_shaped_targets_over_many_steps(geom, nearer):
         rows = np.flatnonzero(rng.random(N) < 0.7).astype(np.int64)
         lam_t, mu_t = _unit_rows(rng, rows.size), rng.uniform(-1, 1, rows.size)
         lam_d, mu_d, held = np.empty((rows.size, 3)), np.empty(rows.size), np.empty(rows.size, dtype=np.bool_)
-        shaped_targets(rows, lam_ref, lam_t, mu_t, push, nearer, 0.06, 0.6, *_shape_args(geom), lam_d, mu_d, held)
+        SHAPED_TARGETS.run(THREADS, rows.size, rows, lam_ref, lam_t, mu_t, push, nearer, 0.06, 0.6, *_shape_args(geom),
+                           lam_d, mu_d, held)
         want, want_mu, p, want_held = shape_target(lam_ref[rows], lam_t, mu_t, push_ref[rows], geom, MARGIN, 0.06, 0.6,
                                                    nearer=nearer)
         push_ref[rows] = p
