@@ -22,7 +22,8 @@ from azimut_env.validation import check_range
 __all__ = ["arg_int", "arg_float", "arg_choice_list", "arg_output_path", "check_output_path", "check_output_layout",
            "require_module", "arg_robot", "arg_robot_file", "arg_imperfections", "add_robot_arguments",
            "robot_description", "robot_params",
-           "robot_env_kwargs", "robot_args_kwargs", "robot_label", "check_robot_stability", "arg_name_list"]
+           "robot_env_kwargs", "robot_args_kwargs", "robot_label", "check_robot_stability", "arg_name_list",
+           "arg_threads", "arg_threads_list", "add_threads_argument"]
 
 
 def _scientific_int(text) -> int | None:
@@ -51,6 +52,39 @@ def arg_int(min_value: int | None = None, max_value: int | None = None) -> Calla
 
     convert.__name__ = "integer"
     return convert
+
+
+def _threads(text: str) -> int:
+    from estimation.threads import max_threads
+
+    v = arg_int(1, max_threads())(text)
+    return v
+
+
+def arg_threads(text: str) -> int:
+    """``type=`` for ``--threads``: an integer from 1 to numba's thread pool (``NUMBA_NUM_THREADS``)."""
+    try:
+        return _threads(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (threads: 1 to numba's pool, NUMBA_NUM_THREADS)") from None
+
+
+def arg_threads_list(text: str) -> list[int]:
+    """``type=`` for a comma-separated list of thread counts (``1,2``), each as :func:`arg_threads`."""
+    items = [x.strip() for x in str(text).split(",")]
+    if not all(items):
+        raise argparse.ArgumentTypeError(f"expected thread counts separated by commas, got {text!r}")
+    out = [arg_threads(x) for x in items]
+    if len(set(out)) != len(out):
+        raise argparse.ArgumentTypeError(f"a thread count is repeated in {text!r}")
+    return out
+
+
+def add_threads_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--threads N``: the threads of ``what`` (default: the cores this process may use)."""
+    parser.add_argument("--threads", type=arg_threads, default=None, metavar="N",
+                        help=f"threads of {what} (default: the cores this process may use; any count gives the "
+                             "same results)")
 
 
 def arg_float(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,

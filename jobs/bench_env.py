@@ -27,25 +27,16 @@ import time
 import numpy as np
 
 from azimut_env.tracks import TRACK_NAMES
-from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_name_list, robot_label
+from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_name_list, arg_threads_list, robot_label
 from jobs.bench_speed import JOBS, check_baseline, load_average, reference_steps_per_s, run_baseline_bench
+from jobs.bench_threads import ACTION_BENCH, timed
 
-__all__ = ["bench_controller_action", "bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
+__all__ = ["bench_env", "bench_vector_env", "memory_per_robot", "reference_steps_per_s",
            "add_arguments", "run"]
 
 #: stages of the vector env's split, in print order
 VECTOR_STAGES = ("actions", "read", "force", "write", "space_step", "summary", "sensors", "estimation", "track",
                  "reward_obs", "other")
-
-
-def _timed(acc: dict[str, float], fn, key: str):
-    """``fn`` wrapped so that each call adds its wall time [s] to ``acc[key]`` (the stage splits)."""
-    def wrapper(*args, **kwargs):
-        t = time.perf_counter()
-        out = fn(*args, **kwargs)
-        acc[key] += time.perf_counter() - t
-        return out
-    return wrapper
 
 
 def _rss_mb() -> float:
@@ -58,65 +49,6 @@ def _rss_mb() -> float:
         return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
     except (OSError, ValueError, AttributeError):
         return float("nan")
-
-
-#: ``--action`` names -> ``control.action_spaces.vector.VectorControllerAction`` kinds (None: raw set-points)
-ACTION_BENCH = {"raw": None, "residual": "residual", "icr-rate": "icr_rate", "icr-target": "icr_target",
-                "twist": "twist"}
-
-
-def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, track: str = "random",
-                            seed: int = 0, robot_kwargs: dict | None = None) -> dict[str, float]:
-    """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
-    same-step autoresets), with the time per control step split into the policy-action ->
-    controller-target stage (path followers, target shaping), the controller (the batched ICR
-    controller, or the per-robot twist baselines), the vector env's step and the rest (wrapper
-    glue)."""
-    from gymnasium.vector import AutoresetMode
-
-    from azimut_env.vector_env import AzimutVectorEnv
-
-    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP,
-                           **(robot_kwargs or {}))
-    kind = ACTION_BENCH[action]
-    acc = {"targets": 0.0, "controller": 0.0, "env": 0.0}
-    clock = time.perf_counter
-    if kind is not None:
-        import control.action_spaces.vector as vw
-
-        wrapped = vw.VectorControllerAction(venv, action=kind)
-    else:
-        wrapped = venv
-    wrapped.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    actions = rng.uniform(-1, 1, size=(calls + 20,) + wrapped.action_space.shape).astype(np.float32)
-    for k in range(20):  # warm-up (numba kernels load or compile)
-        wrapped.step(actions[k])
-    t0, c0 = clock(), time.process_time()
-    for k in range(calls):
-        wrapped.step(actions[20 + k])
-    total, cpu = clock() - t0, time.process_time() - c0
-    if kind is not None:  # a second, instrumented loop for the split (instance attributes shadow the methods)
-        ctl = wrapped.controller  # the action space's ActionController
-        inner = ctl.icr if ctl.icr is not None else ctl.swerve
-        inner.step = _timed(acc, inner.step, "controller")
-        ctl._targets = _timed(acc, ctl._targets, "targets")
-        venv.step = _timed(acc, venv.step, "env")
-        try:
-            t1 = clock()
-            for k in range(calls):
-                wrapped.step(actions[20 + k])
-            inst = clock() - t1
-        finally:
-            for obj, name in ((inner, "step"), (ctl, "_targets"), (venv, "step")):
-                del obj.__dict__[name]
-    else:
-        acc["env"], inst = total, total
-    per = 1e6 / (calls * num_envs)
-    return {"action": action, "num_envs": num_envs, "steps_per_s": calls * num_envs / total,
-            "cpu_steps_per_s": calls * num_envs / cpu,
-            "targets_us": acc["targets"] * per, "controller_us": acc["controller"] * per, "env_us": acc["env"] * per,
-            "other_us": (inst - sum(acc.values())) * per, "instrumented_us": inst * per}
 
 
 def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: int = 8,
@@ -137,12 +69,12 @@ def bench_env(steps: int = 5000, track: str = "paper", seed: int = 0, substeps: 
     clock = time.perf_counter
 
     task = env.task
-    task.physics.step = _timed(acc, task.physics.step, "physics")
-    task.observe = _timed(acc, task.observe, "observe")  # the noise draw and the one compiled call
+    task.physics.step = timed(acc, task.physics.step, "physics")
+    task.observe = timed(acc, task.observe, "observe")  # the noise draw and the one compiled call
     import azimut_env.env as env_module  # the info dict, built per step by the env (azimut_env.task.info)
 
     robot_info = env_module.robot_info
-    env_module.robot_info = _timed(acc, robot_info, "info")
+    env_module.robot_info = timed(acc, robot_info, "info")
     env.reset(seed=seed)
     for key in acc:
         acc[key] = 0.0
@@ -246,12 +178,12 @@ def _vector_split(venv, actions: np.ndarray, calls: int) -> dict[str, float]:
     clock = time.perf_counter
     task, phys = venv.task, venv.physics
     step, reset = task.pipelines()
-    task.apply_actions = _timed(acc, task.apply_actions, "actions")
+    task.apply_actions = timed(acc, task.apply_actions, "actions")
     phys.stage_times = acc  # the physics stages from AzimutPhysics.step's own timing hook
-    task.sensors.draw_noise = _timed(acc, task.sensors.draw_noise, "sensors")
+    task.sensors.draw_noise = timed(acc, task.sensors.draw_noise, "sensors")
     column = lambda stage: {"sensors": "sensors", "icr_estimate": "estimation", "track_state": "track",  # noqa: E731
                             "localisation": "track"}.get(stage.__module__.rsplit(".", 1)[-1], "reward_obs")
-    task.pipelines = lambda: (lambda rows, action: step.run_timed(rows, action, acc, column), reset)
+    task.pipelines = lambda: (lambda rows, action: step.runtimed(rows, action, acc, column), reset)
     N = venv.num_envs
     try:
         t0 = clock()
@@ -341,7 +273,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "this checkout and with DIR (a checkout of an earlier commit), alternated")
     parser.add_argument("--jobs", default=list(JOBS), type=arg_choice_list(tuple(JOBS)),
                         help="with --baseline: the jobs to time (default eval,train)")
-    parser.add_argument("--repeats", type=arg_int(1, 100), default=2, help="with --baseline: runs per side (default 2)")
+    parser.add_argument("--repeats", type=arg_int(1, 100), default=2,
+                        help="with --baseline: runs per side; with --threads: alternated runs per count (default 2)")
+    parser.add_argument("--threads", type=arg_threads_list, default=None, metavar="N[,N...]",
+                        help="instead, the vector env's scaling with threads (e.g. 1,2) at --num-envs robots (default "
+                             "16,256) for each --action (default raw,residual,icr-rate,twist), alternated runs, and "
+                             "whether every count gives the same bits (jobs/bench_threads.py)")
     parser.add_argument("--train-steps", type=arg_int(4096, 100_000_000), default=32768,
                         help="with --baseline: azimut train's --steps (default 32768)")
     parser.add_argument("--cold", action="store_true",
@@ -378,39 +315,18 @@ def _robot_kwargs(args: argparse.Namespace, imperfections: str | None = None) ->
     return robot_env_kwargs(getattr(args, "robot", None), getattr(args, "robot_file", None), imperfections)
 
 
-def run_action_bench(args: argparse.Namespace) -> int:
-    """``--action``: robot-steps/s with a controller in the loop, and where the time goes."""
-    track = args.track if args.track != "paper" else "random"
-    print(f"AzimutVectorEnv behind controller action spaces: {args.action_envs} robots, track {track} (random: a "
-          f"new track per episode), uniform random actions, same-step autoresets; us per robot-step "
-          f"(instrumented loop) and robot-steps/s (uninstrumented loop). The machine may be shared: compare ratios "
-          f"within one run.")
-    print(f"load average {load_average()}")
-    print(f"{'action':<12}{'steps/s':>9}{'x raw':>7}{'CPU st/s':>10}{'x raw':>7}{'targets':>9}{'ctl':>9}{'env':>9}"
-          f"{'other':>9}{'total':>9}")
-    raw = None
-    for action in args.action:
-        r = bench_controller_action(action, args.action_envs, max(20, args.steps // args.action_envs), track, args.seed,
-                                    _robot_kwargs(args))
-        raw = r if action == "raw" else raw
-        rel = [f"{r[k] / raw[k]:>7.2f}" if raw else f"{'-':>7}" for k in ("steps_per_s", "cpu_steps_per_s")]
-        keys = ("targets_us", "controller_us", "env_us", "other_us", "instrumented_us")
-        cells = "".join(f"{r[k]:>9.1f}" for k in keys)
-        print(f"{action:<12}{r['steps_per_s']:>9.0f}{rel[0]}{r['cpu_steps_per_s']:>10.0f}{rel[1]}{cells}", flush=True)
-    print(f"load average {load_average()}")
-    print("(targets: the policy action -> ICR target stage, i.e. the residual's per-robot path followers or the "
-          "target shaping; ctl: the batched ICR controller; env: AzimutVectorEnv.step; x raw: against the raw "
-          "actions of the same run ('raw' first), in wall and in CPU time; goal 0.5x raw for residual, icr-rate and "
-          "twist at 16 robots)")
-    return 0
-
-
 def run(args: argparse.Namespace) -> int:
     if args.baseline:
         run_baseline_bench(check_baseline(args.baseline), args.jobs, args.repeats, args.train_steps, args.cold)
         return 0
+    if args.threads:
+        from jobs.bench_threads import print_thread_scaling
+
+        return print_thread_scaling(args, _robot_kwargs(args))
     if args.action:
-        return run_action_bench(args)
+        from jobs.bench_threads import run_action_bench
+
+        return run_action_bench(args, _robot_kwargs(args))
     if args.convergence:
         return _print_convergence()
     r = _print_single(args)

@@ -172,15 +172,59 @@ def _dataset_result(q: np.ndarray, fns: dict, methods, geom: RobotGeometry, repe
     return {"n_points": len(q), "methods": table, "IT_at_least_as_good_fraction": dom, "fig11_order": order}
 
 
+#: the methods that run over blocks of samples on several threads (estimation.estimate)
+THREADED_METHODS = ("IT", "IT+", "ORACLE")
+
+
+def thread_scaling(datasets: dict[str, np.ndarray], geom: RobotGeometry, methods, threads: list[int],
+                   repeat: int) -> dict:
+    """Per dataset and threaded method: points/s at each thread count (the best of ``repeat``
+    rounds, the counts alternated within a round; ORACLE on its first 2,000 points), the ratio
+    to the first count, and whether every count gave the same λ̂ bits."""
+    out: dict = {}
+    for name, q in datasets.items():
+        for m in (m for m in THREADED_METHODS if m in methods):
+            x = q[:2000] if m == "ORACLE" else q
+            best = {t: np.inf for t in threads}
+            lams = {}
+            for r in range(1 if m == "ORACLE" else repeat):
+                for t in (threads if r % 2 == 0 else threads[::-1]):
+                    t0 = time.perf_counter()
+                    lams[t] = estimate_icr(x, geom, m, num_threads=t)
+                    best[t] = min(best[t], time.perf_counter() - t0)
+            rate = {t: len(x) / best[t] for t in threads}
+            out[f"{name} {m}"] = {"points": len(x), "points_per_s": rate,
+                                  "ratio": {t: rate[t] / rate[threads[0]] for t in threads},
+                                  "same_bits": all(np.array_equal(lams[threads[0]], v) for v in lams.values())}
+    return out
+
+
+def _scaling_lines(res: dict) -> list[str]:
+    scale = res.get("thread_scaling")
+    if not scale:
+        return []
+    threads = res["threads"]
+    lines = ["", f"## Thread scaling: points/s at {', '.join(map(str, threads))} threads (best of the rounds, "
+             "counts alternated), × the first count", "",
+             "| dataset, method | points | " + " | ".join(f"{t} thr points/s | ×" for t in threads) + " | same bits |",
+             "|---|---:|" + "---:|---:|" * len(threads) + "---|"]
+    for key, r in scale.items():
+        cells = " | ".join(f"{r['points_per_s'][t]:,.0f} | {r['ratio'][t]:.2f}" for t in threads)
+        lines.append(f"| {key} | {r['points']} | {cells} | {'yes' if r['same_bits'] else 'NO'} |")
+    return lines
+
+
 def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_000_000, seed: int = 0,
                   single_calls: int = 2000, repeat: int = 7, d2_source: str = "auto",
-                  methods: tuple[str, ...] = METHOD_ORDER, log=print) -> dict:
-    """Run the whole evaluation and return a JSON-ready dict."""
+                  methods: tuple[str, ...] = METHOD_ORDER, log=print, threads: list[int] | None = None) -> dict:
+    """Run the whole evaluation and return a JSON-ready dict. ``threads``: the thread counts of
+    the scaling section (the tables use the first; default: 1 only, no scaling section)."""
+    threads = list(threads or [1])
     q1, _ = dataset_d1(geom, n_points, seed=seed + 1)
     q2, d2_src = dataset_d2(geom, source=d2_source, seed=seed + 2)
     q3 = dataset_d3(geom, n_points, seed=seed + 3)
     datasets = {"D1": q1, "D2": q2, "D3": q3}
-    fns = {m: (lambda x, m=m: estimate_icr(x, geom, m)) for m in methods}
+    fns = {m: (lambda x, m=m: estimate_icr(x, geom, m, num_threads=threads[0])) for m in methods}
 
     # first call of each method: numba compilation, or loading it from the on-disk cache
     first_call = {}
@@ -194,7 +238,7 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
                   "b_m": geom.b.tolist(), "note": AZIMUT3_ASSUMPTIONS["note"]},
         "it_params": asdict(ITParams()), "it_plus_params": asdict(IT_BEST),
         "d2_source": d2_src, "machine": platform.processor() or platform.machine(),
-        "python": sys.version.split()[0], "first_call_s": first_call, "datasets": {},
+        "python": sys.version.split()[0], "first_call_s": first_call, "datasets": {}, "threads": threads,
     }
     for name, q in datasets.items():
         log(f"[{name}] {len(q)} points ...")
@@ -209,6 +253,9 @@ def run_benchmark(geom: RobotGeometry, n_points: int = 15000, n_random: int = 1_
         rob[m] = {k: float(_valid_unit(fns[m](v)).mean()) for k, v in inputs.items()}
     rob["n_inputs"] = {k: len(v) for k, v in inputs.items()}
     results["robustness_valid_unit"] = rob
+    if len(threads) > 1:
+        log(f"[threads] {', '.join(map(str, threads))} ...")
+        results["thread_scaling"] = thread_scaling(datasets, geom, methods, threads, repeat)
     return results
 
 
@@ -266,11 +313,19 @@ def format_report(res: dict) -> str:
         if m == "n_inputs":
             continue
         lines.append(f"| {m} | " + " | ".join(f"{100 * r[c]:.4f}%" for c in cats) + " |")
+    lines.extend(_scaling_lines(res))
     return "\n".join(lines)
 
 
+def _default_threads() -> list[int]:
+    from estimation.threads import default_threads
+
+    cores = default_threads()
+    return [1, cores] if cores > 1 else [1]
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from jobs.args import arg_choice_list, arg_int, arg_output_path
+    from jobs.args import arg_choice_list, arg_int, arg_output_path, arg_threads_list
 
     parser.add_argument("--json", metavar="PATH", type=arg_output_path(), help="also write the results as JSON")
     parser.add_argument("--points", type=arg_int(10, 10_000_000), default=15000,
@@ -284,6 +339,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", default=",".join(METHOD_ORDER), type=arg_choice_list(METHOD_ORDER),
                         help=f"comma-separated subset of {','.join(METHOD_ORDER)} (NE is required: the timing "
                              "ratios are against it)")
+    parser.add_argument("--threads", type=arg_threads_list, default=None, metavar="N[,N...]",
+                        help="thread counts: the tables at the first, a scaling section of IT, IT+ and ORACLE at all "
+                             "(default: 1 and the cores this process may use)")
 
 
 def check_args(args: argparse.Namespace) -> None:
@@ -299,7 +357,7 @@ def run(args: argparse.Namespace) -> int:
     geom = RobotGeometry.azimut3()
     res = run_benchmark(geom, n_points=args.points, n_random=args.random, seed=args.seed,
                         single_calls=args.single_calls, d2_source=args.d2, methods=methods,
-                        log=lambda s: print(s, file=sys.stderr))
+                        log=lambda s: print(s, file=sys.stderr), threads=args.threads or _default_threads())
     print(format_report(res))
     if args.json:
         with open(args.json, "w") as fh:

@@ -58,7 +58,7 @@ arg_seeds.__name__ = "seeds"
 
 def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episodes", *, threads: bool = True,
                            resume: bool = True) -> None:
-    """``--workers``, ``--executor``, ``--ray-address``, ``--threads-per-task``, ``--retries``,
+    """``--workers``, ``--executor``, ``--ray-address``, ``--threads`` (``--threads-per-task``), ``--retries``,
     ``--resume``: how a command runs its tasks (shared by the commands that run campaigns; a
     command with its own thread or resume flag leaves those out)."""
     from jobs.args import arg_int
@@ -72,8 +72,11 @@ def add_executor_arguments(parser: argparse.ArgumentParser, what: str = "episode
                         help="join an existing Ray cluster ('auto' on one of its nodes, or HEAD_IP:6379) instead of "
                              "starting a local instance; every node needs this package installed")
     if threads:
-        parser.add_argument("--threads-per-task", type=arg_int(1, 1024), default=None, metavar="N",
-                            help="numba/torch/BLAS threads per task (default: CPUs // workers)")
+        parser.add_argument("--threads", "--threads-per-task", dest="threads_per_task", type=arg_int(1, 1024),
+                            default=None, metavar="N",
+                            help="threads per task: the vector env's and controllers' compiled kernels (blocks of "
+                                 "robots), torch, BLAS (default: CPUs // workers; serial: the cores this process may "
+                                 "use); the results do not depend on it")
     parser.add_argument("--retries", type=arg_int(0, 10), default=1,
                         help="runs again a task that raised or whose worker died, this many times, before "
                              "reporting it as failed (default 1)")

@@ -52,9 +52,12 @@ def _module_names(text: str) -> list[str]:
 
 
 def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
-    """LOG, --robot/--robot-file, --module-names, --format, --steer-convention, the ROS 2 bag flags
-    and the WPILib data log flags."""
+    """LOG, --robot/--robot-file, --module-names, --format, --steer-convention, the ROS 2 bag flags,
+    the WPILib data log flags and --threads (the estimators' blocks of samples)."""
     from estimation.logs import FORMATS, STEER_CONVENTIONS
+    from jobs.args import add_threads_argument
+
+    add_threads_argument(parser, "the estimators (blocks of samples)")
     from estimation.logs.ros import TIME_SOURCES
     from estimation.logs.wpilog import ANGLE_UNITS, YAW_UNITS
 
@@ -241,6 +244,9 @@ def run_on_log(command: str, args: argparse.Namespace, check_args, work, errors=
         except ValueError as exc:
             print(f"azimut {command}: error: {exc}", file=sys.stderr)
             return 2
+    from estimation.threads import set_default_threads
+
+    set_default_threads(getattr(args, "threads", None))  # None: the cores this process may use
     progress = LogProgress(command)
     t0 = time.perf_counter()
     try:

@@ -25,7 +25,14 @@ import sys
 from pathlib import Path
 
 from azimut_env.tracks import TRACK_NAMES
-from jobs.args import add_robot_arguments, arg_choice_list, arg_int, arg_output_path, require_module
+from jobs.args import (
+    add_robot_arguments,
+    add_threads_argument,
+    arg_choice_list,
+    arg_int,
+    arg_output_path,
+    require_module,
+)
 from train.envs import ACTIONS, canonical_action
 from train.trainer import DEFAULT_EVAL_TRACKS, RUN_ARGS
 
@@ -73,6 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="JSON file of hyperparameters overriding the defaults: an object of keyword arguments, "
                              "or the versioned best_hyperparams.json azimut tune writes")
     parser.add_argument("--torch-threads", type=arg_int(1, 256), default=1, help="torch CPU threads (default 1)")
+    add_threads_argument(parser, "the vector env and its controllers (blocks of robots; torch's are --torch-threads)")
     parser.add_argument("--progress-bar", action="store_true",
                         help="SB3's progress bar (needs tqdm and rich; otherwise a line per evaluation)")
     parser.add_argument("--quiet", action="store_true", help="no SB3 log table on stdout")
@@ -268,7 +276,10 @@ def _run(args: argparse.Namespace) -> int:
         return run_seeds(args, args.seeds, _robot_kwargs(args) or None)
     import torch
 
+    from estimation.threads import set_default_threads
+
     torch.set_num_threads(args.torch_threads)
+    set_default_threads(args.threads)
     if args.engine == "rllib":
         return _run_rllib(args)
     from jobs.records import provenance

@@ -35,11 +35,16 @@ FINAL_COLUMNS = [("return", "{:.1f}", 1.0), ("completed", "{:.2f}", 1.0), ("rms_
 def train_seed_task(algo: str, action: str, track: str, seed: int, steps: int, num_robots: int,
                     eval_tracks: list[str], eval_every: int, checkpoint_every: int, overrides: dict | None,
                     time_limit_min: float, out: str, env_kwargs: dict | None = None, torch_threads: int = 1,
-                    resume: bool = False, quiet: bool = True, correction_cost: float = 0.0) -> dict:
+                    resume: bool = False, quiet: bool = True, correction_cost: float = 0.0,
+                    env_threads: int | None = None) -> dict:
     """Train one seed into ``out`` (with ``resume``, from its newest checkpoint when it has one
-    and no final model, or an interrupted one); returns ``{"run": run.json, "evaluations": [...]}``."""
+    and no final model, or an interrupted one); returns ``{"run": run.json, "evaluations": [...]}``.
+    ``env_threads``: the vector env's threads (None: the worker's numba count)."""
     import torch
 
+    from estimation.threads import set_default_threads
+
+    set_default_threads(env_threads)
     from jobs.records import provenance
     from jobs.training.plots import write_learning_curve
     from train.trainer import latest_checkpoint, train, was_interrupted
@@ -91,7 +96,7 @@ def seed_tasks(args: argparse.Namespace, seeds: Sequence[int], out: Path, env_kw
             key["correction_cost"] = float(args.correction_cost)
         tasks.append(Task("jobs.training.seeds:train_seed_task", key,
                           extra={"out": str(out / f"seed_{seed}"), "torch_threads": args.torch_threads,
-                                 "resume": bool(args.resume)},
+                                 "resume": bool(args.resume), "env_threads": getattr(args, "threads", None)},
                           label=f"{args.algo}-{args.action}-seed{seed}", cost=float(args.steps),
                           check="jobs.training.seeds:check_seed_result"))
     return tasks
@@ -274,7 +279,8 @@ def run_seeds(args: argparse.Namespace, seeds: Sequence[int], env_kwargs: dict |
     start = time.perf_counter()
     try:
         records = run_tasks(tasks, out / "seeds", executor=executor, workers=args.workers,
-                            threads=args.torch_threads, ray_address=args.ray_address, retries=args.retries,
+                            threads=max(args.torch_threads, getattr(args, "threads", None) or 1),
+                            ray_address=args.ray_address, retries=args.retries,
                             resume=args.resume, progress=_print_progress)
     except CampaignInterrupted as exc:
         print(f"azimut train: {exc}; run the same command with --resume", flush=True)
