@@ -82,7 +82,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_fields
+from azimut_env.validation import check_fields, check_positive_fields
 from control.commands import WheelCommand
 from control.icr.config import Mode
 from control.twist.base import TwistBatchBase, TwistControllerBase
@@ -135,10 +135,7 @@ class SetpointConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        for name in ("speed_deadband", "slip_speed", "zero_twist", "stop_hysteresis"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"SetpointConfig.{name} must be finite and >= 0, got {v!r}")
+        check_positive_fields(self, "speed_deadband", "slip_speed", "zero_twist", "stop_hysteresis", allow_zero=True)
         if not self.slip_speed > self.speed_deadband:
             raise ValueError(f"SetpointConfig.slip_speed must exceed speed_deadband ({self.speed_deadband!r}), got "
                              f"{self.slip_speed!r}")

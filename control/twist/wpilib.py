@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_bool, check_fields
+from azimut_env.validation import check_fields, check_positive_fields
 from control.commands import WheelCommand
 from control.limits import ActuatorLimits
 from control.twist.base import TwistBatchBase, TwistControllerBase
@@ -82,11 +82,8 @@ class SwerveConfig:
     coupling: bool = False
 
     def __post_init__(self) -> None:
-        check_fields(self)
-        for name in ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling"):
-            object.__setattr__(self, name, check_bool(f"SwerveConfig.{name}", getattr(self, name)))
-        if not (math.isfinite(self.speed_deadband) and self.speed_deadband >= 0):
-            raise ValueError(f"SwerveConfig.speed_deadband must be finite and >= 0, got {self.speed_deadband!r}")
+        check_fields(self)  # the bools included
+        check_positive_fields(self, "speed_deadband", allow_zero=True)
         for name in ("slew_linear", "slew_angular"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v > 0):
