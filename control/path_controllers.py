@@ -223,7 +223,37 @@ class ICRPathController(_PathFollowing):
                                                      plan_excursion=excursion))
 
 
-class TwistPathController(_PathFollowing):
+class _TwistFollowing(_PathFollowing):
+    """Path followers feeding their twists to a batch of twist controllers (``batch_type``:
+    :class:`~control.twist.wpilib.SwerveBatch` or :class:`~control.twist.setpoint.SetpointBatch`,
+    built with ``batch_config``, None for its defaults): what ``twist`` and ``twist-setpoint``
+    share. ``config_name``: the keyword that gave ``batch_config``, for its error message."""
+
+    batch_type: type
+
+    def __init__(self, speed_scale: float, follower_config: PathFollowerConfig | None, config_name: str,
+                 batch_config) -> None:
+        super().__init__(speed_scale, follower_config)
+        config_type = self.batch_type.config_type
+        if batch_config is not None and not isinstance(batch_config, config_type):
+            raise TypeError(f"{config_name} must be a {config_type.__name__} or None, got "
+                            f"{type(batch_config).__name__}")
+        self.batch_config = batch_config
+        self.controller = None
+
+    def reset(self, env, rows) -> None:
+        rows = np.asarray(rows, dtype=np.intp)
+        self._reset_followers(env, rows)
+        if self.controller is None or self.controller.num != self.followers.num:
+            self.controller = self.batch_type(self.followers.num, env.geometry, env.limits, env.control_period,
+                                              self.batch_config, self.followers.num_threads)
+        self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
+
+    def act(self, env, obs) -> WheelCommand:
+        return self._with_holds(self.controller.step(None, self._targets(env).twist, env.measured_beta))
+
+
+class TwistPathController(_TwistFollowing):
     """``twist``: path followers + the WPILib-style baseline (see the module docstring).
 
     Args:
@@ -232,28 +262,14 @@ class TwistPathController(_PathFollowing):
     """
 
     name = "twist"
+    batch_type = SwerveBatch
 
     def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
                  swerve_config: SwerveConfig | None = None) -> None:
-        super().__init__(speed_scale, follower_config)
-        if swerve_config is not None and not isinstance(swerve_config, SwerveConfig):
-            raise TypeError(f"swerve_config must be a SwerveConfig or None, got {type(swerve_config).__name__}")
-        self.swerve_config = swerve_config
-        self.controller: SwerveBatch | None = None
-
-    def reset(self, env, rows) -> None:
-        rows = np.asarray(rows, dtype=np.intp)
-        self._reset_followers(env, rows)
-        if self.controller is None or self.controller.num != self.followers.num:
-            self.controller = SwerveBatch(self.followers.num, env.geometry, env.limits, env.control_period,
-                                          self.swerve_config, self.followers.num_threads)
-        self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
-
-    def act(self, env, obs) -> WheelCommand:
-        return self._with_holds(self.controller.step(None, self._targets(env).twist, env.measured_beta))
+        super().__init__(speed_scale, follower_config, "swerve_config", swerve_config)
 
 
-class SetpointPathController(_PathFollowing):
+class SetpointPathController(_TwistFollowing):
     """``twist-setpoint``: path followers + the setpoint generator (see the module docstring and
     :mod:`control.twist.setpoint`).
 
@@ -263,22 +279,8 @@ class SetpointPathController(_PathFollowing):
     """
 
     name = "twist-setpoint"
+    batch_type = SetpointBatch
 
     def __init__(self, speed_scale: float = 1.0, *, follower_config: PathFollowerConfig | None = None,
                  setpoint_config: SetpointConfig | None = None) -> None:
-        super().__init__(speed_scale, follower_config)
-        if setpoint_config is not None and not isinstance(setpoint_config, SetpointConfig):
-            raise TypeError(f"setpoint_config must be a SetpointConfig or None, got {type(setpoint_config).__name__}")
-        self.setpoint_config = setpoint_config
-        self.controller: SetpointBatch | None = None
-
-    def reset(self, env, rows) -> None:
-        rows = np.asarray(rows, dtype=np.intp)
-        self._reset_followers(env, rows)
-        if self.controller is None or self.controller.num != self.followers.num:
-            self.controller = SetpointBatch(self.followers.num, env.geometry, env.limits, env.control_period,
-                                            self.setpoint_config, self.followers.num_threads)
-        self.controller.reset(rows, env.measured_beta[rows], env.measured_phidot[rows])
-
-    def act(self, env, obs) -> WheelCommand:
-        return self._with_holds(self.controller.step(None, self._targets(env).twist, env.measured_beta))
+        super().__init__(speed_scale, follower_config, "setpoint_config", setpoint_config)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from azimut_env.validation import check_fields, check_positive
+from azimut_env.validation import check_fields, check_positive_fields
 
 __all__ = ["BlowUp", "BlowUpLimits", "BLOWUP_MESSAGES"]
 
@@ -56,7 +56,7 @@ class BlowUpLimits:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        for name in ("speed", "spin", "yaw_rate", "position", "energy_gain"):  # NaN would disarm the check
-            object.__setattr__(self, name, check_positive(f"BlowUpLimits.{name}", getattr(self, name)))
+        # finite: a NaN would disarm the check
+        check_positive_fields(self, "speed", "spin", "yaw_rate", "position", "energy_gain")
         if not 2 <= self.energy_window <= 10_000:  # an int already (check_fields)
             raise ValueError(f"BlowUpLimits.energy_window must be in [2, 10000], got {self.energy_window!r}")

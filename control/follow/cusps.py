@@ -88,32 +88,47 @@ def cusp_row(track: Track, pts: np.ndarray, i: int) -> list[float] | None:
             *(a / np.linalg.norm(a)), *(b / np.linalg.norm(b))]
 
 
+@njit(cache=True, inline="always")
+def _cusp_at(S, cusps, closed, length, s, include_end) -> tuple[int, float]:
+    """The first cusp (its row of ``cusps``) within one segment of which the progress ``s`` lies
+    (the outgoing leg's end included with ``include_end``), or −1; and the progress where ``s``'s
+    lap starts (a closed track's ``s`` counts laps)."""
+    if cusps.shape[0] == 0:
+        return -1, 0.0
+    base = math.floor(s / length) * length if closed else 0.0
+    s_loc = s - base
+    for c in range(cusps.shape[0]):
+        i = int(cusps[c, 0])
+        if include_end:
+            outside = s_loc < S[i] - cusps[c, 1] or s_loc > S[i] + cusps[c, 2]
+        else:
+            outside = s_loc < S[i] - cusps[c, 1] or s_loc >= S[i] + cusps[c, 2]
+        if not outside:
+            return c, base
+    return -1, base
+
+
 @njit(cache=True)
 def cusp_progress(S, X, Y, TH, rho, closed, length, cusps, px, py, pth, s0) -> float:
     """The progress at pose (px, py, pth) given the projection's ``s0``: within one segment of a
     cusp (``cusps``: :func:`cusp_table`), the projection onto the nearer of its two legs (the
     incoming one on a tie); ``s0`` elsewhere. ``S``, ``X``, ``Y``, ``TH``: the track's samples;
     ``rho``: its progress radius; a closed track's ``s0`` counts laps (kept)."""
-    if cusps.shape[0] == 0:
+    c, base = _cusp_at(S, cusps, closed, length, s0, True)
+    if c < 0:
         return s0
-    base = math.floor(s0 / length) * length if closed else 0.0
-    s_loc = s0 - base
-    for c in range(cusps.shape[0]):
-        i = int(cusps[c, 0])
-        lin, lout = cusps[c, 1], cusps[c, 2]
-        if s_loc < S[i] - lin or s_loc > S[i] + lout:
-            continue
-        r0 = px - X[i]
-        r1 = py - Y[i]
-        r2 = rho * wrap_pi(pth - TH[i])
-        t_in = min(max(r0 * cusps[c, 3] + r1 * cusps[c, 4] + r2 * cusps[c, 5], -lin), 0.0)
-        t_out = min(max(r0 * cusps[c, 6] + r1 * cusps[c, 7] + r2 * cusps[c, 8], 0.0), lout)
-        e0, e1, e2 = r0 - t_in * cusps[c, 3], r1 - t_in * cusps[c, 4], r2 - t_in * cusps[c, 5]
-        f0, f1, f2 = r0 - t_out * cusps[c, 6], r1 - t_out * cusps[c, 7], r2 - t_out * cusps[c, 8]
-        if e0 * e0 + e1 * e1 + e2 * e2 <= f0 * f0 + f1 * f1 + f2 * f2:
-            return base + S[i] + t_in
-        return base + S[i] + t_out
-    return s0
+    i = int(cusps[c, 0])
+    lin, lout = cusps[c, 1], cusps[c, 2]
+    r0 = px - X[i]
+    r1 = py - Y[i]
+    r2 = rho * wrap_pi(pth - TH[i])
+    t_in = min(max(r0 * cusps[c, 3] + r1 * cusps[c, 4] + r2 * cusps[c, 5], -lin), 0.0)
+    t_out = min(max(r0 * cusps[c, 6] + r1 * cusps[c, 7] + r2 * cusps[c, 8], 0.0), lout)
+    e0, e1, e2 = r0 - t_in * cusps[c, 3], r1 - t_in * cusps[c, 4], r2 - t_in * cusps[c, 5]
+    f0, f1, f2 = r0 - t_out * cusps[c, 6], r1 - t_out * cusps[c, 7], r2 - t_out * cusps[c, 8]
+    if e0 * e0 + e1 * e1 + e2 * e2 <= f0 * f0 + f1 * f1 + f2 * f2:
+        return base + S[i] + t_in
+    return base + S[i] + t_out
 
 
 @njit(cache=True)
@@ -125,17 +140,11 @@ def cusp_feed_forward(S, cusps, rho, closed, length, s_ff, reached, v_ff, ref) -
     farthest progress so far, counting this step's), the outgoing leg's from then on, so that a
     robot jittering about the cusp does not flip its direction every period. Returns whether it
     did (``ref`` is untouched otherwise)."""
-    if cusps.shape[0] == 0:
+    c, base = _cusp_at(S, cusps, closed, length, s_ff, False)
+    if c < 0:
         return False
-    base = math.floor(s_ff / length) * length if closed else 0.0
-    s_loc = s_ff - base
-    for c in range(cusps.shape[0]):
-        i = int(cusps[c, 0])
-        if s_loc < S[i] - cusps[c, 1] or s_loc >= S[i] + cusps[c, 2]:
-            continue
-        j = 6 if reached >= base + S[i] else 3
-        ref[0] = v_ff * cusps[c, j]
-        ref[1] = v_ff * cusps[c, j + 1]
-        ref[2] = v_ff * cusps[c, j + 2] / rho
-        return True
-    return False
+    j = 6 if reached >= base + S[int(cusps[c, 0])] else 3
+    ref[0] = v_ff * cusps[c, j]
+    ref[1] = v_ff * cusps[c, j + 1]
+    ref[2] = v_ff * cusps[c, j + 2] / rho
+    return True

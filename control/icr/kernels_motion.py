@@ -154,23 +154,29 @@ def _candidate_drive(c, u, k, bk, br, mu_new, phidot) -> tuple[float, float]:
     return ph, (ph - phidot[k]) / c.dt
 
 
+@njit(cache=True, inline="always")
+def _candidate_axis(c, u, q, lam, v_prev, v_des, mu, mu_des, mu_first) -> float:
+    """Candidate q's axis into ``u`` (its λ, :func:`candidate_lambda`, normalised again, as
+    ``steering_from_lambda`` does) and its μ: what :func:`kappa_search` and :func:`kappa_fallback`
+    test of each candidate."""
+    kq = c.kappa[q]
+    u0, u1, u2, _, _, _ = candidate_lambda(kq, lam[0], lam[1], lam[2], v_prev[0], v_prev[1], v_prev[2], v_des[0],
+                                           v_des[1], v_des[2], c.dt)
+    u[0], u[1], u[2] = unit_xyz(u0, u1, u2)
+    return mu_des if mu_first else mu + kq * (mu_des - mu)
+
+
 @njit(cache=True)
 def kappa_search(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_rate, phidot) -> int:
     """The largest q whose candidate (:func:`kappa_candidate`) is feasible, or −1 (see the module
     docstring: the same verdicts as the candidates' ratios, in another order)."""
-    lim, kappa, dt = c.lim, c.kappa, c.dt
+    lim = c.lim
     u = ws[WS.U, :3]
     unlimited = lim[L_UNLIMITED] != 0.0
     n = beta.shape[0]
-    l0, l1, l2 = lam[0], lam[1], lam[2]
-    p0, p1, p2 = v_prev[0], v_prev[1], v_prev[2]
-    d0, d1, d2 = v_des[0], v_des[1], v_des[2]
     first = 0  # the wheel that ruled out the previous candidate
-    for q in range(kappa.shape[0] - 1, -1, -1):
-        kq = kappa[q]
-        u0, u1, u2, _, _, _ = candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt)
-        u[0], u[1], u[2] = unit_xyz(u0, u1, u2)  # normalised again, as steering_from_lambda does
-        mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
+    for q in range(c.kappa.shape[0] - 1, -1, -1):
+        mu_new = _candidate_axis(c, u, q, lam, v_prev, v_des, mu, mu_des, mu_first)
         bad = -1
         for j in range(n):
             k = first + j
@@ -198,20 +204,14 @@ def kappa_fallback(c, ws, lam, v_prev, v_des, mu, mu_des, mu_first, beta, beta_r
     """The candidate with the smallest limit ratio (inf where a wheel flips), the lowest κ among
     equals, when none is feasible. A candidate stops being computed once its wheels so far put it
     above the best ratio found (it cannot be chosen)."""
-    lim, kappa, dt = c.lim, c.kappa, c.dt
+    lim = c.lim
     u = ws[WS.U, :3]
     unlimited = lim[L_UNLIMITED] != 0.0
     n = beta.shape[0]
-    l0, l1, l2 = lam[0], lam[1], lam[2]
-    p0, p1, p2 = v_prev[0], v_prev[1], v_prev[2]
-    d0, d1, d2 = v_des[0], v_des[1], v_des[2]
     best_q, best_ratio = -1, np.inf
-    for q in range(kappa.shape[0] - 1, -1, -1):
+    for q in range(c.kappa.shape[0] - 1, -1, -1):
         threshold = np.inf if best_q < 0 else best_ratio
-        kq = kappa[q]
-        u0, u1, u2, _, _, _ = candidate_lambda(kq, l0, l1, l2, p0, p1, p2, d0, d1, d2, dt)
-        u[0], u[1], u[2] = unit_xyz(u0, u1, u2)  # normalised again, as steering_from_lambda does
-        mu_new = mu_des if mu_first else mu + kq * (mu_des - mu)
+        mu_new = _candidate_axis(c, u, q, lam, v_prev, v_des, mu, mu_des, mu_first)
         ratio = 0.0
         for k in range(n):
             flipped, bk, br, ba = _candidate_steer(c, u, k, beta, beta_rate, unlimited)

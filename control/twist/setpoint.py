@@ -82,13 +82,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_fields
+from azimut_env.validation import check_fields, check_positive_fields
 from control.commands import WheelCommand
 from control.icr.config import Mode
-from control.limits import ActuatorLimits
-from control.twist.batch import TwistBatchBase
+from control.twist.base import TwistBatchBase, TwistControllerBase
 from control.twist.wpilib import discretize_twist
-from estimation.geometry import RobotGeometry
 from estimation.libm import atan2, hypot
 
 __all__ = ["SetpointConfig", "SetpointController", "SetpointBatch", "braking_step", "TOL"]
@@ -137,10 +135,7 @@ class SetpointConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        for name in ("speed_deadband", "slip_speed", "zero_twist", "stop_hysteresis"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"SetpointConfig.{name} must be finite and >= 0, got {v!r}")
+        check_positive_fields(self, "speed_deadband", "slip_speed", "zero_twist", "stop_hysteresis", allow_zero=True)
         if not self.slip_speed > self.speed_deadband:
             raise ValueError(f"SetpointConfig.slip_speed must exceed speed_deadband ({self.speed_deadband!r}), got "
                              f"{self.slip_speed!r}")
@@ -166,35 +161,21 @@ def _clip(x, lo, hi):
     return np.minimum(np.maximum(x, lo), hi)
 
 
-class SetpointController:
-    """The setpoint generator for one robot, stateful (previous chassis setpoint, previous commands).
+class SetpointController(TwistControllerBase):
+    """The setpoint generator for one robot, stateful (previous chassis setpoint ``twist``, previous
+    commands, whether it is stopping first, its stop-first sequences since reset ``events``).
 
     Args:
         geom, limits, dt [s], config: see :class:`SetpointConfig`.
     """
 
-    def __init__(self, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
-                 config: SetpointConfig | None = None) -> None:
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
-        if config is not None and not isinstance(config, SetpointConfig):
-            raise TypeError(f"config must be a SetpointConfig or None, got {type(config).__name__}")
-        self.geom, self.limits, self.dt = geom, limits, float(dt)
-        self.config = config or SetpointConfig()
-        self.reset()
+    config_type = SetpointConfig
 
     def reset(self, beta=None, phidot=None) -> None:
         """Forget the history; start from measured angles (default 0) at rest."""
-        n = self.geom.n
-        self.twist = np.zeros(3)
-        beta = None if beta is None else np.asarray(beta, dtype=np.float64)
-        self.beta = np.zeros(n) if beta is None else (beta.copy() if self.geom.unlimited_steering
-                                                      else self.geom.wrap_steering(beta))
-        self.rate = np.zeros(n)
-        self.phidot = np.zeros(n) if phidot is None else np.asarray(phidot, dtype=np.float64).copy()
+        super().reset(beta, phidot)
         self.stopping = False
         self.events = 0
-        self._started = beta is not None
 
     # -- the pieces of one step ---------------------------------------------------------------
 
@@ -325,17 +306,7 @@ class SetpointController:
     def step(self, twist, beta_meas) -> WheelCommand:
         """Set-points for the chassis-frame twist target (v_x, v_y, ω) given measured β (n,)."""
         g, cfg, dt = self.geom, self.config, self.dt
-        twist = np.asarray(twist, dtype=np.float64)
-        beta_meas = np.asarray(beta_meas, dtype=np.float64)
-        if twist.shape != (3,) or not np.all(np.isfinite(twist)):
-            raise ValueError(f"twist must be a finite (3,) array, got {twist!r}")
-        if beta_meas.shape != (g.n,) or not np.all(np.isfinite(beta_meas)):
-            raise ValueError(f"beta_meas must be a finite ({g.n},) array")
-        if not self._started:
-            self.reset(beta_meas)
-        now = beta_meas
-        if g.unlimited_steering:  # the measured angle (in ]−π, π]) on the commands' turn
-            now = self.beta + (np.mod(beta_meas - self.beta + np.pi, 2 * np.pi) - np.pi)
+        twist, now = self._step_inputs(twist, beta_meas)
         t = discretize_twist(twist, dt) if cfg.discretize else twist.copy()
         # desaturate the target: its wheel speeds within φ̇_max
         vx, vy = t[0] - t[2] * g.axis_xy[:, 1], t[1] + t[2] * g.axis_xy[:, 0]
@@ -364,26 +335,24 @@ class SetpointController:
         phidot = _clip(phidot, self.phidot - aw * dt, self.phidot + aw * dt)
         phidot = _clip(phidot, -self.limits.wheel_speed_max, self.limits.wheel_speed_max)
         c = self.twist
-        new_twist = np.array([c[0] + s * (t[0] - c[0]), c[1] + s * (t[1] - c[1]), c[2] + s * (t[2] - c[2])])
+        self.twist = np.array([c[0] + s * (t[0] - c[0]), c[1] + s * (t[1] - c[1]), c[2] + s * (t[2] - c[2])])
         beta = self.beta + delta
         rate = (beta - self.beta) / dt
-        accel = (rate - self.rate) / dt
-        phiddot = (phidot - self.phidot) / dt
         if stop and not self.stopping:
             self.events += 1
         self.stopping = stop
         mode = Mode.STOPPING if stop else (Mode.RECONFIGURING if (not zero and np.all(nv < cfg.speed_deadband))
                                            else Mode.RUNNING)
-        self.twist, self.beta, self.rate, self.phidot = new_twist, beta, rate, phidot
-        return WheelCommand(beta=beta.copy(), phidot=phidot.copy(), beta_rate=rate, beta_accel=accel,
-                            phiddot=phiddot, info={"twist": new_twist.copy(), "s": s, "stop": stop, "decoupled": ~ok,
-                                                   "mode": int(mode), "events": self.events})
+        return self._command(beta, rate, phidot, info={"twist": self.twist.copy(), "s": s, "stop": stop,
+                                                       "decoupled": ~ok, "mode": int(mode), "events": self.events})
 
 
 class SetpointBatch(TwistBatchBase):
     """N setpoint generators stepped by row in one compiled call
     (:func:`control.twist.setpoint_compiled.setpoint_step_kernel`, :meth:`SetpointController.step`
-    of each robot, bit for bit), with the commands in (M, n) arrays.
+    of each robot, bit for bit), with the commands in (M, n) arrays; per robot, ``twist`` (N, 3) is
+    its chassis setpoint, ``stopping`` (N,) whether it is stopping first, ``events`` (N,) its
+    stop-first sequences since reset.
 
     Args:
         num: robots N; geom, limits, dt [s], config: as :class:`SetpointController`; num_threads:
@@ -393,12 +362,8 @@ class SetpointBatch(TwistBatchBase):
 
     config_type = SetpointConfig
 
-    def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
-                 config: SetpointConfig | None = None, num_threads: int | None = None) -> None:
-        #: per robot: the chassis setpoint (N, 3), the last commands β, β̇, φ̇ (N, n), whether it
-        #: was stopping first, and its stop-first sequences since reset
-        super().__init__(num, geom, limits, dt, config, num_threads)
-        cfg = config or SetpointConfig()
+    def _setup(self, cfg: SetpointConfig) -> None:
+        limits = self.limits
         self._flags = np.array([cfg.discretize, cfg.offset_correction, cfg.cosine_compensation], dtype=np.bool_)
         self._params = np.array([cfg.speed_deadband, cfg.zero_twist,
                                  limits.steer_rate_max * cfg.steer_rate_scale,

@@ -43,10 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from azimut_env.validation import check_bool, check_fields
+from azimut_env.validation import check_fields, check_positive_fields
 from control.commands import WheelCommand
 from control.limits import ActuatorLimits
-from control.twist.batch import TwistBatchBase
+from control.twist.base import TwistBatchBase, TwistControllerBase
 from estimation.geometry import RobotGeometry
 from estimation.libm import atan2, hypot
 
@@ -82,11 +82,8 @@ class SwerveConfig:
     coupling: bool = False
 
     def __post_init__(self) -> None:
-        check_fields(self)
-        for name in ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling"):
-            object.__setattr__(self, name, check_bool(f"SwerveConfig.{name}", getattr(self, name)))
-        if not (math.isfinite(self.speed_deadband) and self.speed_deadband >= 0):
-            raise ValueError(f"SwerveConfig.speed_deadband must be finite and >= 0, got {self.speed_deadband!r}")
+        check_fields(self)  # the bools included
+        check_positive_fields(self, "speed_deadband", allow_zero=True)
         for name in ("slew_linear", "slew_angular"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v > 0):
@@ -169,78 +166,53 @@ def desaturate(phidot, max_speed: float) -> np.ndarray:
     return phidot * (max_speed / m) if m > max_speed else phidot
 
 
-class SwerveController:
+class SwerveController(TwistControllerBase):
     """The baseline, stateful (previous twist for the slew limiter, previous commands).
 
     Args:
         geom, limits, dt [s], config: see :class:`SwerveConfig`.
     """
 
+    config_type = SwerveConfig
+
     def __init__(self, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
                  config: SwerveConfig | None = None) -> None:
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be finite and > 0, got {dt!r}")
-        self.geom, self.limits, self.dt = geom, limits, float(dt)
-        self.config = config or SwerveConfig()
+        super().__init__(geom, limits, dt, config)
         lin = self.config.slew_linear or 0.7 * limits.wheel_accel_max * float(np.min(geom.r))
         ang = self.config.slew_angular or lin / float(np.max(geom.l))
         self._slew = np.array([lin, lin, ang])
-        self.reset()
-
-    def reset(self, beta=None, phidot=None) -> None:
-        """Forget the history; start from measured angles (default 0) at rest."""
-        n = self.geom.n
-        self._twist = np.zeros(3)
-        beta = None if beta is None else np.asarray(beta, dtype=np.float64)
-        self._beta = np.zeros(n) if beta is None else (beta.copy() if self.geom.unlimited_steering
-                                                        else self.geom.wrap_steering(beta))
-        self._rate = np.zeros(n)
-        self._phidot = np.zeros(n) if phidot is None else np.asarray(phidot, dtype=np.float64).copy()
-        self._started = beta is not None
 
     def step(self, twist, beta_meas) -> WheelCommand:
         """Set-points for the chassis-frame twist target (v_x, v_y, ω) given measured β (n,)."""
         g, cfg, dt = self.geom, self.config, self.dt
-        twist = np.asarray(twist, dtype=np.float64)
-        beta_meas = np.asarray(beta_meas, dtype=np.float64)
-        if twist.shape != (3,) or not np.all(np.isfinite(twist)):
-            raise ValueError(f"twist must be a finite (3,) array, got {twist!r}")
-        if beta_meas.shape != (g.n,) or not np.all(np.isfinite(beta_meas)):
-            raise ValueError(f"beta_meas must be a finite ({g.n},) array")
-        if not self._started:
-            self.reset(beta_meas)
-        if g.unlimited_steering:  # the measured angle (an absolute encoder's, in ]−π, π]) on the commands' turn
-            beta_meas = self._beta + (np.mod(beta_meas - self._beta + np.pi, 2 * np.pi) - np.pi)
-        tw = slew_limit_twist(twist, self._twist, self._slew[0], self._slew[2], dt)
-        self._twist = tw
+        twist, beta_meas = self._step_inputs(twist, beta_meas)
+        tw = slew_limit_twist(twist, self.twist, self._slew[0], self._slew[2], dt)
+        self.twist = tw
         tw_k = discretize_twist(tw, dt) if cfg.discretize else tw
         heading, speed = module_states(tw_k, g)
         beta_des = heading + np.pi / 2 - g.alpha
         hold = speed < cfg.speed_deadband
-        beta_des = np.where(hold, self._beta, beta_des)
+        beta_des = np.where(hold, self.beta, beta_des)
         beta, speed = optimize_module(beta_des, speed, beta_meas, g, cfg.optimize)
-        beta = np.where(hold, self._beta, beta)
+        beta = np.where(hold, self.beta, beta)
         rphi = speed.copy()
         if cfg.offset_correction:
             rphi = rphi - tw_k[2] * g.b
         if cfg.cosine_compensation:
             rphi = rphi * np.cos(beta - beta_meas)
-        rate = (beta - self._beta) / dt
+        rate = (beta - self.beta) / dt
         if cfg.coupling:
             rphi = rphi - g.b * rate
         phidot = rphi / g.r
         if cfg.desaturate:
             phidot = desaturate(phidot, self.limits.wheel_speed_max)
-        accel = (rate - self._rate) / dt
-        phiddot = (phidot - self._phidot) / dt
-        self._beta, self._rate, self._phidot = beta, rate, phidot
-        return WheelCommand(beta=beta.copy(), phidot=phidot.copy(), beta_rate=rate, beta_accel=accel,
-                            phiddot=phiddot, info={"twist": tw_k})
+        return self._command(beta, rate, phidot, info={"twist": tw_k})
 
 
 class SwerveBatch(TwistBatchBase):
     """N baselines stepped by row in one compiled call (:func:`control.twist.compiled.swerve_step_kernel`,
-    :meth:`SwerveController.step` of each robot, bit for bit), with the commands in (M, n) arrays.
+    :meth:`SwerveController.step` of each robot, bit for bit), with the commands in (M, n) arrays;
+    ``twist`` (N, 3) is each robot's slew-limited twist.
 
     Args:
         num: robots N; geom, limits, dt [s], config: as :class:`SwerveController`; num_threads:
@@ -250,15 +222,11 @@ class SwerveBatch(TwistBatchBase):
 
     config_type = SwerveConfig
 
-    def __init__(self, num: int, geom: RobotGeometry, limits: ActuatorLimits, dt: float = 0.02,
-                 config: SwerveConfig | None = None, num_threads: int | None = None) -> None:
-        #: per robot: the slew-limited twist (N, 3) and the last commands β, β̇, φ̇ (N, n)
-        super().__init__(num, geom, limits, dt, config, num_threads)
+    def _setup(self, cfg: SwerveConfig) -> None:
         from control.twist.compiled import FLAGS
 
-        cfg = config or SwerveConfig()
         self._flags = np.array([getattr(cfg, name) for name in FLAGS], dtype=np.bool_)
-        self._slew = SwerveController(geom, limits, dt, cfg)._slew
+        self._slew = SwerveController(self.geom, self.limits, self.dt, cfg)._slew
         self._deadband = float(cfg.speed_deadband)
 
     def step(self, rows, twists, beta_meas) -> WheelCommand:

@@ -349,7 +349,8 @@ def goal4(runs, presets=STOPS):
 # ---------------------------------------------------------------------------------------- sections
 
 
-def header(runs, walls) -> str:
+def produced_by(runs, walls) -> str:
+    """The page's "Produced by" note: the commit, the machine, the runs, what did not finish."""
     n = [runs[p].n_episodes for p in PRESETS]
     failed = sum(len(runs[p].failed) for p in PRESETS)
     unfin = [(p, e) for p in PRESETS for es in runs[p].episodes.values() for e in es if not e["completed"]]
@@ -360,14 +361,7 @@ def header(runs, walls) -> str:
     commits = {runs[p].campaign["provenance"]["commit"][:7] for p in PRESETS}
     local = any(runs[p].campaign["provenance"]["local_changes"] for p in PRESETS)
     assert commits == {COMMIT} and not local, (commits, local)
-    cmds = "\n".join(
-        f"azimut eval --controllers $C --tracks $T --seeds 0-4 --speed-scales $S{(' ' + x) if x else ''} --out cmp/{p}"
-        + ("   # the default robot: paper imperfections" if p == "azimut3" else "")
-        for p, (_, x) in PRESETS.items()
-    )
-    return f"""# Results: the ICR controller against both twist baselines, every preset, track and scenario
-
-!!! note "Produced by"
+    return f"""!!! note "Produced by"
     Commit {COMMIT} (the ICR controller's look-ahead, issue 30: [the cell plan]({LOOKAHEAD})),
     on {MACHINE}, {DATE}. Five `azimut eval` runs, {n[0]} episodes each (3 controllers × 12 tracks
     and scenarios × 5 seeds × 5 speed scales), {sum(n)} in all; {failed} episode{"s" if failed != 1 else ""} failed (an
@@ -377,25 +371,28 @@ def header(runs, walls) -> str:
     time per run (serial, one vector env per controller, the machine shared): {wall}.
     Deterministic for a given seed and commit. Every figure on this page, the prose's included, is
     computed from the five `metrics.json` by `docs/results/comparison/make_tables.py`
-    (`python docs/results/comparison/make_tables.py cmp --images > docs/results/comparison.md`).
+    (`python docs/results/comparison/make_tables.py cmp --images > docs/results/comparison.md`)."""
 
-```bash
-T=paper,circle,figure8,square,crab,random,suite
-C=icr,twist,twist-setpoint
-S=0.6,0.8,1.0,1.2,1.4
-{cmds}
-```
 
-The three controllers share the path follower, the actuator limits and the control period
+def eval_commands() -> str:
+    """The `azimut eval` command of each preset's run."""
+    return "\n".join(
+        f"azimut eval --controllers $C --tracks $T --seeds 0-4 --speed-scales $S{(' ' + x) if x else ''} --out cmp/{p}"
+        + ("   # the default robot: paper imperfections" if p == "azimut3" else "")
+        for p, (_, x) in PRESETS.items()
+    )
+
+
+#: the page's paragraphs on the controllers and on the tables' columns
+CONTROLLERS_TEXT = f"""The three controllers share the path follower, the actuator limits and the control period
 (0.02 s): `icr` is the ICR-based controller (since {COMMIT} with its look-ahead over the track),
 `twist` sends WPILib's module states as they are, `twist-setpoint` is the setpoint generator
 after Team 254's `SwerveSetpointGenerator`, which never commands beyond the actuator limits
 ([Control](../control.md)). The robots are in [Robots](../robots.md) (the scenarios there too,
 scaled to each robot). `--speed-scales` runs every controller at each scale of the tracks' speed
 profiles ([Control](../control.md#slip-and-antagonism-per-metre-and-fronts)); the goals and the
-per-preset tables are at ×1, the fronts at all five.
-
-Columns. In the per-preset tables every cell is the mean over the 5 seeds with, in brackets, the
+per-preset tables are at ×1, the fronts at all five."""
+COLUMNS_TEXT = """Columns. In the per-preset tables every cell is the mean over the 5 seeds with, in brackets, the
 95% percentile-bootstrap interval of the mean (10,000 resamples; no bracket where it rounds to the
 mean), as in each run's `report.md`: *done*: the share of the 5 episodes that finished; *time*:
 the lap time over the finished episodes only (`-`: none finished); the other columns over all 5
@@ -416,6 +413,23 @@ of a module while the command is exactly zero. The goals of issue 30 are judged 
 *finished* episodes at ×1 (they differ from the tables' only where *done* < 1)."""
 
 
+def header(runs, walls) -> str:
+    return f"""# Results: the ICR controller against both twist baselines, every preset, track and scenario
+
+{produced_by(runs, walls)}
+
+```bash
+T=paper,circle,figure8,square,crab,random,suite
+C=icr,twist,twist-setpoint
+S=0.6,0.8,1.0,1.2,1.4
+{eval_commands()}
+```
+
+{CONTROLLERS_TEXT}
+
+{COLUMNS_TEXT}"""
+
+
 def standstill_share(r: Run, c: str) -> float:
     still = [r.fin(c, t, "standstill_slip_energy_J") for t in ALL]
     whole = [r.fin(c, t, "slip_energy_J") for t in ALL]
@@ -423,51 +437,19 @@ def standstill_share(r: Run, c: str) -> float:
     return sum(a for a, _ in pairs) / sum(b for _, b in pairs)
 
 
-def verdict(runs, g2, g3, g4, prev, rows) -> str:
-    a = runs["azimut3"]
-    ok1, miss1, other1 = goal1(runs)
-    slip, lat, limits = g3
-    # lap time against twist-setpoint on the default robot
-    faster = [t for t in ALL if g2[("azimut3", t)][3] is not None and g2[("azimut3", t)][3] <= 1.0]
-    # slip ratios per preset (twist-setpoint / icr, finished means)
-    ratio_rows = []
-    for p in PRESETS:
-        r = runs[p]
-        q_ts, q_tw, m_ts, m_tw = [], [], [], []
-        for t in ALL:
-            si = r.fin("icr", t, "slip_energy_J")
-            q_ts.append(ratio(r.fin("twist-setpoint", t, "slip_energy_J"), si))
-            q_tw.append(ratio(r.fin("twist", t, "slip_energy_J"), si))
-            pi = r.fin("icr", t, "slip_energy_per_m")
-            m_ts.append(ratio(r.fin("twist-setpoint", t, "slip_energy_per_m"), pi))
-            m_tw.append(ratio(r.fin("twist", t, "slip_energy_per_m"), pi))
-        ratio_rows.append([SHORT[p], rng(q_tw), rng(q_ts), rng(m_tw), rng(m_ts)])
-    sp = lambda p, c, t, k, d=1: num(runs[p].fin(c, t, k), d)  # noqa: E731
-    paper = (
-        f"On `paper` with the default robot at ×1: {sp('azimut3', 'icr', 'paper', 'completion_time_s')} s "
-        f"against {sp('azimut3', 'twist', 'paper', 'completion_time_s')} s (`twist`) and "
-        f"{sp('azimut3', 'twist-setpoint', 'paper', 'completion_time_s')} s (`twist-setpoint`), "
-        f"{cnt(a.fin('icr', 'paper', 'reconfigure_events'))} stop (previously {prev['paper']['time']} s and "
-        f"{prev['paper']['stops']} stops); slip energy {sp('azimut3', 'icr', 'paper', 'slip_energy_J')} J against "
-        f"{sp('azimut3', 'twist', 'paper', 'slip_energy_J')} and "
-        f"{sp('azimut3', 'twist-setpoint', 'paper', 'slip_energy_J')} J, "
-        f"{sp('azimut3', 'icr', 'paper', 'slip_energy_per_m', 2)} J/m against "
-        f"{sp('azimut3', 'twist', 'paper', 'slip_energy_per_m', 2)} and "
-        f"{sp('azimut3', 'twist-setpoint', 'paper', 'slip_energy_per_m', 2)} J/m."
-    )
-    stops_new = {t: a.fin("icr", t, "reconfigure_events") for t in ALL}
-    total_old = sum(float(prev[t]["stops"]) for t in ALL if t in prev)
-    total_new = sum(v for v in stops_new.values() if v is not None)
-    shorter = [
-        t
-        for t in ALL
-        if t in prev
-        and a.fin("icr", t, "completion_time_s") is not None
-        and a.fin("icr", t, "completion_time_s") < 0.98 * float(prev[t]["time"])
-    ]
-    lines = [
-        "## Verdict",
-        "",
+def bullet(head: str, items, end: str = ".") -> str:
+    """A bullet of the page: ``- head: a, b and c`` then ``end``."""
+    return f"- {head}: " + join(items) + end
+
+
+def lateral_misses(lat) -> list[str]:
+    """The (preset, track) pairs whose RMS lateral error is more than 0.3 cm over `twist-setpoint`'s."""
+    return [f"{SHORT[p]} `{t}` {v[0] * 100:.2f} against {v[1] * 100:.2f} cm" for (p, t), v in lat.items() if not v[3]]
+
+
+def goals_verdict(rows) -> str:
+    """The verdict's first paragraph: which of issue 30's bars are met."""
+    return (
         f"**Issue 30's goals: {'all met' if all(r[2] for r in rows) else 'not met'}.** "
         + (
             f"Of its {len(rows)} bars, met: " + join([r[0].split(".")[0] + f" ({r[3]})" for r in rows if r[2]]) + ". "
@@ -479,30 +461,78 @@ def verdict(runs, g2, g3, g4, prev, rows) -> str:
             if not all(r[2] for r in rows)
             else ""
         )
-        + "The [goals table](#goals-of-issue-30) has each bar with its measured value.",
-        "",
+        + "The [goals table](#goals-of-issue-30) has each bar with its measured value."
+    )
+
+
+def paper_sentence(runs, prev) -> str:
+    """The default robot on `paper` at ×1 against both baselines and the previous page."""
+    a = runs["azimut3"]
+    sp = lambda c, k, d=1: num(a.fin(c, "paper", k), d)  # noqa: E731
+    return (
+        f"On `paper` with the default robot at ×1: {sp('icr', 'completion_time_s')} s "
+        f"against {sp('twist', 'completion_time_s')} s (`twist`) and "
+        f"{sp('twist-setpoint', 'completion_time_s')} s (`twist-setpoint`), "
+        f"{cnt(a.fin('icr', 'paper', 'reconfigure_events'))} stop (previously {prev['paper']['time']} s and "
+        f"{prev['paper']['stops']} stops); slip energy {sp('icr', 'slip_energy_J')} J against "
+        f"{sp('twist', 'slip_energy_J')} and "
+        f"{sp('twist-setpoint', 'slip_energy_J')} J, "
+        f"{sp('icr', 'slip_energy_per_m', 2)} J/m against "
+        f"{sp('twist', 'slip_energy_per_m', 2)} and "
+        f"{sp('twist-setpoint', 'slip_energy_per_m', 2)} J/m."
+    )
+
+
+def lookahead_lines(runs, g2, prev) -> list[str]:
+    """The verdict's paragraph on the look-ahead: stops and lap times against the previous page."""
+    a = runs["azimut3"]
+    # lap time against twist-setpoint on the default robot
+    faster = [t for t in ALL if g2[("azimut3", t)][3] is not None and g2[("azimut3", t)][3] <= 1.0]
+    stops_new = {t: a.fin("icr", t, "reconfigure_events") for t in ALL}
+    total_old = sum(float(prev[t]["stops"]) for t in ALL if t in prev)
+    total_new = sum(v for v in stops_new.values() if v is not None)
+    shorter = [
+        t
+        for t in ALL
+        if t in prev
+        and a.fin("icr", t, "completion_time_s") is not None
+        and a.fin("icr", t, "completion_time_s") < 0.98 * float(prev[t]["time"])
+    ]
+    return [
         "**The look-ahead made the ICR controller faster on the default robot, not everywhere fast enough.** At ×1",
         "its stop-and-reconfigure events per episode, summed over the 12 tracks and scenarios (means over the",
         f"seeds), are {cnt(total_new)} at {COMMIT} against {cnt(total_old)} at {PREVIOUS_COMMIT}; its lap time is",
         f"more than 2% shorter than at {PREVIOUS_COMMIT} on {len(shorter)} of 12",
         f"({join([f'`{t}`' for t in shorter])}), and at most `twist-setpoint`'s",
-        f"(ratio ≤ 1.000) on {len(faster)} of 12 ({join([f'`{t}`' for t in faster])}). {paper}",
-        "",
-        "**The wheels still fight least under the ICR controller on the robots with steering stops.** "
-        "Ratios of the baselines' slip to the ICR controller's at ×1, over the 12 tracks and scenarios "
-        "(means over the finished episodes):",
-        "",
-        table(
-            [
-                "preset",
-                "slip energy, twist / icr",
-                "slip energy, twist-setpoint / icr",
-                "slip per m, twist / icr",
-                "slip per m, twist-setpoint / icr",
-            ],
-            ratio_rows,
-        ),
-        "",
+        f"(ratio ≤ 1.000) on {len(faster)} of 12 ({join([f'`{t}`' for t in faster])}). {paper_sentence(runs, prev)}",
+    ]
+
+
+#: the columns of the verdict's table of slip ratios
+SLIP_RATIO_COLUMNS = [
+    "preset",
+    "slip energy, twist / icr",
+    "slip energy, twist-setpoint / icr",
+    "slip per m, twist / icr",
+    "slip per m, twist-setpoint / icr",
+]
+
+
+def slip_ratio_rows(runs) -> list[list[str]]:
+    """Per preset: the range over the tracks of each baseline's slip (energy, per metre) over the
+    ICR controller's (finished means, ×1), in the order of :data:`SLIP_RATIO_COLUMNS`."""
+
+    def ratios(r, baseline, key):
+        return [ratio(r.fin(baseline, t, key), r.fin("icr", t, key)) for t in ALL]
+
+    return [
+        [SHORT[p]] + [rng(ratios(runs[p], b, k)) for k in ("slip_energy_J", "slip_energy_per_m") for b in BASELINES]
+        for p in PRESETS
+    ]
+
+
+def standstill_sentence(runs) -> str:
+    return (
         "**Part of the ICR controller's remaining slip is at rest.** The slip energy of the standstill steps "
         "(stops, reconfigurations in place) as a share of the whole, summed over the 12 tracks and scenarios at ×1 "
         "(means over the finished episodes), `icr` / `twist` / `twist-setpoint`: "
@@ -510,26 +540,40 @@ def verdict(runs, g2, g3, g4, prev, rows) -> str:
             f"{SHORT[p]} " + " / ".join(f"{100 * standstill_share(runs[p], c):.0f}%" for c in CONTROLLERS)
             for p in PRESETS
         )
-        + ".",
+        + "."
+    )
+
+
+def verdict(runs, g2, prev, rows) -> str:
+    lines = [
+        "## Verdict",
+        "",
+        goals_verdict(rows),
+        "",
+        *lookahead_lines(runs, g2, prev),
+        "",
+        "**The wheels still fight least under the ICR controller on the robots with steering stops.** "
+        "Ratios of the baselines' slip to the ICR controller's at ×1, over the 12 tracks and scenarios "
+        "(means over the finished episodes):",
+        "",
+        table(SLIP_RATIO_COLUMNS, slip_ratio_rows(runs)),
+        "",
+        standstill_sentence(runs),
         "",
     ]
     return "\n".join(lines)
 
 
-def verdict_losses(runs, g2, g3, g4) -> str:
+def verdict_losses(runs, g2, g3) -> str:
     """The 'where it loses' paragraph, generated."""
     out = ["**Where the ICR controller still loses (×1, means over finished episodes):**", ""]
     ok1, miss1, other1 = goal1(runs)
     if miss1:
-        items = []
-        for p, t, d in miss1:
-            items.append(f"{SHORT[p]} `{t}` {d} of 5")
         out.append(
-            f"- **Unfinished episodes at ×1**: {join(items)}; at the other speed scales "
-            f"{sum(N_SEEDS - d for *_, d in other1)} more, on "
+            f"- **Unfinished episodes at ×1**: {join([f'{SHORT[p]} `{t}` {d} of 5' for p, t, d in miss1])}; at the "
+            f"other speed scales {sum(N_SEEDS - d for *_, d in other1)} more, on "
             + join(list(dict.fromkeys(f"{SHORT[p]} `{t}`" for p, t, s, d in other1)))
-            + " (the goals table "
-            "lists them). [Why](#why-the-remaining-losses)."
+            + " (the goals table lists them). [Why](#why-the-remaining-losses)."
         )
     slow = []
     for p in LAP_GOAL:
@@ -543,25 +587,22 @@ def verdict_losses(runs, g2, g3, g4) -> str:
     sw = [(g2[("swerve", t)][3], t, g2[("swerve", t)][2]) for t in ALL if not g2[("swerve", t)][4]]
     if sw:
         out.append(
-            "- **`swerve`, more than 3% slower than the best baseline**: "
-            + join([f"`{t}` {r:.3f}× `{b}`'s" for r, t, b in sorted(sw, reverse=True) if r is not None])
-            + "."
+            bullet(
+                "**`swerve`, more than 3% slower than the best baseline**",
+                [f"`{t}` {r:.3f}× `{b}`'s" for r, t, b in sorted(sw, reverse=True) if r is not None],
+            )
         )
-    slip, lat, limits = g3
+    slip, lat, _ = g3
     sm = [(k, v) for k, v in slip.items() if not v[4]]
     if sm:
         out.append(
-            "- **Slip energy over 0.3× `twist-setpoint`'s**: "
-            + join([f"{SHORT[p]} `{t}` {v[0]:.1f} J against {v[1]:.1f} J ({v[2]:.2f}×)" for (p, t), v in sm])
-            + "."
+            bullet(
+                "**Slip energy over 0.3× `twist-setpoint`'s**",
+                [f"{SHORT[p]} `{t}` {v[0]:.1f} J against {v[1]:.1f} J ({v[2]:.2f}×)" for (p, t), v in sm],
+            )
         )
-    lm = [(k, v) for k, v in lat.items() if not v[3]]
-    if lm:
-        out.append(
-            "- **RMS lateral error more than 0.3 cm over `twist-setpoint`'s**: "
-            + join([f"{SHORT[p]} `{t}` {v[0] * 100:.2f} against {v[1] * 100:.2f} cm" for (p, t), v in lm])
-            + "."
-        )
+    if lm := lateral_misses(lat):
+        out.append(bullet("**RMS lateral error more than 0.3 cm over `twist-setpoint`'s**", lm))
     sw_slip = []
     r = runs["swerve"]
     for t in ALL:
@@ -571,9 +612,7 @@ def verdict_losses(runs, g2, g3, g4) -> str:
             sw_slip.append(f"`{t}` {si:.2f} J/m against {best[0]:.2f} (`{best[1]}`)")
     if sw_slip:
         out.append(
-            "- **`swerve` (no steering stops), slip per metre more than 10% over the best baseline's**: "
-            + join(sw_slip)
-            + "."
+            bullet("**`swerve` (no steering stops), slip per metre more than 10% over the best baseline's**", sw_slip)
         )
     return "\n".join(out) + "\n"
 
@@ -618,11 +657,9 @@ def verdict_setpoint(runs) -> str:
     )
 
 
-def goal_rows(runs, g2, g3, g4) -> list[list]:
-    """[bar, measured, met (bool), a short summary] per bar of issue 30."""
+def finish_row(runs) -> list:
+    """Bar 1: every track and scenario finished on every preset."""
     ok1, miss1, other1 = goal1(runs)
-    slip, lat, limits = g3
-    rows = []
     m1 = (
         "every preset, track and scenario done 5/5"
         if ok1
@@ -633,55 +670,52 @@ def goal_rows(runs, g2, g3, g4) -> list[list]:
         if other1
         else ""
     )
-    rows.append(
-        [
-            "1. The ICR controller finishes every track and scenario on every preset",
-            m1,
-            ok1,
-            f"{len(miss1)} track/preset pairs with done < 5/5 at ×1",
-        ]
+    return [
+        "1. The ICR controller finishes every track and scenario on every preset",
+        m1,
+        ok1,
+        f"{len(miss1)} track/preset pairs with done < 5/5 at ×1",
+    ]
+
+
+def bar_row(label: str, value: str, over: str, misses: list[str], summary: str) -> list:
+    """A row of the goals table: the bar, its measured ``value`` followed, where some miss the bar,
+    by ``over`` and them, whether it is met (none misses), and a short summary."""
+    if misses:
+        value += f"; {over}: " + join(misses)
+    return [label, value, not misses, summary]
+
+
+def lap_row(g2, label, tracks) -> list:
+    """Bars 2a–2c: the lap time ratios to `twist-setpoint` on ``tracks`` (azimut3, tri, hex)."""
+    cells = [(p, t) for p in LAP_GOAL for t in tracks]
+    bad = [(p, t) for p, t in cells if not g2[(p, t)][4]]
+    rs = [g2[c][3] for c in cells if g2[c][3] is not None]
+    over = [
+        f"{SHORT[p]} `{t}` " + (f"{g2[(p, t)][3]:.3f}×" if g2[(p, t)][3] is not None else "unfinished") for p, t in bad
+    ]
+    return bar_row(
+        label, f"{min(rs):.3f}–{max(rs):.3f}×", "over the bar", over, f"{len(bad)} of {len(cells)} ratios over the bar"
     )
 
-    def lap_row(label, tracks, bar_txt):
-        cells = [(p, t) for p in LAP_GOAL for t in tracks]
-        bad = [(p, t) for p, t in cells if not g2[(p, t)][4]]
-        rs = [g2[c][3] for c in cells if g2[c][3] is not None]
-        val = f"{min(rs):.3f}–{max(rs):.3f}×"
-        if bad:
-            val += "; over the bar: " + join(
-                [
-                    f"{SHORT[p]} `{t}` " + (f"{g2[(p, t)][3]:.3f}×" if g2[(p, t)][3] is not None else "unfinished")
-                    for p, t in bad
-                ]
-            )
-        rows.append([label, val, not bad, f"{len(bad)} of {len(cells)} ratios over the bar"])
 
-    lap_row(
-        "2a. Lap time ≤ 1.0× `twist-setpoint`'s on paper, circle, figure8, square, crab, random (azimut3, tri, hex)",
-        TRACKS,
-        "1.0",
-    )
-    lap_row(
-        "2b. Lap time ≤ 1.25× `twist-setpoint`'s on reverse, spin, strafe90, hold, slalom (azimut3, tri, hex)",
-        tuple(s for s in SCENARIOS if s != "icr-axis"),
-        "1.25",
-    )
-    lap_row("2c. Lap time ≤ 1.5× `twist-setpoint`'s on icr-axis (azimut3, tri, hex)", ("icr-axis",), "1.5")
+def swerve_row(g2) -> list:
+    """Bar 2d: `swerve`'s lap time against the best baseline."""
     sw = [("swerve", t) for t in ALL]
     bad = [c for c in sw if not g2[c][4]]
     rs = [g2[c][3] for c in sw if g2[c][3] is not None]
-    val = f"{min(rs):.3f}–{max(rs):.3f}×"
-    if bad:
-        val += "; over 1.03×: " + join([f"`{t}` {g2[(p, t)][3]:.3f}×" for p, t in bad])
-    rows.append(
-        [
-            "2d. `swerve`: lap time within 3% of the best baseline (the faster of `twist` and `twist-setpoint` "
-            "that finished every episode)",
-            val,
-            not bad,
-            f"{len(bad)} of 12 ratios over 1.03×",
-        ]
+    return bar_row(
+        "2d. `swerve`: lap time within 3% of the best baseline (the faster of `twist` and `twist-setpoint` "
+        "that finished every episode)",
+        f"{min(rs):.3f}–{max(rs):.3f}×",
+        "over 1.03×",
+        [f"`{t}` {g2[(p, t)][3]:.3f}×" for p, t in bad],
+        f"{len(bad)} of 12 ratios over 1.03×",
     )
+
+
+def slip_row(slip) -> list:
+    """Bar 3a: the slip energy against `twist-setpoint`'s where that exceeds 5 J."""
     app = [(k, v) for k, v in slip.items() if v[3]]
     bad = [(k, v) for k, v in app if not v[4]]
     qs = [v[2] for k, v in app if v[2] is not None]
@@ -689,18 +723,19 @@ def goal_rows(runs, g2, g3, g4) -> list[list]:
     skipped = [k for k, v in slip.items() if not v[3]]
     if skipped:
         val += " (not applicable, ≤ 5 J: " + join([f"{SHORT[p]} `{t}`" for p, t in skipped]) + ")"
-    if bad:
-        val += "; over 0.3×: " + join([f"{SHORT[p]} `{t}` {v[2]:.2f}×" for (p, t), v in bad])
-    rows.append(
-        [
-            "3a. Slip energy ≤ 0.3× `twist-setpoint`'s (azimut3, ideal, tri, hex)",
-            val,
-            not bad,
-            f"at most {max(qs):.2f}× on the {len(app)} pairs where it applies"
-            if not bad
-            else f"{len(bad)} of {len(app)} pairs over 0.3×",
-        ]
+    return bar_row(
+        "3a. Slip energy ≤ 0.3× `twist-setpoint`'s (azimut3, ideal, tri, hex)",
+        val,
+        "over 0.3×",
+        [f"{SHORT[p]} `{t}` {v[2]:.2f}×" for (p, t), v in bad],
+        f"at most {max(qs):.2f}× on the {len(app)} pairs where it applies"
+        if not bad
+        else f"{len(bad)} of {len(app)} pairs over 0.3×",
     )
+
+
+def limits_row(runs, limits) -> list:
+    """Bar 3b: the ICR controller's limit-exceeded steps."""
     lim_bad = [p for p, v in limits.items() if v[0]]
     per = join([f"{SHORT[p]} {v[0]} at ×1 ({v[1]} over all five scales)" for p, v in limits.items() if v[1]])
     eps = [e for p in PRESETS for t in ALL for e in runs[p].episodes[("icr", t, REF)] if e["limit_violation_steps"]]
@@ -711,35 +746,37 @@ def goal_rows(runs, g2, g3, g4) -> list[list]:
         for t in ALL
         for x in SCALES
     )
-    rows.append(
-        [
-            "3b. No actuator limit exceeded by the ICR controller (every preset)",
-            f"{sum(v[0] for v in limits.values())} limit-exceeded steps at ×1 "
-            f"({sum(v[1] for v in limits.values())} over all five speed scales)"
-            + (
-                f": {per}; {len(eps)} episodes at ×1 with {span_int([e['limit_violation_steps'] for e in eps])} each"
-                + (", the same counts as `twist-setpoint`'s in every cell" if ts_same else "")
-                if eps
-                else ""
-            ),
-            not lim_bad,
-            f"{sum(v[0] for v in limits.values())} limit-exceeded steps at ×1"
-            + (f", on {join([SHORT[p] for p in lim_bad])}" if lim_bad else ""),
-        ]
-    )
+    return [
+        "3b. No actuator limit exceeded by the ICR controller (every preset)",
+        f"{sum(v[0] for v in limits.values())} limit-exceeded steps at ×1 "
+        f"({sum(v[1] for v in limits.values())} over all five speed scales)"
+        + (
+            f": {per}; {len(eps)} episodes at ×1 with {span_int([e['limit_violation_steps'] for e in eps])} each"
+            + (", the same counts as `twist-setpoint`'s in every cell" if ts_same else "")
+            if eps
+            else ""
+        ),
+        not lim_bad,
+        f"{sum(v[0] for v in limits.values())} limit-exceeded steps at ×1"
+        + (f", on {join([SHORT[p] for p in lim_bad])}" if lim_bad else ""),
+    ]
+
+
+def lateral_row(lat) -> list:
+    """Bar 3c: the RMS lateral error against `twist-setpoint`'s."""
     ds = [v[2] for v in lat.values() if v[2] is not None]
     bad = [(k, v) for k, v in lat.items() if not v[3]]
-    val = f"icr − `twist-setpoint`: {min(ds):+.2f} to {max(ds):+.2f} cm"
-    if bad:
-        val += "; over +0.3 cm: " + join([f"{SHORT[p]} `{t}` {v[2]:+.2f} cm" for (p, t), v in bad])
-    rows.append(
-        [
-            "3c. RMS lateral error ≤ `twist-setpoint`'s + 0.3 cm (azimut3, ideal, tri, hex)",
-            val,
-            not bad,
-            f"{len(bad)} of {len(lat)} pairs over +0.3 cm",
-        ]
+    return bar_row(
+        "3c. RMS lateral error ≤ `twist-setpoint`'s + 0.3 cm (azimut3, ideal, tri, hex)",
+        f"icr − `twist-setpoint`: {min(ds):+.2f} to {max(ds):+.2f} cm",
+        "over +0.3 cm",
+        [f"{SHORT[p]} `{t}` {v[2]:+.2f} cm" for (p, t), v in bad],
+        f"{len(bad)} of {len(lat)} pairs over +0.3 cm",
     )
+
+
+def fronts_row(runs, g4) -> list:
+    """Bar 4: less slip per metre than both baselines at every speed scale where both finish."""
     n_pts = sum(1 for p in STOPS for t in ALL for s in SCALES if runs[p].all_done("icr", t, s))
     misses = [(p, m) for p in STOPS for m in g4[p][1]]
     skipped = [(p, x) for p in STOPS for x in g4[p][2]]
@@ -754,16 +791,38 @@ def goal_rows(runs, g2, g3, g4) -> list[list]:
         val += "; not compared (ICR unfinished): " + join(
             [f"{SHORT[p]} `{t}` {scl(s)} ({d}/5)" for p, (t, s, d) in skipped]
         )
-    rows.append(
-        [
-            "4. On the fronts, less slip per metre than both baselines at every speed scale where both finish "
-            "(azimut3, ideal, tri, hex)",
-            val,
-            not misses,
-            f"{len(misses)} of {n_pts} points",
-        ]
-    )
-    return rows
+    return [
+        "4. On the fronts, less slip per metre than both baselines at every speed scale where both finish "
+        "(azimut3, ideal, tri, hex)",
+        val,
+        not misses,
+        f"{len(misses)} of {n_pts} points",
+    ]
+
+
+def goal_rows(runs, g2, g3, g4) -> list[list]:
+    """[bar, measured, met (bool), a short summary] per bar of issue 30."""
+    slip, lat, limits = g3
+    return [
+        finish_row(runs),
+        lap_row(
+            g2,
+            "2a. Lap time ≤ 1.0× `twist-setpoint`'s on paper, circle, figure8, square, crab, random "
+            "(azimut3, tri, hex)",
+            TRACKS,
+        ),
+        lap_row(
+            g2,
+            "2b. Lap time ≤ 1.25× `twist-setpoint`'s on reverse, spin, strafe90, hold, slalom (azimut3, tri, hex)",
+            tuple(s for s in SCENARIOS if s != "icr-axis"),
+        ),
+        lap_row(g2, "2c. Lap time ≤ 1.5× `twist-setpoint`'s on icr-axis (azimut3, tri, hex)", ("icr-axis",)),
+        swerve_row(g2),
+        slip_row(slip),
+        limits_row(runs, limits),
+        lateral_row(lat),
+        fronts_row(runs, g4),
+    ]
 
 
 def goals_section(runs, rows) -> str:
@@ -898,84 +957,86 @@ def wins_section(runs) -> str:
     return "\n".join(out)
 
 
+#: the columns of a preset's tables (the scenarios' add :data:`SCENARIO_EXTRA`)
+PRESET_COLUMNS = [
+    "track",
+    "controller",
+    "done",
+    "time [s]",
+    "RMS lat [cm]",
+    "slip energy [J]",
+    "slip per m [J/m]",
+    "antagonism [N]",
+    "antag. per distance [N]",
+    "standstill slip [J]",
+    "limit-exc. steps",
+    "stops",
+]
+SCENARIO_EXTRA = ["flips", "peak β̇ cmd [rad/s]", "peak β̇ [rad/s]"]
+HOLD_COLUMNS = ["track", "controller", "chassis [mm]", "yaw [deg]", "steer [deg]", "steer cmd [deg]"]
+
+
+def preset_row(r: Run, c: str, t: str) -> list[str]:
+    """Controller c on track t at ×1: the cells of :data:`PRESET_COLUMNS`."""
+    g = lambda k: r.m(c, t, k)  # noqa: E731
+    done = r.mean(c, t, "completed")
+    return [
+        t,
+        c,
+        f"{done:.2f}",
+        ci(g("completion_time_s")),
+        ci(g("rms_lateral_m"), 2, 100),
+        ci(g("slip_energy_J")),
+        ci(g("slip_energy_per_m"), 2),
+        ci(g("mean_antagonism_N")),
+        ci(g("antagonism_distance_weighted_N")),
+        num(g("standstill_slip_energy_J")["mean"]),
+        cnt(g("limit_violation_steps")["mean"]),
+        cnt(g("reconfigure_events")["mean"]),
+    ]
+
+
+def scenario_row(r: Run, c: str, t: str) -> list[str]:
+    """A scenario's row: :func:`preset_row` and the cells of :data:`SCENARIO_EXTRA`."""
+    g = functools.partial(r.m, c, t)
+    return preset_row(r, c, t) + [
+        cnt(g("setpoint_flips")["mean"]),
+        num(g("peak_steer_rate_cmd")["mean"]),
+        num(g("peak_steer_rate")["mean"]),
+    ]
+
+
+def hold_row(r: Run, c: str) -> list[str]:
+    """Controller c on `hold`: the cells of :data:`HOLD_COLUMNS`."""
+    g = functools.partial(r.m, c, "hold")
+    return [
+        "hold",
+        c,
+        ci(g("hold_chassis_m"), 1, 1000),
+        ci(g("hold_yaw_rad"), 2, 180 / math.pi),
+        ci(g("hold_steer_rad"), 1, 180 / math.pi),
+        ci(g("hold_steer_cmd_rad"), 1, 180 / math.pi),
+    ]
+
+
 def preset_section(runs, p) -> str:
     r = runs[p]
-    title = PRESETS[p][0]
-
-    def base(c, t):
-        g = lambda k: r.m(c, t, k)  # noqa: E731
-        done = r.mean(c, t, "completed")
-        return [
-            t,
-            c,
-            f"{done:.2f}",
-            ci(g("completion_time_s")),
-            ci(g("rms_lateral_m"), 2, 100),
-            ci(g("slip_energy_J")),
-            ci(g("slip_energy_per_m"), 2),
-            ci(g("mean_antagonism_N")),
-            ci(g("antagonism_distance_weighted_N")),
-            num(g("standstill_slip_energy_J")["mean"]),
-            cnt(g("limit_violation_steps")["mean"]),
-            cnt(g("reconfigure_events")["mean"]),
-        ]
-
-    hdr = [
-        "track",
-        "controller",
-        "done",
-        "time [s]",
-        "RMS lat [cm]",
-        "slip energy [J]",
-        "slip per m [J/m]",
-        "antagonism [N]",
-        "antag. per distance [N]",
-        "standstill slip [J]",
-        "limit-exc. steps",
-        "stops",
-    ]
-    tracks = [base(c, t) for t in TRACKS for c in CONTROLLERS]
-    scen = []
-    for t in SCENARIOS:
-        for c in CONTROLLERS:
-            g = functools.partial(r.m, c, t)
-            scen.append(
-                base(c, t)
-                + [
-                    cnt(g("setpoint_flips")["mean"]),
-                    num(g("peak_steer_rate_cmd")["mean"]),
-                    num(g("peak_steer_rate")["mean"]),
-                ]
-            )
-    hold = []
-    for c in CONTROLLERS:
-        g = functools.partial(r.m, c, "hold")
-        hold.append(
-            [
-                "hold",
-                c,
-                ci(g("hold_chassis_m"), 1, 1000),
-                ci(g("hold_yaw_rad"), 2, 180 / math.pi),
-                ci(g("hold_steer_rad"), 1, 180 / math.pi),
-                ci(g("hold_steer_cmd_rad"), 1, 180 / math.pi),
-            ]
-        )
     imgs = " ".join(f'![{p} {s}](comparison/{p}_{s}.png){{ width="32%" }}' for s in SCENARIOS)
     return "\n".join(
         [
-            f"## {title}",
+            f"## {PRESETS[p][0]}",
             "",
             "Built-in tracks, ×1:",
             "",
-            table(hdr, tracks),
+            table(PRESET_COLUMNS, [preset_row(r, c, t) for t in TRACKS for c in CONTROLLERS]),
             "",
             "Scenarios, ×1:",
             "",
-            table(hdr + ["flips", "peak β̇ cmd [rad/s]", "peak β̇ [rad/s]"], scen),
+            table(PRESET_COLUMNS + SCENARIO_EXTRA, [scenario_row(r, c, t) for t in SCENARIOS for c in CONTROLLERS]),
             "",
             "While the command is zero (`hold`):",
             "",
-            table(["track", "controller", "chassis [mm]", "yaw [deg]", "steer [deg]", "steer cmd [deg]"], hold),
+            table(HOLD_COLUMNS, [hold_row(r, c) for c in CONTROLLERS]),
             "",
             f"Trajectories, seed 0, ×1 ({', '.join(SCENARIOS)}):",
             "",
@@ -1095,10 +1156,30 @@ def span(vals, d=2):
     return a if a == b else f"{a}–{b}"
 
 
-def why_section(runs, st, g2, g3, g4) -> str:
-    order = lambda kv: (list(PRESETS).index(kv[0][0]), ALL.index(kv[0][1]))  # noqa: E731
+def _preset_track_order(kv):
+    """Sort key of ``{(preset, track): ...}`` items: the presets' and the tracks' order."""
+    return list(PRESETS).index(kv[0][0]), ALL.index(kv[0][1])
+
+
+#: the columns of the table of the ICR controller's unfinished episodes
+STALL_COLUMNS = [
+    "preset",
+    "track",
+    "track length [m]",
+    "unfinished (scale: episodes)",
+    "final s [m]",
+    "furthest s [m]",
+    "furthest s reached at [s]",
+    "stops",
+    "stops, finished episodes",
+]
+
+
+def stall_rows(runs, st) -> list[list[str]]:
+    """One row of :data:`STALL_COLUMNS` per place (a cluster of final s) where the ICR controller's
+    unfinished episodes of a preset and track end."""
     rows = []
-    for (p, t), eps in sorted(st.items(), key=order):
+    for (p, t), eps in sorted(st.items(), key=_preset_track_order):
         fin = [e["reconfigure_events"] for x in SCALES for e in runs[p].episodes[("icr", t, x)] if e["completed"]]
         for g in clusters([e["s_end"] for e in eps]):
             sub = [e for e in eps if g[0] <= e["s_end"] <= g[-1]]
@@ -1120,89 +1201,78 @@ def why_section(runs, st, g2, g3, g4) -> str:
                     span(fin, 0) if fin else "-",
                 ]
             )
-    lines = [
-        "## Why the remaining losses",
-        "",
-        f"The look-ahead ([ICR controller §9]({LOOKAHEAD}))",
-        "plans once per track which configuration cell the robot is in and where it changes cell, holding short",
-        "excursions of the reference at the cell's rim and placing the unavoidable reconfigurations where the",
-        "reference is slow. Where the ICR controller's unfinished episodes end, over all five speed scales: the",
-        "progress s of the final pose and the furthest s reached (the poses projected onto the track; on a closed",
-        "track within the lap named), when the episode came within 3 cm of its furthest s, its",
-        "stop-and-reconfigure events, and those of the finished episodes of the same preset and track (all scales):",
-        "",
-        table(
-            [
-                "preset",
-                "track",
-                "track length [m]",
-                "unfinished (scale: episodes)",
-                "final s [m]",
-                "furthest s [m]",
-                "furthest s reached at [s]",
-                "stops",
-                "stops, finished episodes",
-            ],
-            rows,
-        ),
-        "",
+    return rows
+
+
+def spin_bullet(st) -> str | None:
+    """The robots with steering stops that stall on `spin`, and where."""
+    spin = [
+        (p, e) for (p, t), eps in sorted(st.items(), key=_preset_track_order) if t == "spin" and p in STOPS for e in eps
     ]
-    spin = [(p, e) for (p, t), eps in sorted(st.items(), key=order) if t == "spin" and p in STOPS for e in eps]
-    if spin:
-        per = []
-        for g in clusters([e["s_end"] for _, e in spin]):
-            sub = [(p, e) for p, e in spin if g[0] <= e["s_end"] <= g[-1]]
-            per.append(
-                f"at s = {span(g)} m {len(sub)} episode{'s' if len(sub) > 1 else ''} ("
-                + join(
-                    [f"{SHORT[q]} {sum(1 for p, _ in sub if p == q)}" for q in PRESETS if any(p == q for p, _ in sub)]
-                )
-                + ")"
-            )
-        lines.append(
-            f"- **`spin` on {join([SHORT[q] for q in STOPS if (q, 'spin') in st])}: stalls where the path turns from "
-            f"translating to spinning in place.** The unfinished episodes end {join(per)}. The failure known from "
-            "instrumented runs on `tri` and `hex`: a centimetre before the spin point the follower's target swings "
-            "between two cells, and the controller cycles between stopping (to reconfigure toward one) and running "
-            "(toward the other) until the time limit; the plan's safety net (§9: steering without the plan after 3 s "
-            "with less than 2 cm of progress) does not get it out. Where the stop count exceeds a finished "
-            "episode's the cycling shows in it; the episodes with as few stops as a finished one stall at the same "
-            "places, held there some other way (not instrumented here). Which seeds and scales stall differs from "
-            "preset to preset; those that pass the kinks finish."
+    if not spin:
+        return None
+    per = []
+    for g in clusters([e["s_end"] for _, e in spin]):
+        sub = [(p, e) for p, e in spin if g[0] <= e["s_end"] <= g[-1]]
+        per.append(
+            f"at s = {span(g)} m {len(sub)} episode{'s' if len(sub) > 1 else ''} ("
+            + join([f"{SHORT[q]} {sum(1 for p, _ in sub if p == q)}" for q in PRESETS if any(p == q for p, _ in sub)])
+            + ")"
         )
+    return (
+        f"- **`spin` on {join([SHORT[q] for q in STOPS if (q, 'spin') in st])}: stalls where the path turns from "
+        f"translating to spinning in place.** The unfinished episodes end {join(per)}. The failure known from "
+        "instrumented runs on `tri` and `hex`: a centimetre before the spin point the follower's target swings "
+        "between two cells, and the controller cycles between stopping (to reconfigure toward one) and running "
+        "(toward the other) until the time limit; the plan's safety net (§9: steering without the plan after 3 s "
+        "with less than 2 cm of progress) does not get it out. Where the stop count exceeds a finished "
+        "episode's the cycling shows in it; the episodes with as few stops as a finished one stall at the same "
+        "places, held there some other way (not instrumented here). Which seeds and scales stall differs from "
+        "preset to preset; those that pass the kinks finish."
+    )
+
+
+def swerve_spin_bullet(runs, st) -> str | None:
+    """`swerve`'s stalls on `spin`."""
     sw = st.get(("swerve", "spin"), [])
-    if sw:
-        r = runs["swerve"]
-        tw_sw = [scl(x) for x in SCALES if r.done("twist", "spin", x) < N_SEEDS]
-        lines.append(
-            f"- **`spin` on `swerve` at {join(sorted({scl(e['scale']) for e in sw}))}: a different stall.** "
-            f"{len(sw)} episode{'s' if len(sw) > 1 else ''} stop progressing at s = {span([e['s_end'] for e in sw])} m "
-            f"of {sw[0]['length']:.2f} m from about {span([e['reached_s'] for e in sw], 0)} s on, with "
-            f"{span([e['stops'] for e in sw], 0)} stop-and-reconfigure events; `twist` does not finish `swerve` "
-            f"`spin` at {join(tw_sw)} either (its stall at 9be52e4: module speeds below the deadband at the switch "
-            "to spinning). Not investigated here."
-        )
-    other = [(p, t, e) for (p, t), eps in sorted(st.items(), key=order) if t != "spin" for e in eps]
-    if other:
-        lines.append(
-            "- **Other stalls, not investigated here**: "
-            + join(
-                [
-                    f"{SHORT[p]} `{t}` seed {e['seed']} at {scl(e['scale'])}, s = {e['s_end']:.2f} m"
-                    + (f" of lap {e['lap']}" if e["closed"] else "")
-                    + (
-                        f" (a corner at {e['corner']:.2f} m)"
-                        if e["corner"] is not None and abs(e["corner"] - e["s_end"]) < 0.1
-                        else ""
-                    )
-                    + f", {e['stops']} stops"
-                    for p, t, e in other
-                ]
+    if not sw:
+        return None
+    r = runs["swerve"]
+    tw_sw = [scl(x) for x in SCALES if r.done("twist", "spin", x) < N_SEEDS]
+    return (
+        f"- **`spin` on `swerve` at {join(sorted({scl(e['scale']) for e in sw}))}: a different stall.** "
+        f"{len(sw)} episode{'s' if len(sw) > 1 else ''} stop progressing at s = {span([e['s_end'] for e in sw])} m "
+        f"of {sw[0]['length']:.2f} m from about {span([e['reached_s'] for e in sw], 0)} s on, with "
+        f"{span([e['stops'] for e in sw], 0)} stop-and-reconfigure events; `twist` does not finish `swerve` "
+        f"`spin` at {join(tw_sw)} either (its stall at 9be52e4: module speeds below the deadband at the switch "
+        "to spinning). Not investigated here."
+    )
+
+
+def other_stalls_bullet(st) -> str | None:
+    """The stalls off `spin`, each with where it ended."""
+    other = [(p, t, e) for (p, t), eps in sorted(st.items(), key=_preset_track_order) if t != "spin" for e in eps]
+    if not other:
+        return None
+    return bullet(
+        "**Other stalls, not investigated here**",
+        [
+            f"{SHORT[p]} `{t}` seed {e['seed']} at {scl(e['scale'])}, s = {e['s_end']:.2f} m"
+            + (f" of lap {e['lap']}" if e["closed"] else "")
+            + (
+                f" (a corner at {e['corner']:.2f} m)"
+                if e["corner"] is not None and abs(e["corner"] - e["s_end"]) < 0.1
+                else ""
             )
-            + "."
-        )
+            + f", {e['stops']} stops"
+            for p, t, e in other
+        ],
+    )
+
+
+def icr_axis_bullet(runs, g2) -> str:
     axis = [(p, g2[(p, "icr-axis")]) for p in LAP_GOAL]
-    lines.append(
+    return (
         "- **`icr-axis`**: its path runs along a steering axis, which the plan does not model; the arc check of §5 "
         "still stops the robot there, where the reference does not slow down (lap time ratio "
         + join(
@@ -1214,31 +1284,32 @@ def why_section(runs, st, g2, g3, g4) -> str:
         )
         + ")."
     )
+
+
+def slow_tracks_bullet(runs, g2) -> str | None:
+    """The built-in tracks where the ICR controller's lap time is over its bar."""
     slow = [(p, t) for p in LAP_GOAL for t in TRACKS if not g2[(p, t)][4] and g2[(p, t)][3] is not None]
-    if slow:
-        lines.append(
-            "- **Built-in tracks over 1.0×** (extra seconds; the ICR controller's stops against `twist-setpoint`'s "
-            "stop-first events, per episode): "
-            + join(
-                [
-                    f"{SHORT[p]} `{t}` +{g2[(p, t)][0] - g2[(p, t)][1]:.2f} s "
-                    f"({cnt(runs[p].fin('icr', t, 'reconfigure_events'))} / "
-                    f"{cnt(runs[p].fin('twist-setpoint', t, 'reconfigure_events'))})"
-                    for p, t in slow
-                ]
-            )
-            + ". Each unavoidable change of cell is still a stop at rest, which `twist-setpoint` replaces by a "
-            "shorter stop-first or none; where neither stops (`circle`) the difference is a few control periods."
-        )
-    slip, lat, limits = g3
-    lm = [(k, v) for k, v in lat.items() if not v[3]]
-    if lm:
-        lines.append(
-            "- **RMS lateral error over `twist-setpoint`'s + 0.3 cm**: "
-            + join([f"{SHORT[p]} `{t}` {v[0] * 100:.2f} against {v[1] * 100:.2f} cm" for (p, t), v in lm])
-            + ". Not investigated here."
-        )
+    if not slow:
+        return None
+    return bullet(
+        "**Built-in tracks over 1.0×** (extra seconds; the ICR controller's stops against `twist-setpoint`'s "
+        "stop-first events, per episode)",
+        [
+            f"{SHORT[p]} `{t}` +{g2[(p, t)][0] - g2[(p, t)][1]:.2f} s "
+            f"({cnt(runs[p].fin('icr', t, 'reconfigure_events'))} / "
+            f"{cnt(runs[p].fin('twist-setpoint', t, 'reconfigure_events'))})"
+            for p, t in slow
+        ],
+        ". Each unavoidable change of cell is still a stop at rest, which `twist-setpoint` replaces by a "
+        "shorter stop-first or none; where neither stops (`circle`) the difference is a few control periods.",
+    )
+
+
+def limits_bullet(runs, limits) -> str | None:
+    """The ICR controller's limit-exceeded steps, and what a rerun showed of them."""
     lim = [(p, v) for p, v in limits.items() if v[1]]
+    if not lim:
+        return None
     per_ep = [
         e["limit_violation_steps"]
         for p, _ in lim
@@ -1247,31 +1318,66 @@ def why_section(runs, st, g2, g3, g4) -> str:
         for e in runs[p].episodes[("icr", t, x)]
         if e["limit_violation_steps"]
     ]
-    if lim:
-        lines.append(
-            "- **Limit-exceeded steps of the ICR controller**: "
-            + join([f"{SHORT[p]} {v[0]} at ×1 ({v[1]} over all scales)" for p, v in lim])
-            + f", every affected episode with {span_int(per_ep)}, and `twist-setpoint` has "
-            "the same count in every cell. A rerun of one of them (`hex` `figure8`, seed 0, ×1, at "
-            f"{COMMIT}, with the episode log's "
-            "`limit_flags`) flags the first two control steps for both controllers (the steering rate and "
-            "acceleration of the first set-point, then the acceleration): the first command measured against the "
-            "steering at reset, not the controller's motion along the track. By the metric the bar is not met."
-        )
+    return bullet(
+        "**Limit-exceeded steps of the ICR controller**",
+        [f"{SHORT[p]} {v[0]} at ×1 ({v[1]} over all scales)" for p, v in lim],
+        f", every affected episode with {span_int(per_ep)}, and `twist-setpoint` has "
+        "the same count in every cell. A rerun of one of them (`hex` `figure8`, seed 0, ×1, at "
+        f"{COMMIT}, with the episode log's "
+        "`limit_flags`) flags the first two control steps for both controllers (the steering rate and "
+        "acceleration of the first set-point, then the acceleration): the first command measured against the "
+        "steering at reset, not the controller's motion along the track. By the metric the bar is not met.",
+    )
+
+
+def fronts_bullet(g4) -> str | None:
+    """The fronts' points where the ICR controller's slip per metre is not below both baselines'."""
     fm = [(p, m) for p in STOPS for m in g4[p][1]]
-    if fm:
-        tied = all(any(v[1] for v in m[4].values()) for _, m in fm)
-        lines.append(
-            "- **Fronts**: the points where the ICR controller's slip per metre is not below both baselines' are "
-            + join([f"{SHORT[p]} `{m[0]}` {scl(m[1])}" for p, m in fm])
-            + (
-                ", each within the 95% interval of a baseline that beats it (a tie at a small slip, not a separation)"
-                if tied
-                else ""
-            )
-            + " (numbers in the [Fronts](#fronts))."
+    if not fm:
+        return None
+    tied = all(any(v[1] for v in m[4].values()) for _, m in fm)
+    return (
+        "- **Fronts**: the points where the ICR controller's slip per metre is not below both baselines' are "
+        + join([f"{SHORT[p]} `{m[0]}` {scl(m[1])}" for p, m in fm])
+        + (
+            ", each within the 95% interval of a baseline that beats it (a tie at a small slip, not a separation)"
+            if tied
+            else ""
         )
-    return "\n".join(lines) + "\n"
+        + " (numbers in the [Fronts](#fronts))."
+    )
+
+
+def why_section(runs, st, g2, g3, g4) -> str:
+    _, lat, limits = g3
+    lm = lateral_misses(lat)
+    lines = [
+        "## Why the remaining losses",
+        "",
+        f"The look-ahead ([ICR controller §9]({LOOKAHEAD}))",
+        "plans once per track which configuration cell the robot is in and where it changes cell, holding short",
+        "excursions of the reference at the cell's rim and placing the unavoidable reconfigurations where the",
+        "reference is slow. Where the ICR controller's unfinished episodes end, over all five speed scales: the",
+        "progress s of the final pose and the furthest s reached (the poses projected onto the track; on a closed",
+        "track within the lap named), when the episode came within 3 cm of its furthest s, its",
+        "stop-and-reconfigure events, and those of the finished episodes of the same preset and track (all scales):",
+        "",
+        table(STALL_COLUMNS, stall_rows(runs, st)),
+        "",
+    ]
+    bullets = [
+        spin_bullet(st),
+        swerve_spin_bullet(runs, st),
+        other_stalls_bullet(st),
+        icr_axis_bullet(runs, g2),
+        slow_tracks_bullet(runs, g2),
+        bullet("**RMS lateral error over `twist-setpoint`'s + 0.3 cm**", lm, ". Not investigated here.")
+        if lm
+        else None,
+        limits_bullet(runs, limits),
+        fronts_bullet(g4),
+    ]
+    return "\n".join(lines + [b for b in bullets if b is not None]) + "\n"
 
 
 # ---------------------------------------------------------------------------------------- images
@@ -1317,8 +1423,8 @@ def main(argv: list[str]) -> None:
     st = stalls(root, runs)
     parts = [
         header(runs, walls),
-        verdict(runs, g2, g3, g4, prev, rows),
-        verdict_losses(runs, g2, g3, g4),
+        verdict(runs, g2, prev, rows),
+        verdict_losses(runs, g2, g3),
         verdict_setpoint(runs),
         goals_section(runs, rows),
         lap_ratio_table(runs, g2),
