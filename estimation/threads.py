@@ -150,22 +150,22 @@ class BlockKernel:
         if threads > 1:
             bounds = self.bounds(threads, n_rows)
             if bounds.shape[0] > 2:
-                _run_blocks(_parallel_twin(self.kernel), args, bounds)
+                _run_blocks(_parallel_twin(self.kernel), args, bounds, threads)
                 return
         self.kernel(*args, 0, n_rows)
 
 
-def _run_blocks(twin: Callable, args: tuple, bounds: np.ndarray) -> None:
-    """``twin(*args, bounds)`` with numba's pool at one thread per block (the calling thread's
-    setting, restored after: numba's thread count is per calling thread)."""
+def _run_blocks(twin: Callable, args: tuple, bounds: np.ndarray, threads: int) -> None:
+    """``twin(*args, bounds)`` with numba's pool at ``threads`` threads, at most one per block (the
+    calling thread's setting, restored after: numba's thread count is per calling thread)."""
     from numba import get_num_threads, set_num_threads
 
     before = get_num_threads()
-    blocks = bounds.shape[0] - 1
-    if before != blocks:
-        set_num_threads(blocks)
+    want = min(threads, bounds.shape[0] - 1)
+    if before != want:
+        set_num_threads(want)
     try:
         twin(*args, bounds)
     finally:
-        if before != blocks:
+        if before != want:
             set_num_threads(before)

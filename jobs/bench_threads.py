@@ -4,12 +4,13 @@ how it scales with threads.
 ``--action`` (:func:`run_action_bench`): robot-steps/s behind each action space and where the time
 of a step goes (targets, controller, env). ``--threads 1,2`` (:func:`print_thread_scaling`), in one run:
 
-For each action space (raw set-points, or a controller in the loop: ``residual``, ``icr-rate``,
+for each action space (raw set-points, or a controller in the loop: ``residual``, ``icr-rate``,
 ``twist``) and each N robots, the vector env is built at every thread count of ``--threads`` and
-stepped with the same seeded uniform random actions (same-step autoresets on random tracks, as
-``--action``); robot-steps/s are timed ``--repeats`` times with the thread counts alternated
-(ascending, then descending, ...) and the median is reported with its ratio to the first count.
-The final observations, rewards and ends of every count are compared: they must be the same bits
+stepped with the same seeded uniform random actions (same-step autoresets on ``--track``; raw
+set-points over a fifth of their range, as ``--num-envs`` draws them); robot-steps/s are timed
+``--repeats`` times with the thread counts alternated (ascending, then descending, ...) and the
+median is reported with its ratio to the first count. Every step's observations, rewards and ends
+at every count are compared after the timed loops: they must be the same bits
 (:mod:`estimation.threads`), and the table says so.
 """
 
@@ -148,19 +149,23 @@ def scaling_cell(action: str, num_envs: int, threads: int, calls: int, track: st
     try:
         env.reset(seed=seed)
         rng = np.random.default_rng(seed)
-        actions = rng.uniform(-1, 1, size=(calls + 20,) + env.action_space.shape).astype(np.float32)
-        digest = hashlib.sha256()
+        # raw set-points as bench-env --num-envs draws them (a fifth of the range: the robots stay on
+        # the track); a controller's actions over their whole range, as --action
+        scale = 0.2 if env is venv else 1.0
+        actions = (rng.uniform(-1, 1, size=(calls + 20,) + env.action_space.shape) * scale).astype(np.float32)
         for k in range(20):
             env.step(actions[k])
         clock = time.perf_counter
+        kept = []  # every step's outputs, hashed after the timed loop
         t0 = clock()
         for k in range(calls):
             obs, rew, term, trunc, _ = env.step(actions[20 + k])
-            digest.update(obs.tobytes())
-            digest.update(rew.tobytes())
-            digest.update(term.tobytes())
-            digest.update(trunc.tobytes())
+            kept.append((obs.copy(), rew.copy(), term.copy(), trunc.copy()))
         elapsed = clock() - t0
+        digest = hashlib.sha256()
+        for arrays in kept:
+            for a in arrays:
+                digest.update(a.tobytes())
     finally:
         venv.close()
     return calls * num_envs / elapsed, digest.hexdigest()[:16]
@@ -198,11 +203,10 @@ def print_thread_scaling(args, robot_kwargs: dict) -> int:
     """The table of ``azimut bench-env --threads``; exit status 1 if a thread count changed a result."""
     actions = args.action or ["raw", "residual", "icr-rate", "twist"]
     num_envs = args.num_envs or [16, 256]
-    track = args.track if args.track != "paper" else "random"
-    threads = args.threads
-    print(f"AzimutVectorEnv thread scaling: track {track} (random: a new track per episode), same-step autoresets, "
-          f"seeded uniform random actions; ~{args.vector_steps} robot-steps per run, median of {args.repeats} runs "
-          f"with the thread counts alternated; x: against {threads[0]} thread(s) in this run")
+    track, threads = args.track, args.threads
+    print(f"AzimutVectorEnv thread scaling: track {track}, same-step autoresets, seeded uniform random actions (raw: "
+          f"a fifth of the set-point range, as --num-envs); ~{args.vector_steps} robot-steps per run, median of "
+          f"{args.repeats} runs with the thread counts alternated; x: against {threads[0]} thread(s) in this run")
     print(f"load average {load_average()}")
     print(f"{'action':<10}{'N':>6}" + "".join(f"{f'{t} thr st/s':>12}{'x':>8}" for t in threads) + "   same bits")
     rows = thread_scaling(actions, num_envs, threads, args.vector_steps, args.repeats, track, args.seed,

@@ -211,7 +211,7 @@ class SensorState:
         same streams). ``all_rows``: ``rows`` selects every robot."""
         normals = self.normals
         if isinstance(rngs, NumbaList):
-            _DRAW_NORMALS.run(self.num_threads, len(rngs), rngs, rows, normals)
+            _DRAW_NORMALS.run(self.num_threads, normals.shape[0], rngs, rows, normals)
         elif all_rows:
             for i, rng in enumerate(rngs):
                 rng.standard_normal(out=normals[i])

@@ -29,7 +29,7 @@ from numba import njit
 
 from control.commands import WheelCommand
 from control.icr.config import ICRControllerConfig
-from control.icr.kernel_constants import N_WS, WS, compiled_constants
+from control.icr.kernel_constants import N_WS, WS, compiled_constants, private_constants
 from control.icr.kernels import (
     ARC_AXIS,
     ARC_NONE,
@@ -185,6 +185,7 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs, lo, hi) -> None:
     lam_hat, mu_hat, beta_meas, phidot_meas, lam_d_in, mu_d_in, plan, excursion = inputs
     beta_c, rate_c, phidot_c, accel, phiddot, lam_target, mu_target, axis_cap, event_out, kappa_out, saturated, \
         held_out = outputs
+    c = private_constants(c)  # a block's own arrays: no reference count shared between threads
     E, P, s_unit, normals, lim, tune, dt = c.E, c.P, c.s_unit, c.normals, c.lim, c.tune, c.dt
     steer_max = c.steer_max
     n = E.shape[0]

@@ -15,6 +15,7 @@ step: its rows are named (:class:`WS`), a function reads the rows it needs.
 
 from __future__ import annotations
 
+import hashlib
 from enum import IntEnum
 
 import numpy as np
@@ -51,7 +52,7 @@ from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 from estimation.numba_cache import structref_constructor
 
-__all__ = ["ICRConstants", "compiled_constants", "WS", "N_WS"]
+__all__ = ["ICRConstants", "compiled_constants", "private_constants", "WS", "N_WS"]
 
 
 @structref.register
@@ -92,6 +93,25 @@ _NAMES = [name for name, _, _ in FIELDS]
 
 #: the cached compiled constructor, ``new(*fields)`` in :data:`FIELDS` order
 _NEW = structref_constructor(_TYPE, _NAMES, __file__, __name__)
+
+
+def _private_copy():
+    """``private(c)``: the struct with copies of its arrays, compiled (cached under a name that
+    hashes its source, generated from :data:`FIELDS`)."""
+    from numba import njit
+
+    args = ", ".join(f"c.{name}.copy()" if isinstance(typ, types.Array) else f"c.{name}" for name, typ, _ in FIELDS)
+    src = f"def _private(c):\n    return _new({args})\n"
+    name = "_private_" + hashlib.sha256(src.encode()).hexdigest()[:16]
+    scope = {"_new": _NEW, "__name__": __name__}
+    exec(compile(src.replace("def _private(", f"def {name}("), __file__, "exec"), scope)
+    return njit(cache=True)(scope[name])
+
+
+#: ``private_constants(c)``: the struct with arrays of its own. Each block of a step on several
+#: threads takes one: the step passes these arrays to a function per robot, and the shared struct's
+#: arrays carry one reference count that the threads would contend for (estimation/threads.py)
+private_constants = _private_copy()
 
 
 def stop_circle_normals(geom: RobotGeometry) -> np.ndarray:
