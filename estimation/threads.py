@@ -146,6 +146,11 @@ class BlockKernel:
             b = self._bounds[key] = block_bounds(n_rows, threads, self.min_rows)
         return b
 
+    def serial(self, threads: int, n_rows: int) -> bool:
+        """True where ``run(threads, n_rows, ...)`` is one call of the kernel itself (a caller on a
+        hot path of one robot may call ``kernel(*args, 0, n_rows)`` directly)."""
+        return threads <= 1 or self.bounds(threads, n_rows).shape[0] <= 2
+
     def run(self, threads: int, n_rows: int, *args: Any) -> None:
         if threads > 1:
             bounds = self.bounds(threads, n_rows)

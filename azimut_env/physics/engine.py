@@ -51,7 +51,7 @@ from azimut_env.physics.blowup import BLOWUP_MESSAGES, BlowUp, BlowUpLimits
 from azimut_env.physics.body_io import BodyIO
 from azimut_env.physics.contacts import lap, step_with_contacts
 from azimut_env.physics.energy_check import EnergyCheck
-from azimut_env.physics.kernels import STEP_BLOCKS, SUMMARY_BLOCKS
+from azimut_env.physics.kernels import STEP_BLOCKS, SUMMARY_BLOCKS, step_kernel, summary_kernel
 from azimut_env.physics.layout import ACC, BODY, CMD, CS, FT, JS, MS, RS, RS_POSE, RS_TWIST_BODY, WP, WS, WS_FORCE
 from azimut_env.physics.modules import mechanical_energy, module_impulse_response
 from azimut_env.physics.obstacles import Obstacle, add_obstacle_shape, add_robot_shape, overlapping_shapes
@@ -96,6 +96,7 @@ class AzimutPhysics:
         self.n = self.params.n
         self.control_period = float(control_period)
         self.num_threads = check_threads(num_threads)
+        self._serial = self.num_threads == 1 or self.n_robots == 1  # the kernels called directly
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
         self._energy_check = EnergyCheck(self.n_robots, self.blowup)
@@ -159,10 +160,13 @@ class AzimutPhysics:
     def _summarize(self, sl: slice = slice(None)) -> None:
         """The summary rows ``sl`` (all robots by default) from the state (:func:`summary_kernel`)."""
         lim, out = self.blowup, self.summary[sl]
-        SUMMARY_BLOCKS.run(self.num_threads, out.shape[0], self._state[sl], self.joint_state[sl], self.motor_state[sl],
-                           self.acc[sl], self.wheel_params[sl], self.enabled[sl], self._axis_xy, self.n,
-                           1.0 / self.substeps, SLIP_MEMORY_TIME, lim.speed, lim.yaw_rate, lim.spin, lim.position, out,
-                           self.wheel_summary[sl])
+        args = (self._state[sl], self.joint_state[sl], self.motor_state[sl], self.acc[sl], self.wheel_params[sl],
+                self.enabled[sl], self._axis_xy, self.n, 1.0 / self.substeps, SLIP_MEMORY_TIME, lim.speed,
+                lim.yaw_rate, lim.spin, lim.position, out, self.wheel_summary[sl])
+        if self._serial:
+            summary_kernel(*args, 0, out.shape[0])
+        else:
+            SUMMARY_BLOCKS.run(self.num_threads, out.shape[0], *args)
 
     def _read_state(self) -> np.ndarray:
         self._io.read()
@@ -210,8 +214,6 @@ class AzimutPhysics:
             return
         self._obstacle_shapes = [add_obstacle_shape(self.space, ob) for ob in obs]
         self._setup_buffers()
-
-    # ------------------------------------------------------------------ pickling
 
     def __getstate__(self) -> dict:
         d = self.__dict__.copy()
@@ -362,9 +364,8 @@ class AzimutPhysics:
         robot = self._robot_index(robot)
         if not math.isfinite(impulse):
             raise ValueError(f"kick impulse must be finite, got {impulse!r}")
-        for k in wheels:
-            if not 0 <= int(k) < self.n:
-                raise ValueError(f"kick: wheel index {k} out of range 0..{self.n - 1}")
+        if any(not 0 <= int(k) < self.n for k in wheels):
+            raise ValueError(f"kick: a wheel index of {list(wheels)} is out of range 0..{self.n - 1}")
         wp = self.wheel_params[robot]
         if not np.any(wp[:, WP.COM]):
             for k in wheels:
@@ -382,13 +383,10 @@ class AzimutPhysics:
             self.joint_state[robot, :, JS.OMEGA] += dq[3:]
         self._read_robot_state(robot)
 
-    # ------------------------------------------------------------------ stepping
-
     def step(self, times: dict[str, float] | None = None) -> None:
-        """Advance all robots by one control period (``substeps`` substeps).
-
-        Timing hook: with ``times`` given (else :attr:`stage_times`, when set), each stage's seconds are added
-        under ``read``, ``force`` (the compiled kernel), ``write``, ``space_step``, ``summary`` (bench-env's split)."""
+        """Advance all robots by one control period (``substeps`` substeps). Timing hook: with ``times`` given
+        (else :attr:`stage_times`, when set), each stage's seconds are added under ``read``, ``force`` (the
+        compiled kernel), ``write``, ``space_step``, ``summary`` (bench-env's split)."""
         self.acc[:] = 0.0
         p = self.params
         args = (self.joint_state, self.motor_state, self.tire_state, self.commands, self.wheel_params, self.enabled,
@@ -401,9 +399,11 @@ class AzimutPhysics:
         self._energy_check.before(self)
         if tm is not None:
             t = lap(tm, "read", t)
-        state = self._state
         if not self.obstacles:  # the whole control period in one compiled call
-            STEP_BLOCKS.run(self.num_threads, self.n_robots, state, *args, self.substeps, True)
+            if self._serial:  # one robot or one thread: the kernel itself, no dispatch
+                step_kernel(self._state, *args, self.substeps, True, 0, self.n_robots)
+            else:
+                STEP_BLOCKS.run(self.num_threads, self.n_robots, self._state, *args, self.substeps, True)
             if tm is not None:
                 t = lap(tm, "force", t)
             self._io.write()

@@ -172,8 +172,9 @@ class AzimutTask:
         if p is None or p[0].jit != self.jit:
             ta, ns = task_arrays(self, self.jit)
             threads = self.physics.num_threads
-            p = self._pipelines = (Pipeline(step_stages(self, self.jit), ta, ns, self.jit, threads),
-                                   Pipeline(reset_stages(self, self.jit), ta, ns, self.jit, threads))
+            N = self.n_robots
+            p = self._pipelines = (Pipeline(step_stages(self, self.jit), ta, ns, self.jit, threads, N),
+                                   Pipeline(reset_stages(self, self.jit), ta, ns, self.jit, threads, N))
         return p
 
     # ------------------------------------------------------------------ reset

@@ -103,28 +103,37 @@ class Pipeline:
         jit: False: every stage as plain Python (``py_func``), the reference path.
         num_threads: threads of the compiled stages (blocks of at least :data:`MIN_BLOCK_ROWS`
             robots; checked where it entered, :class:`~azimut_env.task.config.TaskConfig`).
+        n_rows: the robots N (the length of every ``rows``).
     """
 
-    def __init__(self, stages: Sequence[Callable], ta: Any, ns: Any, jit: bool = True, num_threads: int = 1) -> None:
+    def __init__(self, stages: Sequence[Callable], ta: Any, ns: Any, jit: bool = True, num_threads: int = 1,
+                 n_rows: int = 1) -> None:
         self.stages = tuple(stages)
         self.ta, self.ns, self.jit = ta, ns, jit
         self.num_threads = num_threads
-        calls: list[tuple[Any, Any]] = []
+        # (function, arrays, how): "block" a BlockKernel run on the threads, "serial" its kernel
+        # called once on all rows (one thread or a batch too small to split: no dispatch on the
+        # single env's path), "python" a stage as plain Python
+        calls: list[tuple[Any, Any, str]] = []
         group: list[Callable] = []
         for stage in (*self.stages, None):
             if jit and stage is not None and _is_compiled(stage):
                 group.append(stage)
                 continue
             if group:
-                calls.append((BlockKernel(_fuse(group), MIN_BLOCK_ROWS), ta))
+                blocks = BlockKernel(_fuse(group), MIN_BLOCK_ROWS)
+                serial = blocks.serial(num_threads, n_rows)
+                calls.append((blocks.kernel if serial else blocks, ta, "serial" if serial else "block"))
                 group = []
             if stage is not None:
-                calls.append((py_func(stage), ns))
+                calls.append((py_func(stage), ns, "python"))
         self._calls = tuple(calls)
 
     def __call__(self, rows: np.ndarray, action: np.ndarray) -> None:
-        for fn, arrays in self._calls:
-            if isinstance(fn, BlockKernel):
+        for fn, arrays, how in self._calls:
+            if how == "serial":
+                fn(arrays, rows, action, 0, rows.shape[0])
+            elif how == "block":
                 fn.run(self.num_threads, rows.shape[0], arrays, rows, action)
             else:
                 fn(arrays, rows, action)
