@@ -27,10 +27,10 @@ from pathlib import Path
 from azimut_env.tracks import TRACK_NAMES
 from jobs.args import (
     add_robot_arguments,
-    add_threads_argument,
     arg_choice_list,
     arg_int,
     arg_output_path,
+    arg_threads,
     require_module,
 )
 from train.envs import ACTIONS, canonical_action
@@ -80,7 +80,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="JSON file of hyperparameters overriding the defaults: an object of keyword arguments, "
                              "or the versioned best_hyperparams.json azimut tune writes")
     parser.add_argument("--torch-threads", type=arg_int(1, 256), default=1, help="torch CPU threads (default 1)")
-    add_threads_argument(parser, "the vector env and its controllers (blocks of robots; torch's are --torch-threads)")
+    parser.add_argument("--threads", type=arg_threads, default=None, metavar="N",
+                        help="threads of the vector env and its controllers, blocks of robots (default: the cores "
+                             "this process may use less torch's extra threads, so that the two do not oversubscribe "
+                             "the cores; the results do not depend on it)")
     parser.add_argument("--progress-bar", action="store_true",
                         help="SB3's progress bar (needs tqdm and rich; otherwise a line per evaluation)")
     parser.add_argument("--quiet", action="store_true", help="no SB3 log table on stdout")
@@ -269,6 +272,18 @@ def interrupted_line(exc: KeyboardInterrupt, args: argparse.Namespace) -> str:
             f"'{name}'); the same command with --resume continues")
 
 
+def env_threads(args: argparse.Namespace) -> int:
+    """The vector env's threads: ``--threads``, else the cores this process may use less torch's
+    threads beyond the main one (PPO alternates the env's steps and torch's update, and torch's
+    worker threads keep spinning after their work: measured on 2 cores, 16 robots, env/torch
+    threads 1/1 8,014 env steps/s, 2/1 8,343, 2/2 8,666, 1/2 9,089; docs/results/bench-env.md)."""
+    from estimation.threads import default_threads
+
+    if args.threads is not None:
+        return args.threads
+    return max(1, default_threads() - (args.torch_threads - 1))
+
+
 def _run(args: argparse.Namespace) -> int:
     if getattr(args, "seeds", None) is not None:  # one agent per seed, as campaign tasks (jobs.training.seeds)
         from jobs.training.seeds import run_seeds
@@ -279,7 +294,7 @@ def _run(args: argparse.Namespace) -> int:
     from estimation.threads import set_default_threads
 
     torch.set_num_threads(args.torch_threads)
-    set_default_threads(args.threads)
+    set_default_threads(env_threads(args))
     if args.engine == "rllib":
         return _run_rllib(args)
     from jobs.records import provenance
@@ -290,7 +305,9 @@ def _run(args: argparse.Namespace) -> int:
     record = train(args.algo, args.action, args.track, args.seed, args.steps, Path(args.out), args.num_robots,
                    tuple(args.eval_tracks), args.eval_every, args.checkpoint_every, args.resume, overrides,
                    args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
-                   time_limit_min=args.time_limit, record_extra={"provenance": provenance()},
+                   time_limit_min=args.time_limit,
+                   record_extra={"provenance": provenance(),
+                                 "threads": {"env": env_threads(args), "torch": args.torch_threads}},
                    correction_cost=args.correction_cost)
     write_learning_curve(Path(args.out), record)
     if not record["complete"]:

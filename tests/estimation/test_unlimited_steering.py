@@ -66,10 +66,14 @@ def test_estimate_invariant_under_pi_shifts(q, k, method):
     q, k = np.array(q), np.array(k)
     a = estimate_icr(q, SWERVE, method)
     b = estimate_icr(q + k * np.pi, SWERVE, method)
-    assert lambda_distance(a, b) < 1e-6
     _, _, beta_a, qa = estimate_eta(q, np.zeros(4), SWERVE, method)
     _, _, beta_b, qb = estimate_eta(q + k * np.pi, np.zeros(4), SWERVE, method)
     assert np.isclose(qa, qb, atol=1e-9)
+    # the same λ̂, except at a tie: the swerve is square, so every wheel at one angle has
+    # symmetric optima of equal quality (found by hypothesis: q = 4 × −1.736, k = (0, 0, 0, −2), IT),
+    # and the last bit that wrapping q + kπ changes may pick the other one, as good (qa == qb above)
+    tie = bool(np.all(q == q[0]))
+    assert lambda_distance(a, b) < 1e-6 or tie
     assert np.all(np.abs(SWERVE.steering_difference(beta_b, q + k * np.pi)) <= np.pi / 2 + 1e-12)
 
 
