@@ -260,6 +260,9 @@ class AzimutEnv(AzimutFrontEnd, gym.Env):
     * ``pose_source``: ``"true"`` (default) or ``"odometry"`` (see "What is privileged");
       ``localisation``: :class:`~azimut_env.task.localisation.LocalisationParams` (fix period [s], fix
       noise [m], [rad]; default 1 s, 2 cm, 0.01 rad).
+    * ``num_threads``: threads of the compiled physics and step pipeline of the vector env, blocks
+      of robots (default None: the cores this process may use); one robot runs on one, and any
+      count gives the same bits (:mod:`estimation.threads`).
 
     ``reset(options=...)`` accepts ``"track"`` (a Track or a built-in name, for this episode
     only), ``"start_progress"`` [m] (on an open track within [0, length], else ``ValueError``; on

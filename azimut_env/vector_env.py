@@ -92,7 +92,9 @@ class AzimutVectorEnv(AzimutFrontEnd, gym.vector.VectorEnv):
     ``max_lateral_error``, ``lookahead_count``, ``lookahead_spacing``, ``obstacles`` (shared by all
     sub-envs, at the same world positions), ``start_noise``, ``render_mode``, ``action_latency``
     (a FIFO per sub-env, emptied at its reset), ``pose_source``, ``localisation`` (each sub-env has
-    its own pose estimate and fix noise, drawn from its generator).
+    its own pose estimate and fix noise, drawn from its generator), ``num_threads`` (the physics
+    substeps, the step pipeline and the controllers that read :attr:`num_threads` run in blocks of
+    robots, one per thread; default: the cores this process may use; any count gives the same bits).
 
     ``reset(seed=..., options=...)``: ``seed`` an int (sub-env i gets ``seed + i``) or a list of
     ``num_envs`` ints/None; ``options`` a dict applied to every reset sub-env, or a sequence of
