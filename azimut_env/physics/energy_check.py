@@ -31,6 +31,7 @@ from numba import njit
 from azimut_env.physics.blowup import BlowUp, BlowUpLimits
 from azimut_env.physics.layout import ACC, BODY, CS, JS, MS, RS, WP
 from azimut_env.physics.tire import TS
+from estimation.threads import BlockKernel
 
 __all__ = ["EnergyCheck", "energy_kernel", "energy_gain_kernel", "POSITIVE_SHARE", "RELATIVE_GAIN"]
 
@@ -41,11 +42,11 @@ RELATIVE_GAIN = 0.01
 
 
 @njit(cache=True)
-def energy_kernel(state, body, js, ms, ts, wp, axis_xy, transfer, com_h, accel, out):
-    """out (N,): the mechanical energy [J] of every robot, as
+def energy_kernel(state, body, js, ms, ts, wp, axis_xy, transfer, com_h, accel, out, lo, hi):
+    """out (N,): the mechanical energy [J] of the robots ``lo`` to ``hi - 1``, as
     :func:`~azimut_env.physics.modules.mechanical_energy` computes it (loads with the transfer of
-    ``accel`` (N, 2) when ``com_h`` > 0)."""
-    for i in range(body.shape[0]):
+    ``accel`` (N, 2) when ``com_h`` > 0; a block of :class:`estimation.threads.BlockKernel`)."""
+    for i in range(lo, hi):
         m = body[i, BODY.MASS]
         vx, vy, w, th = state[i, CS.VX], state[i, CS.VY], state[i, CS.W], state[i, CS.TH]
         c, s = math.cos(th), math.sin(th)
@@ -101,6 +102,10 @@ def energy_gain_kernel(e_before, e_after, acc, hist, filled, pos, gain_abs, summ
             summary[i, RS.CODE] = code
 
 
+#: the energies over blocks of robots (a block: at least 32 robots)
+_ENERGY = BlockKernel(energy_kernel, min_rows=32)
+
+
 class EnergyCheck:
     """The per-robot state of the check (its ring of gains) for ``AzimutPhysics``: :meth:`before`
     at the start of a step, :meth:`after` once the step's summary is written, :meth:`clear` when a
@@ -120,9 +125,12 @@ class EnergyCheck:
         self.pos[robot] = 0
 
     def _energy(self, phys, out: np.ndarray) -> None:
-        energy_kernel(phys._state, phys.body_inertia, phys.joint_state, phys.motor_state, phys.tire_state,
-                      phys.wheel_params, phys._axis_xy, phys._load_transfer, float(phys.params.chassis.com_height),
-                      phys.chassis_accel, out)
+        args = (phys._state, phys.body_inertia, phys.joint_state, phys.motor_state, phys.tire_state, phys.wheel_params,
+                phys._axis_xy, phys._load_transfer, float(phys.params.chassis.com_height), phys.chassis_accel, out)
+        if phys.num_threads == 1 or out.shape[0] == 1:
+            energy_kernel(*args, 0, out.shape[0])
+        else:
+            _ENERGY.run(phys.num_threads, out.shape[0], *args)
 
     def before(self, phys) -> None:
         self._energy(phys, self.e_before)
