@@ -76,9 +76,9 @@ class AzimutFrontEnd:
 
     @property
     def num_threads(self) -> int:
-        """Threads of the compiled physics and step pipeline (``num_threads`` given, or the cores
-        this process may use); the controllers' batched steps take the same. Any count gives the
-        same bits."""
+        """Threads of the compiled physics and step pipeline: ``num_threads`` given (or the cores
+        this process may use), at most one per robot (the single env: 1); the controllers' batched
+        steps take the same. Any count gives the same bits."""
         return self.task.physics.num_threads
 
     @property

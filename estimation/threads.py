@@ -11,8 +11,8 @@ compiled on first use).
 **Results do not depend on the thread count.** A row's arithmetic is the same whichever block
 holds it and whichever thread runs it: no sum runs across rows, no work space is shared between
 blocks, and the random streams are per robot (their generators are the caller's, drawn before
-the kernels). So 1, 2 or N threads give the same bits (``tests/test_threads.py`` and the env's and
-controllers' tests check it on recorded episodes).
+the kernels). So 1, 2 or N threads give the same bits (``tests/estimation/test_threads.py``,
+``tests/azimut_env/test_threads_env.py`` and ``tests/control/test_threads_control.py`` check it).
 
 **How many.** ``num_threads=None`` takes the cores this process may run on
 (``os.sched_getaffinity``), at most numba's thread count for the calling thread
@@ -76,18 +76,19 @@ def default_threads() -> int:
 
 
 def check_threads(num_threads: Any, name: str = "num_threads") -> int:
-    """``num_threads`` checked (a positive integer, at most :func:`max_threads`), or None: the
-    default (:func:`default_threads`). ``name``: the argument as the error message names it
-    (``--threads`` for a CLI flag)."""
+    """``num_threads`` checked (an integer, as :func:`estimation.validation.check_int` takes one,
+    from 1 to :func:`max_threads`), or None: the default (:func:`default_threads`). ``name``: the
+    argument as the error message names it (``--threads`` for a CLI flag)."""
+    from estimation.validation import check_int
+
     if num_threads is None:
         return default_threads()
     limit = max_threads()
-    if isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer)):
-        raise TypeError(f"{name} must be a positive integer or None, got {num_threads!r}")
-    if num_threads < 1 or num_threads > limit:
-        raise ValueError(f"{name} must be between 1 and {limit} (numba's thread pool, NUMBA_NUM_THREADS), "
-                         f"got {num_threads}")
-    return int(num_threads)
+    v = check_int(name, num_threads, min_value=1)
+    if v > limit:
+        raise ValueError(f"{name} must be at most {limit}, the threads of numba's pool on this machine "
+                         f"(NUMBA_NUM_THREADS), got {v}")
+    return v
 
 
 def block_bounds(n_rows: int, threads: int, min_rows: int = 1) -> np.ndarray:

@@ -54,19 +54,15 @@ def arg_int(min_value: int | None = None, max_value: int | None = None) -> Calla
     return convert
 
 
-def _threads(text: str) -> int:
-    from estimation.threads import max_threads
-
-    v = arg_int(1, max_threads())(text)
-    return v
-
-
 def arg_threads(text: str) -> int:
     """``type=`` for ``--threads``: an integer from 1 to numba's thread pool (``NUMBA_NUM_THREADS``)."""
+    from estimation.threads import max_threads
+
     try:
-        return _threads(text)
+        return arg_int(1, max_threads())(text)
     except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (threads: 1 to numba's pool, NUMBA_NUM_THREADS)") from None
+        raise argparse.ArgumentTypeError(f"{exc} (threads: 1 to numba's pool on this machine, NUMBA_NUM_THREADS)"
+                                         ) from None
 
 
 def arg_threads_list(text: str) -> list[int]:

@@ -95,8 +95,8 @@ class AzimutPhysics:
         self.n_robots, self.substeps, self.solver_iterations = int(n_robots), int(substeps), int(solver_iterations)
         self.n = self.params.n
         self.control_period = float(control_period)
-        self.num_threads = check_threads(num_threads)
-        self._serial = self.num_threads == 1 or self.n_robots == 1  # the kernels called directly
+        self.num_threads = min(check_threads(num_threads), self.n_robots)  # at most one per robot
+        self._serial = self.num_threads == 1  # the kernels called directly
         self.dt = self.control_period / self.substeps
         self.blowup = blowup if blowup is not None else BlowUpLimits()
         self._energy_check = EnergyCheck(self.n_robots, self.blowup)

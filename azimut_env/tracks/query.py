@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["TQ", "wrap_angle", "wrap_pi", "interp1", "np_interp1", "wrap_progress", "project_window_kernel",
-           "query_one_kernel", "query_batch_kernel", "query_tracks"]
+           "refined_progress", "query_one_kernel", "query_batch_kernel", "query_tracks"]
 
 
 class TQ(IntEnum):
@@ -109,6 +109,20 @@ def segment_step(X, Y, TH, rho, bi, m, px, py, pth) -> tuple[bool, float]:
     return True, min(max(step, -seg), seg)
 
 
+@njit(cache=True, inline="always")
+def refined_progress(S, X, Y, TH, rho, closed, length, bi, lap_offset, base, px, py, pth):
+    """The progress of the nearest sample ``bi`` (S[bi] + ``lap_offset`` + ``base``, in that
+    order: whole laps of a closed track) moved along its segment (:func:`segment_step`) and, on an
+    open track, clamped to [0, length]: the end of every windowed and whole-track projection."""
+    s = S[bi] + lap_offset + base
+    moved, step = segment_step(X, Y, TH, rho, bi, S.shape[0], px, py, pth)
+    if moved:
+        s += step
+    if not closed:
+        s = min(max(s, 0.0), length)
+    return s
+
+
 @njit(cache=True)
 def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint, back, ahead, always_wrap):
     """Progress s of the reference pose nearest to (px, py, pth) in the window [s_hint − back,
@@ -150,13 +164,7 @@ def project_window_kernel(S, X, Y, TH, closed, length, rho, px, py, pth, s_hint,
             best = c
             bi = i
             boff = off
-    s = S[bi] + boff + base
-    moved, step = segment_step(X, Y, TH, rho, bi, m, px, py, pth)
-    if moved:
-        s += step
-    if not closed:
-        s = min(max(s, 0.0), length)
-    return s
+    return refined_progress(S, X, Y, TH, rho, closed, length, bi, boff, base, px, py, pth)
 
 
 @njit(cache=True)

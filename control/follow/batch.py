@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from azimut_env.tracks import Track, np_interp1, project_window_kernel, wrap_pi
-from azimut_env.tracks.query import segment_step
+from azimut_env.tracks.query import refined_progress
 from azimut_env.typed_lists import array_list, set_item
 from control.follow.cusps import cusp_feed_forward, cusp_progress, cusp_table
 from control.follow.path_follower import PathFollower, PathFollowerConfig, check_start_progress, merge_stops
@@ -135,13 +135,7 @@ def _project(P, closed, length, rho, px, py, pth, hint, has_hint):
         if c < best:
             best = c
             bi = i
-    s = S[bi] + 0.0 + 0.0
-    moved, step = segment_step(X, Y, TH, rho, bi, m, px, py, pth)
-    if moved:
-        s += step
-    if not closed:
-        s = min(max(s, 0.0), length)
-    return s
+    return refined_progress(S, X, Y, TH, rho, closed, length, bi, 0.0, 0.0, px, py, pth)
 
 
 @njit(cache=True, inline="always")

@@ -21,10 +21,26 @@ from numba import njit
 
 from estimation.threads import BlockKernel
 
-__all__ = ["swerve_step_kernel", "SWERVE_STEP", "FLAGS"]
+__all__ = ["swerve_step_kernel", "SWERVE_STEP", "FLAGS", "discretize_twist_kernel"]
 
 #: the SwerveConfig booleans, in the order of the kernel's ``flags``
 FLAGS = ("discretize", "optimize", "cosine_compensation", "desaturate", "offset_correction", "coupling")
+
+
+@njit(cache=True, inline="always")
+def discretize_twist_kernel(vx: float, vy: float, w: float, dt: float) -> tuple[float, float, float]:
+    """WPILib's ``ChassisSpeeds.discretize``: the twist whose pose exponential over ``dt`` is the
+    straight move (vx dt, vy dt) with the turn w dt (the twist baselines' ``discretize`` flag)."""
+    x, y, th = vx * dt, vy * dt, w * dt
+    half = 0.5 * th
+    cos_m1 = math.cos(th) - 1.0
+    if abs(cos_m1) < 1e-9:
+        h = 1.0 - th * th / 12.0
+    else:
+        h = -(half * math.sin(th)) / cos_m1
+    nrm = math.hypot(h, half)
+    c, s = h / nrm, -half / nrm
+    return (x * c - y * s) * nrm / dt, (x * s + y * c) * nrm / dt, th / dt
 
 
 # One long function on purpose: one numba call per control step for all robots, no allocation,
@@ -55,19 +71,8 @@ def swerve_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state_r
         t0, t1 = prev[0] + dv0, prev[1] + dv1
         t2 = prev[2] + min(max(twists[m, 2] - prev[2], -step_w), step_w)
         state_twist[i, 0], state_twist[i, 1], state_twist[i, 2] = t0, t1, t2
-        if flags[0]:  # discretize_twist
-            x, y, th = t0 * dt, t1 * dt, t2 * dt
-            half = 0.5 * th
-            cos_m1 = math.cos(th) - 1.0
-            if abs(cos_m1) < 1e-9:
-                h = 1.0 - th * th / 12.0
-            else:
-                h = -(half * math.sin(th)) / cos_m1
-            nrm = math.hypot(h, half)
-            c, s = h / nrm, -half / nrm
-            k0 = (x * c - y * s) * nrm / dt
-            k1 = (x * s + y * c) * nrm / dt
-            k2 = th / dt
+        if flags[0]:
+            k0, k1, k2 = discretize_twist_kernel(t0, t1, t2, dt)
         else:
             k0, k1, k2 = t0, t1, t2
         twist_out[m, 0], twist_out[m, 1], twist_out[m, 2] = k0, k1, k2

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from control.twist.compiled import discretize_twist_kernel
 from estimation.threads import BlockKernel
 
 __all__ = ["setpoint_step_kernel", "SETPOINT_STEP"]
@@ -194,19 +195,8 @@ def setpoint_step_kernel(rows, twists, beta_meas, state_twist, state_beta, state
             now[k] = beta_meas[m, k]
             if unlimited:  # the measured angle (in ]−π, π]) on the commands' turn
                 now[k] = state_beta[i, k] + (np.mod(beta_meas[m, k] - state_beta[i, k] + np.pi, 2 * np.pi) - np.pi)
-        if flags[0]:  # discretize_twist
-            x, y, th = twists[m, 0] * dt, twists[m, 1] * dt, twists[m, 2] * dt
-            half = 0.5 * th
-            cos_m1 = math.cos(th) - 1.0
-            if abs(cos_m1) < 1e-9:
-                h = 1.0 - th * th / 12.0
-            else:
-                h = -(half * math.sin(th)) / cos_m1
-            nrm = math.hypot(h, half)
-            c, s_ = h / nrm, -half / nrm
-            t[0] = (x * c - y * s_) * nrm / dt
-            t[1] = (x * s_ + y * c) * nrm / dt
-            t[2] = th / dt
+        if flags[0]:
+            t[0], t[1], t[2] = discretize_twist_kernel(twists[m, 0], twists[m, 1], twists[m, 2], dt)
         else:
             t[0], t[1], t[2] = twists[m, 0], twists[m, 1], twists[m, 2]
         top = 0.0  # desaturate the target

@@ -134,6 +134,13 @@ def check_executor_args(args: argparse.Namespace) -> str:
     if args.ray_address is not None and not str(args.ray_address).strip():
         raise ValueError("--ray-address must not be empty")
     executor = resolve_executor(args.executor, args.workers, args.ray_address)
+    threads = getattr(args, "threads_per_task", None)
+    if threads is not None and args.ray_address is None:  # local tasks: at most this machine's pool
+        from estimation.threads import max_threads
+
+        if threads > max_threads():
+            raise ValueError(f"argument --threads: must be at most {max_threads()}, the threads of numba's pool on "
+                             f"this machine (NUMBA_NUM_THREADS), got {threads}")
     if args.ray_address is not None:
         check_ray_address(args.ray_address)
     return executor

@@ -62,7 +62,8 @@ def test_a_bad_thread_count_is_refused_by_name(bad):
 def test_the_thread_count_is_the_envs_and_defaults_to_the_cores():
     from estimation.threads import default_threads
 
-    venv = AzimutVectorEnv(num_envs=2)
+    venv = AzimutVectorEnv(num_envs=8)
     assert venv.num_threads == default_threads() and venv.task.config.num_threads is None
     venv.close()
-    assert AzimutVectorEnv(num_envs=2, num_threads=1).num_threads == 1
+    assert AzimutVectorEnv(num_envs=8, num_threads=1).num_threads == 1
+    assert AzimutEnv(num_threads=max_threads()).num_threads == 1  # one robot: one thread, as it says
