@@ -101,10 +101,17 @@ class _PathFollowing:
         tracks, progress = env.tracks, np.atleast_1d(env.progress)
         for i in rows:
             cfg = self.follower_config
-            if not self._config_given and tracks[i].name in SCENARIO_NAMES:
-                cfg = PathFollowerConfig.for_robot(env.params, speed_scale=self.speed_scale)
+            if not self._config_given:
+                if tracks[i].name in SCENARIO_NAMES:
+                    cfg = PathFollowerConfig.for_robot(env.params, speed_scale=self.speed_scale)
+                cfg = self._own_follower_config(cfg)
             track, extra = self._follower_track(env, int(i), tracks[i], cfg, float(progress[i]))
             self.followers.reset(int(i), track, float(progress[i]), cfg, extra_stops=extra)
+
+    def _own_follower_config(self, cfg: PathFollowerConfig) -> PathFollowerConfig:
+        """The followers' gains this controller asks for on top of the default ones (a config the
+        user gives is used as it is)."""
+        return cfg
 
     def _targets(self, env):
         """Every robot's follower output (:class:`~control.follow.batch.FollowerBatchOutput`)."""
@@ -159,6 +166,13 @@ class ICRPathController(_PathFollowing):
         if not self.follower_stops or self.lookahead is not None:
             return None
         return functools.partial(reference_stop_mask, geom=env.geometry, axis_margin=self.icr_config.axis_margin)
+
+    def _own_follower_config(self, cfg: PathFollowerConfig) -> PathFollowerConfig:
+        """With a plan, the follower crawls at ``lookahead.corner_speed`` at its stop points, not
+        at 2 cm/s, where the target's direction is the position feedback's (LookaheadConfig)."""
+        if self.lookahead is None or cfg.corner_speed >= self.lookahead.corner_speed:
+            return cfg
+        return replace(cfg, corner_speed=self.lookahead.corner_speed)
 
     def _follower_track(self, env, i: int, track, config: PathFollowerConfig, progress: float):
         if self.lookahead is None:
