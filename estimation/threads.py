@@ -102,9 +102,9 @@ _TWINS: dict[Callable, Callable] = {}
 
 
 def _parallel_twin(kernel: Callable) -> Callable:
-    """``twin(*args, bounds)``: ``kernel(*args, bounds[b], bounds[b + 1])`` for every block b, one
-    block per thread (numba's ``prange``; the pool's thread count set to the blocks' for the call
-    and restored after). Compiled with numba's disk cache under a name that hashes its source."""
+    """``twin(*args, bounds)``: ``kernel(*args, bounds[b], bounds[b + 1])`` for every block b in
+    numba's ``prange`` (:func:`_run_blocks` sets the pool's thread count). Compiled with numba's
+    disk cache under a name that hashes its source."""
     twin = _TWINS.get(kernel)
     if twin is not None:
         return twin
@@ -160,12 +160,10 @@ class BlockKernel:
         return threads <= 1 or self.bounds(threads, n_rows).shape[0] <= 2
 
     def run(self, threads: int, n_rows: int, *args: Any) -> None:
-        if threads > 1 or (self.twin_on_one_thread and n_rows >= self.min_rows):
-            bounds = self.bounds(threads, n_rows)
-            if bounds.shape[0] > 2 or self.twin_on_one_thread:
-                _run_blocks(_parallel_twin(self.kernel), args, bounds, threads)
-                return
-        self.kernel(*args, 0, n_rows)
+        if self.serial(threads, n_rows):
+            self.kernel(*args, 0, n_rows)
+        else:
+            _run_blocks(_parallel_twin(self.kernel), args, self.bounds(threads, n_rows), threads)
 
 
 def _run_blocks(twin: Callable, args: tuple, bounds: np.ndarray, threads: int) -> None:

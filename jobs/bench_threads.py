@@ -43,6 +43,22 @@ ACTION_BENCH = {"raw": None, "residual": "residual", "icr-rate": "icr_rate", "ic
                 "twist": "twist"}
 
 
+def action_env(action: str, num_envs: int, track: str, env_kwargs: dict):
+    """(the vector env, the env the benchmark steps): the same one for raw set-points, else the
+    controller action space ``action`` on it (same-step autoresets)."""
+    from gymnasium.vector import AutoresetMode
+
+    from azimut_env.vector_env import AzimutVectorEnv
+
+    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
+    kind = ACTION_BENCH[action]
+    if kind is None:
+        return venv, venv
+    import control.action_spaces.vector as vw
+
+    return venv, vw.VectorControllerAction(venv, action=kind)
+
+
 def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, track: str = "random",
                             seed: int = 0, robot_kwargs: dict | None = None) -> dict[str, float]:
     """Robot-steps/s of the vector env behind a controller action space (uniform random actions,
@@ -50,21 +66,10 @@ def bench_controller_action(action: str, num_envs: int = 16, calls: int = 300, t
     controller-target stage (path followers, target shaping), the controller (the batched ICR
     controller, or the per-robot twist baselines), the vector env's step and the rest (wrapper
     glue)."""
-    from gymnasium.vector import AutoresetMode
-
-    from azimut_env.vector_env import AzimutVectorEnv
-
-    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP,
-                           **(robot_kwargs or {}))
+    venv, wrapped = action_env(action, num_envs, track, robot_kwargs or {})
     kind = ACTION_BENCH[action]
     acc = {"targets": 0.0, "controller": 0.0, "env": 0.0}
     clock = time.perf_counter
-    if kind is not None:
-        import control.action_spaces.vector as vw
-
-        wrapped = vw.VectorControllerAction(venv, action=kind)
-    else:
-        wrapped = venv
     wrapped.reset(seed=seed)
     rng = np.random.default_rng(seed)
     actions = rng.uniform(-1, 1, size=(calls + 20,) + wrapped.action_space.shape).astype(np.float32)
@@ -124,28 +129,11 @@ def run_action_bench(args, robot_kwargs: dict) -> int:
     return 0
 
 
-
-
-def _env(action: str, num_envs: int, track: str, threads: int, robot_kwargs: dict):
-    from gymnasium.vector import AutoresetMode
-
-    from azimut_env.vector_env import AzimutVectorEnv
-
-    venv = AzimutVectorEnv(num_envs=num_envs, track=track, autoreset_mode=AutoresetMode.SAME_STEP,
-                           num_threads=threads, **robot_kwargs)
-    kind = ACTION_BENCH[action]
-    if kind is None:
-        return venv, venv
-    import control.action_spaces.vector as vw
-
-    return venv, vw.VectorControllerAction(venv, action=kind)
-
-
 def scaling_cell(action: str, num_envs: int, threads: int, calls: int, track: str, seed: int,
                  robot_kwargs: dict | None = None) -> tuple[float, str]:
     """(robot-steps/s, digest of every step's observation, reward and ends) of ``calls`` steps of
     the vector env behind ``action`` at ``threads`` threads, after 20 untimed steps."""
-    venv, env = _env(action, num_envs, track, threads, robot_kwargs or {})
+    venv, env = action_env(action, num_envs, track, {**(robot_kwargs or {}), "num_threads": threads})
     try:
         env.reset(seed=seed)
         rng = np.random.default_rng(seed)

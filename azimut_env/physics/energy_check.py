@@ -127,7 +127,7 @@ class EnergyCheck:
     def _energy(self, phys, out: np.ndarray) -> None:
         args = (phys._state, phys.body_inertia, phys.joint_state, phys.motor_state, phys.tire_state, phys.wheel_params,
                 phys._axis_xy, phys._load_transfer, float(phys.params.chassis.com_height), phys.chassis_accel, out)
-        if phys.num_threads == 1 or out.shape[0] == 1:
+        if phys.num_threads == 1:  # the single env's path: the kernel itself, no dispatch
             energy_kernel(*args, 0, out.shape[0])
         else:
             _ENERGY.run(phys.num_threads, out.shape[0], *args)

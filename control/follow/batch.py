@@ -412,9 +412,12 @@ class BatchFollower:
 
     def _run(self, poses: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
         """The kernel's (len(rows), len(FO)) outputs of the robots ``rows`` (default all)."""
-        rows = np.arange(self.num) if rows is None else np.asarray(rows, dtype=np.int64)
-        if self.num_threads > 1 and np.unique(rows).size != rows.size:
-            raise ValueError("rows must be distinct robots")
+        if rows is None:
+            rows = np.arange(self.num)
+        else:
+            rows = np.asarray(rows, dtype=np.int64)
+            if self.num_threads > 1 and np.unique(rows).size != rows.size:
+                raise ValueError("rows must be distinct robots")
         out = np.empty((rows.size, len(FO)))
         _FOLLOW.run(self.num_threads, rows.size, self._packs, self._stops, self._holds, self._cusps, self.tracks,
                     self.cfg, self.state, np.ascontiguousarray(poses, dtype=np.float64), rows, self.dt, out)

@@ -58,7 +58,7 @@ from control.icr.kernel_constants import stop_circle_normals
 from control.icr.kernels import in_cell, nearest_in_cell, steering_row
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
-from estimation.validation import check_fields, check_positive_fields
+from estimation.validation import check_fields, check_positive_fields, check_range
 
 __all__ = ["LookaheadConfig", "CellPlan", "PlanTable", "plan_cells", "plan_table", "plan_sides", "capped_track"]
 
@@ -116,9 +116,7 @@ class LookaheadConfig:
                               allow_zero=True)
         for name, lo, hi in (("spacing", 0.001, 0.1), ("steer_rate_fraction", 0.0, 1.0),
                              ("max_hold_angle", 0.0, math.pi), ("swing_window", 0.0, 1.0), ("corner_speed", 0.0, 1.0)):
-            value = getattr(self, name)
-            if not lo <= value <= hi:
-                raise ValueError(f"LookaheadConfig.{name} must be in [{lo:g}, {hi:g}], got {value!r}")
+            check_range(f"LookaheadConfig.{name}", getattr(self, name), lo, hi)
 
 
 @dataclass(frozen=True)

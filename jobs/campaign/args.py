@@ -136,11 +136,9 @@ def check_executor_args(args: argparse.Namespace) -> str:
     executor = resolve_executor(args.executor, args.workers, args.ray_address)
     threads = getattr(args, "threads_per_task", None)
     if threads is not None and args.ray_address is None:  # local tasks: at most this machine's pool
-        from estimation.threads import max_threads
+        from estimation.threads import check_threads
 
-        if threads > max_threads():
-            raise ValueError(f"argument --threads: must be at most {max_threads()}, the threads of numba's pool on "
-                             f"this machine (NUMBA_NUM_THREADS), got {threads}")
+        check_threads(threads, "argument --threads")
     if args.ray_address is not None:
         check_ray_address(args.ray_address)
     return executor

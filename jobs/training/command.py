@@ -294,7 +294,8 @@ def _run(args: argparse.Namespace) -> int:
     from estimation.threads import set_default_threads
 
     torch.set_num_threads(args.torch_threads)
-    set_default_threads(env_threads(args))
+    threads = env_threads(args)
+    set_default_threads(threads)
     if args.engine == "rllib":
         return _run_rllib(args)
     from jobs.records import provenance
@@ -307,7 +308,7 @@ def _run(args: argparse.Namespace) -> int:
                    args.progress_bar, args.quiet, env_kwargs=_robot_kwargs(args) or None,
                    time_limit_min=args.time_limit,
                    record_extra={"provenance": provenance(),
-                                 "threads": {"env": env_threads(args), "torch": args.torch_threads}},
+                                 "threads": {"env": threads, "torch": args.torch_threads}},
                    correction_cost=args.correction_cost)
     write_learning_curve(Path(args.out), record)
     if not record["complete"]:
