@@ -114,7 +114,8 @@ def initial_state_batch(lam_hat, beta, phidot, geom: RobotGeometry,
     lam = check_unit_batch(lam_hat, "lam_hat")
     nrows = lam.shape[0]
     beta = check_finite_array(beta, "beta", (nrows, geom.n))
-    beta = geom.measured_steering(beta)
+    if not geom.unlimited_steering:  # without stops the measured angles are the commands' start as they are
+        beta = geom.wrap_steering(beta)
     phidot = check_finite_array(phidot, "phidot", (nrows, geom.n))
     err = wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
     reconf = np.max(np.abs(err), axis=-1) > config.reconfig_tol
