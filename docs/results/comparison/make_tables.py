@@ -22,11 +22,13 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
 
-COMMIT = "f517eb0"
+COMMIT = "ad45618"
 DATE = "2026-11-29"
 MACHINE = "the project's shared 2-CPU x86_64 virtual machine (AMD EPYC), Python 3.11"
-PREVIOUS_REV = "1fe18b7"  # the commit that wrote the previous page (its runs at 9be52e4)
-PREVIOUS_COMMIT = "9be52e4"
+PREVIOUS_REV = "9ace8fd"  # the commit that wrote the previous page (its runs at f517eb0)
+PREVIOUS_COMMIT = "f517eb0"
+LOOKAHEAD_COMMIT = "f517eb0"  # the look-ahead; e18aaf5: corners at the plan's crawl speed
+CRAWL_COMMIT = "e18aaf5"
 LOOKAHEAD = "../icr-controller.md#9-look-ahead-which-cell-and-where-to-change-it-controlicrlookaheadpy"
 
 PRESETS = {  # name: (title, extra eval flags)
@@ -362,7 +364,8 @@ def produced_by(runs, walls) -> str:
     local = any(runs[p].campaign["provenance"]["local_changes"] for p in PRESETS)
     assert commits == {COMMIT} and not local, (commits, local)
     return f"""!!! note "Produced by"
-    Commit {COMMIT} (the ICR controller's look-ahead, issue 30: [the cell plan]({LOOKAHEAD})),
+    Commit {COMMIT} (the ICR controller's look-ahead, issue 30: [the cell plan]({LOOKAHEAD}) since
+    {LOOKAHEAD_COMMIT}, corners at the plan's crawl speed since {CRAWL_COMMIT}; the kernels on threads),
     on {MACHINE}, {DATE}. Five `azimut eval` runs, {n[0]} episodes each (3 controllers × 12 tracks
     and scenarios × 5 seeds × 5 speed scales), {sum(n)} in all; {failed} episode{"s" if failed != 1 else ""} failed (an
     error of the run). {len(unfin)} episodes did not finish their track ({by_c}; counted in *done*):
@@ -385,7 +388,7 @@ def eval_commands() -> str:
 
 #: the page's paragraphs on the controllers and on the tables' columns
 CONTROLLERS_TEXT = f"""The three controllers share the path follower, the actuator limits and the control period
-(0.02 s): `icr` is the ICR-based controller (since {COMMIT} with its look-ahead over the track),
+(0.02 s): `icr` is the ICR-based controller (since {LOOKAHEAD_COMMIT} with its look-ahead over the track),
 `twist` sends WPILib's module states as they are, `twist-setpoint` is the setpoint generator
 after Team 254's `SwerveSetpointGenerator`, which never commands beyond the actuator limits
 ([Control](../control.md)). The robots are in [Robots](../robots.md) (the scenarios there too,
@@ -1325,8 +1328,13 @@ def limits_bullet(runs, limits) -> str | None:
         "the same count in every cell. A rerun of one of them (`hex` `figure8`, seed 0, ×1, at "
         f"{COMMIT}, with the episode log's "
         "`limit_flags`) flags the first two control steps for both controllers (the steering rate and "
-        "acceleration of the first set-point, then the acceleration): the first command measured against the "
-        "steering at reset, not the controller's motion along the track. By the metric the bar is not met.",
+        "acceleration of the first set-point, then the acceleration). A wheel measured 3 mrad past its "
+        "−π/2 stop at reset is wrapped by π to the other stop where both controllers start "
+        "(`RobotGeometry.wrap_steering`), so their first command turns it by π. Starting it at the stop it "
+        "is at instead (commit 39f48ba) removed every flag, but the ICR controller then sat 20 s at the "
+        "start of hex `icr-axis` seed 3 (a wheel 6 mrad past +π/2, put onto the stop) and never finished it, "
+        "and hex `figure8`'s slip rose to 0.40× `twist-setpoint`'s; it was reverted (fce714d) until that "
+        "start is fixed. By the metric the bar is not met.",
     )
 
 
