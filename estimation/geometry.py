@@ -186,6 +186,17 @@ class RobotGeometry:
         beta = np.asarray(beta, dtype=np.float64)
         return self.steer_max - np.mod(self.steer_max - beta, np.pi)
 
+    def measured_steering(self, beta: np.ndarray) -> np.ndarray:
+        """The steering angles a controller starts from, given measured ones (a copy): as measured
+        with unlimited steering; with stops, clipped into [β_max − π, β_max]. A wheel measured a
+        little past its stop (the sensor's noise, the stop's compliance) is at that stop: wrapped
+        modulo π instead it would be at the other stop, and the first command would turn it by π
+        (on hex, 3 mrad past −π/2 at reset flagged the first steps of every controller)."""
+        beta = np.array(beta, dtype=np.float64)
+        if self.unlimited_steering:
+            return beta
+        return np.clip(beta, self.steer_max - np.pi, self.steer_max)
+
     def steering_difference(self, q, beta) -> np.ndarray:
         """q − β [rad], the joint-space difference the quality metric and the estimators use.
 

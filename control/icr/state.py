@@ -10,7 +10,6 @@ import numpy as np
 
 from control.checks import check_finite_array, check_unit, check_unit_batch
 from control.icr.config import ICRControllerConfig, Mode
-from control.icr.feasibility import wrap_half
 from estimation.geometry import RobotGeometry
 from estimation.kinematics import steering_from_lambda
 
@@ -114,10 +113,11 @@ def initial_state_batch(lam_hat, beta, phidot, geom: RobotGeometry,
     lam = check_unit_batch(lam_hat, "lam_hat")
     nrows = lam.shape[0]
     beta = check_finite_array(beta, "beta", (nrows, geom.n))
-    if not geom.unlimited_steering:  # without stops the measured angles are the commands' start as they are
-        beta = geom.wrap_steering(beta)
+    beta = geom.measured_steering(beta)
     phidot = check_finite_array(phidot, "phidot", (nrows, geom.n))
-    err = wrap_half(beta - steering_from_lambda(lam, geom, singular_fill=beta))
+    # with stops the plain difference: a wheel at one stop is not at the other (the same axis mod π,
+    # but a turn by π away); unlimited steering: modulo π (RobotGeometry.steering_difference)
+    err = geom.steering_difference(beta, steering_from_lambda(lam, geom, singular_fill=beta))
     reconf = np.max(np.abs(err), axis=-1) > config.reconfig_tol
     return ICRBatchState(
         mode=np.where(reconf, int(Mode.RECONFIGURING), int(Mode.RUNNING)).astype(np.int64), lam=lam,

@@ -51,8 +51,7 @@ class TwistControllerBase:
         n = self.geom.n
         self.twist = np.zeros(3)
         beta = None if beta is None else np.asarray(beta, dtype=np.float64)
-        self.beta = np.zeros(n) if beta is None else (beta.copy() if self.geom.unlimited_steering
-                                                      else self.geom.wrap_steering(beta))
+        self.beta = np.zeros(n) if beta is None else self.geom.measured_steering(beta)
         self.rate = np.zeros(n)
         self.phidot = np.zeros(n) if phidot is None else np.asarray(phidot, dtype=np.float64).copy()
         self._started = beta is not None
@@ -122,7 +121,7 @@ class TwistBatchBase:
         rows = np.asarray(rows, dtype=np.intp)
         beta = np.asarray(beta, dtype=np.float64).reshape(rows.size, self.geom.n)
         self.twist[rows] = 0.0
-        self.beta[rows] = beta if self.geom.unlimited_steering else self.geom.wrap_steering(beta)
+        self.beta[rows] = self.geom.measured_steering(beta)
         self.rate[rows] = 0.0
         self.phidot[rows] = np.asarray(phidot, dtype=np.float64).reshape(rows.size, self.geom.n)
         self._ready[rows] = True
