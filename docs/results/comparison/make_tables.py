@@ -22,7 +22,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
 
-COMMIT = "ad45618"
+COMMIT = "c2ded6f"
 DATE = "2026-11-29"
 MACHINE = "the project's shared 2-CPU x86_64 virtual machine (AMD EPYC), Python 3.11"
 PREVIOUS_REV = "9ace8fd"  # the commit that wrote the previous page (its runs at f517eb0)
@@ -365,7 +365,7 @@ def produced_by(runs, walls) -> str:
     assert commits == {COMMIT} and not local, (commits, local)
     return f"""!!! note "Produced by"
     Commit {COMMIT} (the ICR controller's look-ahead, issue 30: [the cell plan]({LOOKAHEAD}) since
-    {LOOKAHEAD_COMMIT}, corners at the plan's crawl speed since {CRAWL_COMMIT}; the kernels on threads),
+    {LOOKAHEAD_COMMIT}, corners at the plan's crawl speed since {CRAWL_COMMIT}; the kernels on threads; the start from wheels measured past a stop since c2ded6f),
     on {MACHINE}, {DATE}. Five `azimut eval` runs, {n[0]} episodes each (3 controllers × 12 tracks
     and scenarios × 5 seeds × 5 speed scales), {sum(n)} in all; {failed} episode{"s" if failed != 1 else ""} failed (an
     error of the run). {len(unfin)} episodes did not finish their track ({by_c}; counted in *done*):
