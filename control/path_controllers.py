@@ -185,6 +185,7 @@ class ICRPathController(_PathFollowing):
             plan = plan_cells(track, env.geometry, env.limits, speed_scale=config.speed_scale, start=progress,
                               decel=config.corner_decel, rate_fraction=cfg.reconfig_rate_fraction,
                               accel_fraction=cfg.reconfig_accel_fraction, hold_margin=cfg.stop_hold_margin,
+                              hold_angle=cfg.stop_hold_angle,
                               corners=PathFollower(track, config).stops, corner_speed=config.corner_speed,
                               config=self.lookahead)
             slowed = track if plan is None else capped_track(track, plan, config.speed_scale)
