@@ -37,8 +37,11 @@ def test_icr_versus_twist_baseline(track):
     assert icr["slip_energy_J"] < factor * twist["slip_energy_J"]
     # antagonism per distance (the time mean rewards standing still, issue 30); with its look-ahead
     # the ICR controller stops less, so its margin over twist at the corners shrank: square 0.63x,
-    # crab 0.52x at e18aaf5 (the time means 0.60x and 0.50x)
-    margin = 0.7 if factor < 1 else 1.0
+    # crab 0.52x at e18aaf5 (the time means 0.60x and 0.50x). Since 194a029 it drives off a corner
+    # once every wheel has come to rest within 0.2 rad of its angle (reconfig_hold_tol), not 6°:
+    # the last few degrees are rolled in, for 0.9 s less on square's lap and 16.5 N against 14.9 N
+    # of antagonism per distance (0.70x twist's; crab 0.54x)
+    margin = 0.75 if factor < 1 else 1.0
     assert icr["antagonism_distance_weighted_N"] < margin * twist["antagonism_distance_weighted_N"]
     # the look-ahead holds through the reference's short excursions: a little more lateral error on
     # random (1.33 cm against twist's 1.00 at e18aaf5; docs/not-done.md)
