@@ -176,10 +176,12 @@ class ICRPathController(_PathFollowing):
 
     def _own_follower_config(self, cfg: PathFollowerConfig) -> PathFollowerConfig:
         """With a plan, the follower crawls at ``lookahead.corner_speed`` at its stop points, not
-        at 2 cm/s, where the target's direction is the position feedback's (LookaheadConfig)."""
-        if self.lookahead is None or cfg.corner_speed >= self.lookahead.corner_speed:
+        at 2 cm/s, where the target's direction is the position feedback's (LookaheadConfig), and
+        takes the junctions where the path turns back in (x, y, ρθ) as cusps
+        (``PathFollowerConfig.rotation_cusps``)."""
+        if self.lookahead is None:
             return cfg
-        return replace(cfg, corner_speed=self.lookahead.corner_speed)
+        return replace(cfg, corner_speed=max(cfg.corner_speed, self.lookahead.corner_speed), rotation_cusps=True)
 
     def _follower_track(self, env, i: int, track, config: PathFollowerConfig, progress: float):
         if self.lookahead is None:

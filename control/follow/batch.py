@@ -399,7 +399,7 @@ class BatchFollower:
         _, pack, stops, holds = self._track_arrays(track, config)
         stops = merge_stops(stops, extra_stops, track)
         for lst, value in ((self._packs, pack), (self._stops, stops), (self._holds, holds),
-                           (self._cusps, cusp_table(track))):
+                           (self._cusps, cusp_table(track, config.rotation_cusps))):
             set_item(lst, i, value)
         self._track_of[i] = track
         self.tracks[i] = (1.0 if track.closed else 0.0, track.length, track.progress_radius)

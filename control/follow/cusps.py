@@ -44,43 +44,50 @@ __all__ = ["CUSP_MIN_STEP", "cusp_row", "cusp_table", "cusp_progress", "cusp_fee
 CUSP_MIN_STEP = 1e-3
 
 
-def cusp_table(track: Track) -> np.ndarray:
+def cusp_table(track: Track, rotation: bool = False) -> np.ndarray:
     """The cusps of ``track``: (K, 9) rows (sample index, s-length of the incoming leg's last
     segment, of the outgoing leg's first segment, unit incoming direction (3), unit outgoing
     direction (3)), directions in (x, y, ρθ). A sample is a cusp where the *path* turns back: its
     incoming and outgoing directions in the plane, each taken to the nearest sample at least
     :data:`CUSP_MIN_STEP` away, make an angle of more than 90° (a negative dot product); a
-    rotation in place that reverses the turn is not one. Interior samples only (the ends of an
-    open track, and a closed track's seam, are not examined). Cached on the track."""
-    cached = track.__dict__.get("_cusp_table")
+    rotation in place that reverses the turn is not one. With ``rotation``
+    (``PathFollowerConfig.rotation_cusps``) the directions are those in the projection's own
+    metric (x, y, ρθ): a path that turns back there is a cusp too, as where ``spin``'s
+    drive-and-rotate leg (turning by −π) ends in a spin in place by +π/2 (118°). Interior samples
+    only (the ends of an open track, and a closed track's seam, are not examined). Cached on the
+    track."""
+    key = "_cusp_table_rotation" if rotation else "_cusp_table"
+    cached = track.__dict__.get(key)
     if cached is not None:
         return cached
-    xy = track.xy
-    pts = np.stack([xy[:, 0], xy[:, 1], track.progress_radius * track.heading], axis=1)
+    pts = np.stack([track.xy[:, 0], track.xy[:, 1], track.progress_radius * track.heading], axis=1)
+    test = pts if rotation else pts[:, :2]
     # only samples that may be cusps go through the exact test (cusp_row): a neighbour closer than twice
     # the bridging step, or a turn not clearly under 90° (a superset of the test's hits, so the
     # table is the loop's over every sample; a reset of a random track ran ~1,200 norms before)
-    da_all, db_all = xy[1:-1] - xy[:-2], xy[2:] - xy[1:-1]
-    na, nb = np.hypot(da_all[:, 0], da_all[:, 1]), np.hypot(db_all[:, 0], db_all[:, 1])
-    dots = da_all[:, 0] * db_all[:, 0] + da_all[:, 1] * db_all[:, 1]
+    da_all, db_all = test[1:-1] - test[:-2], test[2:] - test[1:-1]
+    na, nb = np.linalg.norm(da_all, axis=1), np.linalg.norm(db_all, axis=1)
+    dots = np.sum(da_all * db_all, axis=1)
     maybe = (na < 2 * CUSP_MIN_STEP) | (nb < 2 * CUSP_MIN_STEP) | (dots <= 1e-9 * na * nb)
-    rows = [row for i in (np.flatnonzero(maybe) + 1).tolist() if (row := cusp_row(track, pts, i)) is not None]
+    rows = [row for i in (np.flatnonzero(maybe) + 1).tolist()
+            if (row := cusp_row(track, pts, i, rotation)) is not None]
     table = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(-1, 9))
-    object.__setattr__(track, "_cusp_table", table)
+    object.__setattr__(track, key, table)
     return table
 
 
-def cusp_row(track: Track, pts: np.ndarray, i: int) -> list[float] | None:
+def cusp_row(track: Track, pts: np.ndarray, i: int, rotation: bool = False) -> list[float] | None:
     """The exact test of :func:`cusp_table` at interior sample ``i`` (``pts``: the samples' (x, y,
-    ρθ)): its row if the sample is a cusp, else None."""
-    xy, m = pts[:, :2], pts.shape[0]
+    ρθ); ``rotation``: the test in (x, y, ρθ), else in the plane): its row if the sample is a
+    cusp, else None."""
+    test, m = (pts if rotation else pts[:, :2]), pts.shape[0]
     j = i - 1
-    while j > 0 and np.linalg.norm(xy[i] - xy[j]) < CUSP_MIN_STEP:
+    while j > 0 and np.linalg.norm(test[i] - test[j]) < CUSP_MIN_STEP:
         j -= 1
     k = i + 1
-    while k < m - 1 and np.linalg.norm(xy[k] - xy[i]) < CUSP_MIN_STEP:
+    while k < m - 1 and np.linalg.norm(test[k] - test[i]) < CUSP_MIN_STEP:
         k += 1
-    da, db = xy[i] - xy[j], xy[k] - xy[i]
+    da, db = test[i] - test[j], test[k] - test[i]
     if min(np.linalg.norm(da), np.linalg.norm(db)) < CUSP_MIN_STEP or float(da @ db) >= 0.0:
         return None
     a, b = pts[i] - pts[j], pts[k] - pts[i]

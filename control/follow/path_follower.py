@@ -90,6 +90,15 @@ class PathFollowerConfig:
         speed_scale: multiplies the track's speed profile [-] (1: the track's nominal speed).
         hold_reach: progress [m] short of a hold's s at which the hold starts (the reference
             speed falls to ``corner_speed`` there, so the robot arrives slowly).
+        rotation_cusps: also treat as cusps the points where the path turns back in the
+            projection's metric (x, y, ρθ) but not in the plane (:func:`control.follow.cusps.cusp_table`),
+            as where ``spin``'s drive-and-rotate leg ends in a spin in place the other way. Off by
+            default; the ICR path controller turns it on: without it the progress stalled a few
+            millimetres before that junction, the heading feedback balancing the spin's
+            feed-forward, and the ICR controller reconfigured after the feedback's target (hex
+            ``spin`` at ×1.2 and ×1.4, seed 0, never finished; the default robot lost 1.1 s a lap).
+            The twist baselines blend through the junction without it; with it they crawl to the
+            cusp at ``corner_speed`` (``twist-setpoint`` 2.3 s slower on ``spin``, seed 0).
     """
 
     k_pos: float = 3.0
@@ -108,6 +117,7 @@ class PathFollowerConfig:
     max_lateral_accel: float = 1.0
     speed_scale: float = 1.0
     hold_reach: float = 0.01
+    rotation_cusps: bool = False
 
     @classmethod
     def for_robot(cls, params, speed_scale: float = 1.0) -> PathFollowerConfig:
@@ -216,7 +226,7 @@ class PathFollower:
         self._hold_next = 0  # index of the next hold of the track
         self._hold_left = 0  # control periods left in the current hold (0: not holding)
         self.stops = merge_stops(self._find_stops(stop_mask), extra_stops, track)
-        self._cusps = cusp_table(track)
+        self._cusps = cusp_table(track, self.config.rotation_cusps)
 
     def reset(self, progress: float | None = None) -> None:
         """Forget the progress (the next step searches the whole track unless given) and the

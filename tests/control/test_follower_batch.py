@@ -126,3 +126,17 @@ def test_residual_action_space_bit_for_bit(monkeypatch):
         env.step(rng.uniform(-1, 1, (4, 3)).astype(np.float32))
     env.close()
     assert rec.check() >= 4 * 250  # the steps of the robots not being reset
+
+
+def test_rotation_cusps_bit_for_bit(monkeypatch):
+    """The ICR path controller's followers take ``spin``'s junction of its drive-and-rotate leg
+    and its last spin, where the path turns back in (x, y, ρθ), as a cusp
+    (``PathFollowerConfig.rotation_cusps``): there too the batch equals one follower per robot."""
+    from control.path_controllers import ICRPathController
+    from control.rollout import run_episodes
+
+    rec = _Recorder(monkeypatch)
+    logs = run_episodes(ICRPathController(), ["spin", "spin"], [0, 1], env_kwargs={"robot": "hex"})
+    assert all(log.completed for log in logs)  # past the junction
+    assert any(call[0] == "reset" and call[5].rotation_cusps for call in rec.calls)
+    assert rec.check() >= sum(log.t.size for log in logs)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from azimut_env.tracks import Track
+from azimut_env.tracks import ALL_TRACK_NAMES, Track
 from control.episode import EpisodeLog, scenario_metrics
 from control.follow.batch import BatchFollower
 from control.follow.path_follower import PathFollower
@@ -180,3 +180,35 @@ def test_the_cusp_table_is_the_test_at_every_sample():
         assert np.array_equal(table, _cusps_every_sample(track))
         found += len(table)
     assert found > 0
+
+
+def test_a_rotation_that_turns_back_is_a_cusp_only_when_asked():
+    """``spin``'s drive-and-rotate leg (turning by −π) ends in a spin in place by +π/2: the path
+    turns back by 118° in the projection's metric (x, y, ρθ), not in the plane. It is a cusp with
+    ``rotation`` (the ICR path controller's followers) and on no other built-in track or scenario
+    does ``rotation`` change the table; without it the twist baselines' follower is as before."""
+    from azimut_env.task.config import robot_of
+    from azimut_env.tracks.scenarios import named_track
+    from control.follow.cusps import cusp_table
+
+    for robot in ("azimut3", "hex", "swerve"):
+        params = robot_of({"robot": robot})
+        for name in ALL_TRACK_NAMES:
+            track = named_track(name, params)
+            plane, rotation = cusp_table(track), cusp_table(track, rotation=True)
+            if name != "spin":
+                np.testing.assert_array_equal(plane, rotation)
+                continue
+            assert plane.shape[0] == 0 and rotation.shape[0] == 1
+            a, b = rotation[0, 3:6], rotation[0, 6:9]
+            assert np.degrees(np.arccos(a @ b)) > 100.0  # turns back: 118° (azimut3), 106° (swerve)
+            assert np.all(track.xy[int(rotation[0, 0]) + 1:] == track.xy[int(rotation[0, 0])])  # then in place
+
+
+def test_the_icr_controller_passes_the_spin_junction():
+    """Without the rotation cusp the ICR controller's follower stalled a few millimetres before
+    ``spin``'s last spin (the heading feedback balancing the spin's feed-forward) and hex never
+    finished at ×1.2 and ×1.4 on seed 0 (17 and 23 stop sequences there)."""
+    for scale in (1.2, 1.4):
+        log = run_episodes(ICRPathController(speed_scale=scale), ["spin"], [0], env_kwargs={"robot": "hex"})[0]
+        assert log.completed and log.events <= 12, (scale, log.t[-1], log.events)
