@@ -22,13 +22,18 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
 
-COMMIT = "c2ded6f"
+COMMIT = "b5b953b"
 DATE = "2026-11-29"
 MACHINE = "the project's shared 2-CPU x86_64 virtual machine (AMD EPYC), Python 3.11"
-PREVIOUS_REV = "9ace8fd"  # the commit that wrote the previous page (its runs at f517eb0)
-PREVIOUS_COMMIT = "f517eb0"
+PREVIOUS_REV = "30e8902"  # the commit that wrote the previous page (its runs at c2ded6f)
+PREVIOUS_COMMIT = "c2ded6f"
 LOOKAHEAD_COMMIT = "f517eb0"  # the look-ahead; e18aaf5: corners at the plan's crawl speed
 CRAWL_COMMIT = "e18aaf5"
+#: what changed in the ICR controller since the look-ahead, for the "Produced by" note
+SINCE = (f"corners at the plan's crawl speed since {CRAWL_COMMIT}; the kernels on threads; the start from "
+         "wheels measured past a stop since c2ded6f; holds planned within the controller's hold angle "
+         "since 527e7ca; reconfigurations settled within 0.2 rad since 194a029; turning-back junctions as cusps "
+         "for its followers since b5b953b")
 LOOKAHEAD = "../icr-controller.md#9-look-ahead-which-cell-and-where-to-change-it-controlicrlookaheadpy"
 
 PRESETS = {  # name: (title, extra eval flags)
@@ -365,7 +370,7 @@ def produced_by(runs, walls) -> str:
     assert commits == {COMMIT} and not local, (commits, local)
     return f"""!!! note "Produced by"
     Commit {COMMIT} (the ICR controller's look-ahead, issue 30: [the cell plan]({LOOKAHEAD}) since
-    {LOOKAHEAD_COMMIT}, corners at the plan's crawl speed since {CRAWL_COMMIT}; the kernels on threads; the start from wheels measured past a stop since c2ded6f),
+    {LOOKAHEAD_COMMIT}, {SINCE}),
     on {MACHINE}, {DATE}. Five `azimut eval` runs, {n[0]} episodes each (3 controllers × 12 tracks
     and scenarios × 5 seeds × 5 speed scales), {sum(n)} in all; {failed} episode{"s" if failed != 1 else ""} failed (an
     error of the run). {len(unfin)} episodes did not finish their track ({by_c}; counted in *done*):
