@@ -63,6 +63,22 @@ def test_a_run_shorter_than_checkpoint_every_leaves_no_empty_checkpoints_folder(
     assert (out / "model.zip").is_file() and not (out / "checkpoints").exists()
 
 
+def test_ppo_says_what_steps_become_in_whole_rollouts(tmp_path, capsys):
+    """SB3's PPO learns whole rollouts of n_steps x robots: a budget that is not a multiple of one
+    is rounded up, and the run says so before it starts (and records both counts)."""
+    import json
+
+    from train.trainer import train
+
+    out = tmp_path / "rounded"
+    record = train("ppo", "raw", "crab", seed=0, steps=40, out=out, num_robots=2, eval_tracks=("crab",),
+                   eval_every=0, checkpoint_every=0, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1},
+                   env_kwargs=SHORT, eval_max_time=0.5)
+    said = capsys.readouterr().out
+    assert "rollouts of n_steps x robots = 32 x 2 = 64 steps, so 40 steps become 64" in said
+    assert record["num_timesteps"] == 64 and json.loads((out / "run.json").read_text())["steps"] == 40
+
+
 def test_resume_continues_from_the_checkpoint(tmp_path):
     from train.trainer import train
 
