@@ -1281,8 +1281,12 @@ def other_stalls_bullet(st) -> str | None:
 def icr_axis_bullet(runs, g2) -> str:
     axis = [(p, g2[(p, "icr-axis")]) for p in LAP_GOAL]
     return (
-        "- **`icr-axis`**: its path runs along a steering axis, which the plan does not model; the arc check of §5 "
-        "still stops the robot there, where the reference does not slow down (lap time ratio "
+        "- **`icr-axis`**: its ICR crosses wheel 0's steering axis, which the plan does not model; the arc check "
+        "of §5 still stops the robot there, where the reference does not slow down. On the default robot (seed 0, "
+        "traced at 194a029) its 4 stops are the plan's two changes of cell (158° and 168° turns), the axis "
+        "(a 15° turn) and one 1.5 cm before the end of the track, where the follower's target, slowing to the end "
+        "against a steady 1.7 cm offset, swings by more than the 30° a hold allows (a 114° turn, 0.85 s) "
+        "(lap time ratio "
         + join(
             [
                 f"{SHORT[p]} {v[3]:.3f}× with {cnt(runs[p].fin('icr', 'icr-axis', 'reconfigure_events'))} stops"
