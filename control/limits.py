@@ -99,15 +99,13 @@ class SetpointLimitCheck:
         self._scales = (max(abs(lo), abs(hi)), float(limits.wheel_speed_max))
 
     def reset(self, rows, beta, phidot) -> None:
-        """Restart the robots ``rows`` from their measured β, φ̇ ((M, n) or (N, n) of all robots,
-        read at ``rows``), at rest. With stops, an angle measured past a stop counts as at the stop,
-        where the controllers start too (:meth:`~estimation.geometry.RobotGeometry.measured_steering`)."""
+        """Restart the robots ``rows`` from β, φ̇ ((M, n) or (N, n) of all robots, read at
+        ``rows``), at rest: the angles the controllers start from
+        (:meth:`~estimation.geometry.RobotGeometry.measured_steering` of the measured ones)."""
         rows = np.asarray(rows, dtype=np.intp)
         beta, phidot = np.asarray(beta, dtype=np.float64), np.asarray(phidot, dtype=np.float64)
         if beta.shape[0] != rows.size:
             beta, phidot = beta[rows], phidot[rows]
-        if not self.limits.unlimited_steering:
-            beta = np.clip(beta, self.limits.steer_min, self.limits.steer_max)
         self.beta[rows], self.phidot[rows], self.rate[rows] = beta, phidot, 0.0
 
     def step(self, beta, phidot, *, from_action: bool = False) -> np.ndarray:

@@ -54,14 +54,11 @@ DEFAULT_LOOKAHEAD = LookaheadConfig()
 
 #: the ICR controller's tuning behind a path follower with look-ahead: stopped wheels turn at the
 #: full steering rate and acceleration limits (the default's 50% and 30% were for a controller
-#: that stopped often and without knowing why; on the default robot the full limits save 2-5 s a
-#: lap for 2-6 J more slip), μ is time-scaled apart from λ's turn (``mu_own_scale``), and a wheel
-#: that has come to rest within 0.2 rad (11.5°) of its target counts as settled
-#: (``reconfig_hold_tol``, 6° by default): the default robot's compliant steering with stiction
-#: stops its last 6-12° short under the tyre's scrub torque at rest and creeps there for up to
-#: 0.5 s, where rolling brings it at once (5 seeds: ``spin`` 26.64 → 24.30 s, ``icr-axis`` 11.82 →
-#: 10.97 s, ``square`` 35.19 → 33.78 s, ``crab`` 16.23 → 15.88 s, slip energy up to 13% more and
-#: within 0.26× ``twist-setpoint``'s; ``tri`` and ``hex``, without that creep, unchanged)
+#: that stopped often and without knowing why), μ is time-scaled apart from λ's turn
+#: (``mu_own_scale``), and a wheel that has come to rest within 0.2 rad (11.5°) of its target
+#: counts as settled (``reconfig_hold_tol``, 6° by default): a compliant steering with stiction
+#: stops the last degrees short under the tyre's scrub torque at rest and creeps there, where
+#: rolling brings it at once (figures: ``docs/icr-controller.md`` §9)
 PATH_ICR_CONFIG = ICRControllerConfig(reconfig_rate_fraction=1.0, reconfig_accel_fraction=1.0, mu_own_scale=True,
                                       reconfig_hold_tol=0.2)
 

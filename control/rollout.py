@@ -217,7 +217,7 @@ def _restart(controller: Controller, env: AzimutVectorEnv, check: SetpointLimitC
         mask = np.zeros(num, dtype=np.bool_)
         mask[i] = True
         obs, _ = env.reset(options={"reset_mask": mask, "track": env.tracks[i]})
-    check.reset(over, env.measured_beta, env.measured_phidot)
+    check.reset(over, env.geometry.measured_steering(env.measured_beta), env.measured_phidot)
     controller.reset(env, over)
     return obs
 
@@ -227,7 +227,8 @@ def _loop(controller: Controller, env: AzimutVectorEnv, seeds: list[int], option
     num, n, dt, name = len(seeds), env.n, env.control_period, controller.name
     obs, _ = env.reset(seed=seeds, options=options)
     check = SetpointLimitCheck(env.limits, dt, num, n)  # the first period differenced against the reset's
-    check.reset(np.arange(num), env.measured_beta, env.measured_phidot)  # measured state
+    # from the measured state, the angles where the controllers start (a wheel past a stop at it)
+    check.reset(np.arange(num), env.geometry.measured_steering(env.measured_beta), env.measured_phidot)
     controller.reset(env, np.arange(num))
     lengths = [t.length for t in env.tracks]
     horizons = _horizons(controller, env.tracks, max_time, dt)

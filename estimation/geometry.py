@@ -190,8 +190,7 @@ class RobotGeometry:
         """The steering angles a controller starts from, given measured ones (a copy): as measured
         with unlimited steering; with stops, clipped into [β_max − π, β_max]. A wheel measured a
         little past its stop (the sensor's noise, the stop's compliance) is at that stop: wrapped
-        modulo π instead it would be at the other stop, and the first command would turn it by π
-        (on hex, 3 mrad past −π/2 at reset flagged the first steps of every controller)."""
+        modulo π instead it would be at the other stop, and the first command would turn it by π."""
         beta = np.array(beta, dtype=np.float64)
         if self.unlimited_steering:
             return beta

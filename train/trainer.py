@@ -274,8 +274,8 @@ def train(algo: str, action: str, track: str, seed: int, steps: int, out: Path, 
     t0 = time.perf_counter()
     # SB3 adds the steps a resumed model has done to total_timesteps: give it what is left
     todo = max(int(steps) - start_steps, 0) if ckpt is not None else steps
-    rollout = int(hp.get("n_steps", 1)) * int(num_robots)
-    if algo == "ppo" and not quiet and int(todo) % rollout:  # SB3 learns whole rollouts: say what --steps becomes
+    rollout = int(hp["n_steps"]) * int(num_robots) if algo == "ppo" else 1  # SB3's PPO learns whole rollouts
+    if not quiet and int(todo) % rollout:  # say what --steps becomes
         print(f"azimut train: PPO learns in rollouts of n_steps x robots = {hp['n_steps']} x {num_robots} = "
               f"{rollout} steps, so {todo} steps {'to go ' if ckpt is not None else ''}become "
               f"{-(-int(todo) // rollout) * rollout} (run.json keeps both: 'steps' and 'num_timesteps')", flush=True)

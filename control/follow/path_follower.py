@@ -92,13 +92,10 @@ class PathFollowerConfig:
             speed falls to ``corner_speed`` there, so the robot arrives slowly).
         rotation_cusps: also treat as cusps the points where the path turns back in the
             projection's metric (x, y, ρθ) but not in the plane (:func:`control.follow.cusps.cusp_table`),
-            as where ``spin``'s drive-and-rotate leg ends in a spin in place the other way. Off by
-            default; the ICR path controller turns it on: without it the progress stalled a few
-            millimetres before that junction, the heading feedback balancing the spin's
-            feed-forward, and the ICR controller reconfigured after the feedback's target (hex
-            ``spin`` at ×1.2 and ×1.4, seed 0, never finished; the default robot lost 1.1 s a lap).
-            The twist baselines blend through the junction without it; with it they crawl to the
-            cusp at ``corner_speed`` (``twist-setpoint`` 2.3 s slower on ``spin``, seed 0).
+            as where ``spin``'s drive-and-rotate leg ends in a spin in place the other way (False
+            by default; the ICR path controller turns it on: without it the progress can stall a
+            few millimetres before such a junction, the heading feedback balancing the spin's
+            feed-forward; the twist baselines blend through it; ``docs/control.md``).
     """
 
     k_pos: float = 3.0

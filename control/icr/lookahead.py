@@ -54,6 +54,7 @@ import numpy as np
 from numba import njit
 
 from control.follow.path_follower import reference_lambdas
+from control.icr.config import ICRControllerConfig
 from control.icr.kernel_constants import stop_circle_normals
 from control.icr.kernels import in_cell, nearest_in_cell, steering_row
 from control.limits import ActuatorLimits
@@ -63,6 +64,7 @@ from estimation.validation import check_fields, check_positive_fields, check_ran
 __all__ = ["LookaheadConfig", "CellPlan", "PlanTable", "plan_cells", "plan_table", "plan_sides", "capped_track"]
 
 _INF = 1e18
+_ICR = ICRControllerConfig()  # the controller's defaults, the plan's holds'
 
 
 @dataclass(frozen=True)
@@ -231,7 +233,7 @@ def _viterbi(hold, betas, speeds, w, decel, overhead, rate, accel, choice):
 
 def plan_cells(track, geom: RobotGeometry, limits: ActuatorLimits, *, speed_scale: float = 1.0,
                start: float = 0.0, decel: float = 1.0, rate_fraction: float = 1.0, accel_fraction: float = 1.0,
-               hold_margin: float = 0.003, hold_angle: float = math.radians(30.0), corners=(),
+               hold_margin: float = _ICR.stop_hold_margin, hold_angle: float = _ICR.stop_hold_angle, corners=(),
                corner_speed: float = 0.02,
                config: LookaheadConfig | None = None) -> CellPlan | None:
     """The cell plan of ``track`` from progress ``start`` to its end (a closed track: one lap)
@@ -243,15 +245,16 @@ def plan_cells(track, geom: RobotGeometry, limits: ActuatorLimits, *, speed_scal
             ``corner_speed`` [m/s] (sharp corners of the path); the plan counts the time there at
             that speed.
         rate_fraction, accel_fraction: the reconfiguration's share of the steering limits.
-        hold_margin: how far inside its cell a hold point is [rad] (``stop_hold_margin``).
+        hold_margin: how far inside its cell a hold point is [rad] (the controller's
+            ``stop_hold_margin``).
         hold_angle: the farthest a hold may be from the reference λ [rad] while the reference
-            moves (|μ| > 0.05 m/s): the controller's own limit (``stop_hold_angle``), so the plan
-            counts only on holds the controller makes. (With 45° here against the controller's
-            30°, the default robot's ``spin`` planned to hold the last 0.37 m of its
-            drive-and-rotate leg, the controller gave the hold up 3 cm before the spin and stopped
-            four times there: 27.97 s a lap against 26.64 s with 30°, 5 seeds.)
+            moves (|μ| > 0.05 m/s): the controller's own ``stop_hold_angle``, so the plan counts
+            only on holds the controller makes (a plan holding farther stops where it planned not
+            to: ``docs/icr-controller.md`` §9).
         config: the plan's tuning (default :class:`LookaheadConfig`).
     """
+    hold_margin = check_range("hold_margin", hold_margin, 0.0, 0.1)
+    hold_angle = check_range("hold_angle", hold_angle, 0.0, math.pi, lo_open=True)
     if geom.unlimited_steering:
         return None
     cfg = config or LookaheadConfig()

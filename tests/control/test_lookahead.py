@@ -223,6 +223,9 @@ def test_plan_inputs_take_only_sides_and_flags():
             ctl.step(*args, plan_side=bad)
     with pytest.raises(ValueError, match="plan_excursion"):
         ctl.step(*args, plan_side=np.ones((1, GEOM.n)), plan_excursion=np.array([np.nan]))
+    for name, value in (("hold_angle", float("nan")), ("hold_angle", 0.0), ("hold_margin", -1e-3)):
+        with pytest.raises(ValueError, match=name):
+            plan_cells(named_track("paper", robot_of({})), GEOM, LIMITS, **{name: value})
     for field, value in (("spacing", 1e-6), ("steer_rate_fraction", 5.0), ("corner_speed", 10.0)):
         with pytest.raises(ValueError, match=f"LookaheadConfig.{field}"):
             LookaheadConfig(**{field: value})

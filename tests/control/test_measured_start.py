@@ -51,8 +51,8 @@ def test_a_wheel_past_its_stop_starts_at_that_stop():
     batch = SetpointBatch(1, GEOM, limits, 0.02)
     batch.reset(np.array([0]), past, np.zeros((1, 4)))
     assert np.allclose(batch.beta, [[-HALF, 0.2, -0.2, HALF]])
-    check = SetpointLimitCheck(limits, 0.02, 1, 4)
-    check.reset(np.array([0]), past, np.zeros((1, 4)))
+    check = SetpointLimitCheck(limits, 0.02, 1, 4)  # started as the rollout starts it: where the controllers start
+    check.reset(np.array([0]), GEOM.measured_steering(past), np.zeros((1, 4)))
     assert not check.step(np.array([[-HALF + 0.001, 0.2, -0.2, HALF - 0.001]]), np.zeros((1, 4))).any()
 
 
