@@ -53,6 +53,9 @@ from control.icr.kernels import (
     C_STOP_MU,
     C_STOP_TIMEOUT,
     C_ZERO_MU,
+    EXCURSION_END,
+    EXCURSION_NONE,
+    EXCURSION_PLANNED,
     L_BRAKE_DT,
     L_HEADROOM_WSM,
     L_UNLIMITED,
@@ -170,8 +173,9 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs, lo, hi) -> None:
     ``state0`` and ``state1`` the fields of
     the state before and after the step, in :class:`~control.icr.state.ICRBatchState`'s order
     ((N, …) arrays, ``state1`` already a copy of ``state0``); ``inputs`` (λ̂, μ̂, β, φ̇, λ_d, μ_d,
-    planned cell (M, n): ±1 per stop circle, all 0 without a plan; planned excursion (M,): 1.0 where
-    the plan expects the target outside that cell) and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c,
+    planned cell (M, n): ±1 per stop circle, all 0 without a plan; planned excursion (M,):
+    ``EXCURSION_PLANNED`` where the plan expects the target outside that cell, ``EXCURSION_END`` on
+    the approach to the track's end) and ``outputs`` (β_c, β̇_c, φ̇_c, β̈_c, φ̈_c,
     λ_target, μ_target, axis_cap, event, κ, saturated, held) are (M, …), row m of them is robot
     rows[m] (distinct robots)."""
     # One long function on purpose: the whole step of a robot (target, modes, commands) reads and
@@ -262,10 +266,12 @@ def _step_kernel(rows, c, state0, state1, inputs, outputs, lo, hi) -> None:
                 grazing = beyond < tune[C_STOP_HYST] and miss < tune[C_HOLD_SPEED]
                 missed = held_miss0[i] + (0.0 if grazing else miss * dt)
                 # in the planned cell, hold through the target's excursions (the plan has weighed them)
-                # unless one goes beyond the hold angle (the follower's feedback after a disturbance)
-                planned_hold = planned and excursion[m] != 0.0 and in_cell(lam, plan[m], normals, near) \
+                # unless one goes beyond the hold angle (the follower's feedback after a disturbance);
+                # on the approach to the track's end at any angle: the target slowing to the end
+                # swings with the follower's feedback, and no change of cell pays off there
+                planned_hold = planned and excursion[m] != EXCURSION_NONE and in_cell(lam, plan[m], normals, near) \
                     and missed <= tune[C_PLAN_HOLD_DIST] \
-                    and (beyond < tune[C_HOLD_ANGLE] or miss < tune[C_HOLD_SPEED])
+                    and (beyond < tune[C_HOLD_ANGLE] or miss < tune[C_HOLD_SPEED] or excursion[m] == EXCURSION_END)
                 hold = planned_hold or (beyond < tune[C_HOLD_ANGLE] and missed <= tune[C_HOLD_DIST])
                 if hold:
                     ld[0], ld[1], ld[2] = hp[0], hp[1], hp[2]
@@ -420,10 +426,12 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
             dt), when the caller keeps them (else computed here). plan_side: (M, n) the cell a
             look-ahead plan wants each robot in (±1 per stop circle; a row of zeros, or None: no
             plan; :func:`control.icr.lookahead.plan_sides`): the controller stops and reconfigures
-            into it when λ is elsewhere and the target is in it. plan_excursion: (M,) 1.0 where the
-            plan expects the target to leave that cell for a while (None: nowhere): there a target
-            beyond a stop is held at the cell's rim for up to ``planned_hold_distance`` of missed
-            motion, not ``stop_hold_distance`` (``docs/icr-controller.md`` §6). num_threads: the
+            into it when λ is elsewhere and the target is in it. plan_excursion: (M,) 1.0
+            (``EXCURSION_PLANNED``) where the plan expects the target to leave that cell for a while,
+            2.0 (``EXCURSION_END``) on the approach to an open track's end, 0.0 elsewhere (None:
+            nowhere): there a target beyond a stop is held at the cell's rim for up to
+            ``planned_hold_distance`` of missed motion, not ``stop_hold_distance``, and on the
+            approach to the end at any angle (``docs/icr-controller.md`` §6). num_threads: the
             robots in blocks on this many threads (:mod:`estimation.threads`; checked where it
             entered; the same bits for any count).
 
@@ -455,7 +463,8 @@ def compiled_control_step_batch(state: ICRBatchState, lam_hat, mu_hat, beta_meas
     mu_d = _float_rows(mu_d, "mu_d", (M,))
     plan = np.zeros((M, n)) if plan_side is None else _plan_rows(plan_side, "plan_side", (M, n), (-1.0, 0.0, 1.0))
     excursion = np.zeros(M) if plan_excursion is None else _plan_rows(plan_excursion, "plan_excursion", (M,),
-                                                                      (0.0, 1.0))
+                                                                      (EXCURSION_NONE, EXCURSION_PLANNED,
+                                                                       EXCURSION_END))
     c = constants if constants is not None else compiled_constants(geom, limits, config, dt)
     fields = state.__dataclass_fields__
     state0 = tuple(getattr(state, name) for name in fields)

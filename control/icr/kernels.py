@@ -50,6 +50,10 @@ N_LIM = 27
 #: :class:`control.icr.feasibility.ArcReason` codes
 ARC_NONE, ARC_STOP, ARC_AXIS = 0, 1, 2
 
+#: a look-ahead plan's flag at the robot's progress (:func:`control.icr.lookahead.plan_sides`):
+#: no expected excursion, an expected excursion of the reference, the approach to an open track's end
+EXCURSION_NONE, EXCURSION_PLANNED, EXCURSION_END = 0.0, 1.0, 2.0
+
 
 @njit(cache=True, inline="always")
 def dot3(a, b) -> float:

@@ -56,7 +56,7 @@ from numba import njit
 from control.follow.path_follower import reference_lambdas
 from control.icr.config import ICRControllerConfig
 from control.icr.kernel_constants import stop_circle_normals
-from control.icr.kernels import in_cell, nearest_in_cell, steering_row
+from control.icr.kernels import EXCURSION_END, EXCURSION_PLANNED, in_cell, nearest_in_cell, steering_row
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 from estimation.validation import check_fields, check_positive_fields, check_range
@@ -94,6 +94,12 @@ class LookaheadConfig:
             on 2 of 5 seeds on azimut3, 3 of 5 on hex); at 7 cm/s the reference's direction
             dominates and the controller stops and reconfigures once, where the reference turns
             (at 10 cm/s tri's ``square`` stalled at a corner on 2 of 5 seeds, at 5 cm/s hex's on 1).
+        end_hold: [m] on an open track, the last ``end_hold`` of progress is the approach to the
+            end, where the controller holds λ in the last planned cell whatever the target's angle
+            (within ``planned_hold_distance``; 0: no such approach). The follower's target slows to
+            zero there against the robot's steady offset from the reference, so its direction
+            becomes the position feedback's and swings; a stop and reconfiguration for it (over a
+            second) would buy the last centimetres (``docs/icr-controller.md`` §9).
     """
 
     miss_cost: float = 40.0
@@ -105,15 +111,16 @@ class LookaheadConfig:
     stall_distance: float = 0.02
     stall_time: float = 3.0
     corner_speed: float = 0.07
+    end_hold: float = 0.1
 
     def __post_init__(self) -> None:
         check_fields(self)
         check_positive_fields(self, "spacing", "swing_window", "steer_rate_fraction", "stall_time",
                               "corner_speed")
         check_positive_fields(self, "miss_cost", "switch_overhead", "excursion_margin", "stall_distance",
-                              allow_zero=True)
+                              "end_hold", allow_zero=True)
         for name, lo, hi in (("spacing", 0.001, 0.1), ("steer_rate_fraction", 0.0, 1.0),
-                             ("swing_window", 0.0, 1.0), ("corner_speed", 0.0, 1.0)):
+                             ("swing_window", 0.0, 1.0), ("corner_speed", 0.0, 1.0), ("end_hold", 0.0, 1.0)):
             check_range(f"LookaheadConfig.{name}", getattr(self, name), lo, hi)
 
 
@@ -133,6 +140,8 @@ class CellPlan:
             ``steer_rate_fraction`` of their steering rate limit, keep up with the planned
             configuration's steering β(s) over a ``swing_window`` (module docstring), braked
             and accelerated within the follower's deceleration.
+        end_from: the progress [m] where the approach to the end begins (``end_hold`` before an
+            open track's end; inf on a closed track).
     """
 
     start: np.ndarray
@@ -142,6 +151,7 @@ class CellPlan:
     excursions: np.ndarray
     s: np.ndarray
     speed_cap: np.ndarray
+    end_from: float = math.inf
 
     @property
     def switches(self) -> np.ndarray:
@@ -297,8 +307,10 @@ def plan_cells(track, geom: RobotGeometry, limits: ActuatorLimits, *, speed_scal
     edges = np.flatnonzero(np.diff(np.concatenate([[0], out, [0]])))
     excursions = np.stack([s[edges[0::2]] - cfg.excursion_margin,
                            s[np.minimum(edges[1::2], s.size) - 1] + cfg.excursion_margin], axis=1)
+    end_from = math.inf if track.closed or cfg.end_hold == 0.0 else length - cfg.end_hold
     return CellPlan(start=s[first].copy(), side=sides[choice[first]].copy(), cost=float(cost),
-                    holds_missed=float(np.sum(held[np.isfinite(held)])), excursions=excursions, s=s, speed_cap=cap)
+                    holds_missed=float(np.sum(held[np.isfinite(held)])), excursions=excursions, s=s, speed_cap=cap,
+                    end_from=end_from)
 
 
 def _speed_cap(beta: np.ndarray, choice: np.ndarray, cfg: LookaheadConfig, rate: float, decel: float) -> np.ndarray:
@@ -332,8 +344,8 @@ def capped_track(track, plan: CellPlan, speed_scale: float):
 
 
 @njit(cache=True)
-def _lookup(starts, sides, counts, exc, exc_counts, closed, lengths, progress, lam_d, N, lead, segment, out,
-            out_exc):
+def _lookup(starts, sides, counts, exc, exc_counts, end_from, closed, lengths, progress, lam_d, N, lead, segment,
+            out, out_exc):
     for i in range(progress.shape[0]):
         K = counts[i]
         out[i, :] = 0.0
@@ -354,7 +366,9 @@ def _lookup(starts, sides, counts, exc, exc_counts, closed, lengths, progress, l
             out[i, q] = sides[i, k, q]
         for e in range(exc_counts[i]):
             if exc[i, e, 0] <= s <= exc[i, e, 1]:
-                out_exc[i] = 1.0
+                out_exc[i] = EXCURSION_PLANNED
+        if s >= end_from[i]:
+            out_exc[i] = EXCURSION_END
 
 
 class PlanTable(NamedTuple):
@@ -365,6 +379,7 @@ class PlanTable(NamedTuple):
     counts: np.ndarray  #: (N,) segments per robot (0: no plan)
     excursions: np.ndarray  #: (N, E, 2) expected excursions [m]
     excursion_counts: np.ndarray  #: (N,)
+    end_from: np.ndarray  #: (N,) where the approach to the end begins [m] (inf: nowhere)
     closed: np.ndarray  #: (N,) bool: the robot's track is a loop
     lengths: np.ndarray  #: (N,) its length [m]
 
@@ -375,13 +390,15 @@ def plan_table(plans: list[CellPlan | None], tracks, n: int) -> PlanTable:
     K = max([1] + [p.start.size for p in plans if p is not None])
     E = max([1] + [p.excursions.shape[0] for p in plans if p is not None])
     table = PlanTable(np.zeros((num, K)), np.zeros((num, K, n)), np.zeros(num, dtype=np.int64), np.zeros((num, E, 2)),
-                      np.zeros(num, dtype=np.int64), np.array([bool(t.closed) for t in tracks], dtype=np.bool_),
+                      np.zeros(num, dtype=np.int64), np.full(num, np.inf),
+                      np.array([bool(t.closed) for t in tracks], dtype=np.bool_),
                       np.array([float(t.length) for t in tracks]))
     for i, p in enumerate(plans):
         if p is not None:
             table.counts[i], table.excursion_counts[i] = p.start.size, p.excursions.shape[0]
             table.starts[i, :p.start.size], table.sides[i, :p.start.size] = p.start, p.side
             table.excursions[i, :p.excursions.shape[0]] = p.excursions
+            table.end_from[i] = p.end_from
     return table
 
 
@@ -394,11 +411,14 @@ def plan_sides(table: PlanTable, progress: np.ndarray, lam_d: np.ndarray, normal
     early: holding it in the old cell would make no progress). ``normals``: the stop circles'
     (n, 3). ``segment`` (N,) int: each robot's current segment of its plan, updated in place (it
     never goes back: a target that swings back and forth at rest does not swing the plan; 0 after
-    a reset). Also (N,) 1.0 where the progress is in one of the plan's expected excursions."""
+    a reset). Also (N,) the excursion flag: ``EXCURSION_PLANNED`` (1.0) where the progress is in one
+    of the plan's expected excursions, ``EXCURSION_END`` (2.0) on the approach to the track's end
+    (:attr:`CellPlan.end_from`), 0.0 elsewhere."""
     num, n = table.counts.shape[0], normals.shape[0]
     out = np.empty((num, n))
     out_exc = np.empty(num)
-    _lookup(table.starts, table.sides, table.counts, table.excursions, table.excursion_counts, table.closed,
+    _lookup(table.starts, table.sides, table.counts, table.excursions, table.excursion_counts, table.end_from,
+            table.closed,
             table.lengths, np.asarray(progress, dtype=np.float64), np.ascontiguousarray(lam_d, dtype=np.float64),
             np.ascontiguousarray(normals, dtype=np.float64), float(lead), segment, out, out_exc)
     return out, out_exc

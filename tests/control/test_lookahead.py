@@ -12,7 +12,7 @@ from control.follow.path_follower import reference_lambdas
 from control.icr.batch import BatchICRController
 from control.icr.config import ICRControllerConfig, Mode
 from control.icr.kernel_constants import stop_circle_normals
-from control.icr.kernels import in_cell
+from control.icr.kernels import EXCURSION_END, EXCURSION_NONE, EXCURSION_PLANNED, in_cell
 from control.icr.lookahead import (
     CellPlan,
     LookaheadConfig,
@@ -277,3 +277,57 @@ def test_the_plan_counts_only_on_holds_the_controller_makes():
     planned = int(np.sum((switches > window[0]) & (switches < window[1])))
     stops = sum(1 for s, event in seen if event and window[0] < s < window[1])
     assert planned >= 1 and stops == planned, (planned, stops, switches)
+
+
+def test_the_approach_to_an_open_tracks_end_is_flagged():
+    track = _line_track([0.3, 1.5])
+    plan = plan_cells(track, GEOM, LIMITS)
+    assert plan.end_from == pytest.approx(track.length - LookaheadConfig().end_hold)
+    lam, _ = reference_lambdas(track, np.array([track.length - 0.05]))
+    for s, flag in ((track.length - 0.2, EXCURSION_NONE), (track.length - 0.05, EXCURSION_END),
+                    (track.length, EXCURSION_END)):
+        _, exc = plan_sides(plan_table([plan], [track], GEOM.n), np.array([s]), lam, N, np.zeros(1, dtype=np.int64))
+        assert exc[0] == flag
+    assert plan_cells(track, GEOM, LIMITS, config=LookaheadConfig(end_hold=0.0)).end_from == np.inf
+    circle = named_track("circle", PARAMS)
+    assert plan_cells(circle, GEOM, LIMITS).end_from == np.inf  # a lap's end is no stop
+    for bad in (-0.1, 2.0, float("nan")):
+        with pytest.raises(ValueError, match="LookaheadConfig.end_hold"):
+            LookaheadConfig(end_hold=bad)
+
+
+def test_on_the_approach_to_the_end_a_target_at_any_angle_is_held():
+    # a target 60 deg beyond a stop circle: beyond the hold angle, so an expected excursion stops
+    # for it; on the approach to the end it is held at the cell's rim
+    lam0 = np.array([0.0, 1.0, 0.2])
+    lam0 /= np.linalg.norm(lam0)
+    side = _cell(lam0)
+    k = int(np.argmin(np.abs(N @ lam0)))
+    lam_d = lam0 - (N[k] @ lam0 + side[k] * np.sin(np.radians(60.0))) * N[k]
+    lam_d /= np.linalg.norm(lam_d)
+    events = {}
+    for flag in (EXCURSION_PLANNED, EXCURSION_END):
+        ctl = BatchICRController(1, GEOM, LIMITS, 0.02, PATH_ICR_CONFIG)
+        beta = steering_from_lambda(lam0, GEOM)[None]
+        ctl.reset([0], lam0[None], beta, np.zeros((1, GEOM.n)))
+        for _ in range(20):
+            cmd = ctl.step(None, lam0[None], np.array([0.1]), beta, np.zeros((1, GEOM.n)), lam_d[None],
+                           np.array([0.1]), plan_side=side[None], plan_excursion=np.array([flag]))
+            beta = cmd.beta
+        events[flag] = int(cmd.events[0])
+        if flag == EXCURSION_END:
+            assert cmd.info["held_at_stop"][0] and in_cell(ctl.state.lam[0], side, N)
+    assert events == {EXCURSION_PLANNED: 1, EXCURSION_END: 0}
+
+
+def test_icr_axis_ends_without_a_stop_for_the_last_centimetres():
+    """The default robot's icr-axis, seed 0: without the approach to the end the controller stopped
+    1.5 cm before the end and turned its wheels by 114 deg; with it the lap is a stop shorter."""
+    laps = {}
+    for end_hold in (0.0, LookaheadConfig().end_hold):
+        ctrl = ICRPathController(lookahead=LookaheadConfig(end_hold=end_hold))
+        log = run_episodes(ctrl, ["icr-axis"], [0])[0]
+        assert log.completed
+        laps[end_hold] = (float(log.t[-1]), int(log.events))
+    (t_off, ev_off), (t_on, ev_on) = laps[0.0], laps[LookaheadConfig().end_hold]
+    assert ev_on == ev_off - 1 and t_on < t_off - 0.5
