@@ -55,12 +55,14 @@ DEFAULT_LOOKAHEAD = LookaheadConfig()
 #: the ICR controller's tuning behind a path follower with look-ahead: stopped wheels turn at the
 #: full steering rate and acceleration limits (the default's 50% and 30% were for a controller
 #: that stopped often and without knowing why), μ is time-scaled apart from λ's turn
-#: (``mu_own_scale``), and a wheel that has come to rest within 0.2 rad (11.5°) of its target
-#: counts as settled (``reconfig_hold_tol``, 6° by default): a compliant steering with stiction
-#: stops the last degrees short under the tyre's scrub torque at rest and creeps there, where
-#: rolling brings it at once (figures: ``docs/icr-controller.md`` §9)
+#: (``mu_own_scale``), and once the commands have arrived a wheel within 0.2 rad (11.5°) of its
+#: target counts as settled (``reconfig_hold_tol``, 6° by default), still turning or not
+#: (``reconfig_still_tol`` = π: no stillness test): a compliant steering with stiction stops the
+#: last degrees short under the tyre's scrub torque at rest and creeps there, and a stiffer one
+#: still lags its set-point by about 10° when the commands arrive; rolling off from rest closes
+#: either gap within a few periods (figures: ``docs/icr-controller.md`` §9)
 PATH_ICR_CONFIG = ICRControllerConfig(reconfig_rate_fraction=1.0, reconfig_accel_fraction=1.0, mu_own_scale=True,
-                                      reconfig_hold_tol=0.2)
+                                      reconfig_hold_tol=0.2, reconfig_still_tol=np.pi)
 
 
 def _follower_config(speed_scale: float, follower_config: PathFollowerConfig | None) -> PathFollowerConfig:

@@ -69,7 +69,9 @@ class ICRControllerConfig:
             where the steering's stiction and the tread's grip hold it at rest (the dead band
             τ_s/k_s of a compliant steering with friction, 1.9° for the ``"paper"`` robot, plus
             the scrub torque's deflection), and rolling will bring it the rest of the way; the
-            robot need not wait for ``reconfig_timeout``.
+            robot need not wait for ``reconfig_timeout``. A ``reconfig_still_tol`` above π/2
+            tests no stillness (a wheel moves less than that in a period): any wheel within
+            ``reconfig_hold_tol`` counts as settled.
         coupling_from_measurement: in RECONFIGURING, compute the steer-to-drive coupling
             r φ̇ = −b β̇ from the measured steering rate (finite difference of the measured β)
             instead of the commanded one: the compliant steering lags its set-point.

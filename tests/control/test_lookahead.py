@@ -331,3 +331,25 @@ def test_icr_axis_ends_without_a_stop_for_the_last_centimetres():
         laps[end_hold] = (float(log.t[-1]), int(log.events))
     (t_off, ev_off), (t_on, ev_on) = laps[0.0], laps[LookaheadConfig().end_hold]
     assert ev_on == ev_off - 1 and t_on < t_off - 0.5
+
+
+def test_a_reconfiguration_ends_when_the_commands_arrive_with_every_wheel_near_its_target():
+    """hex's stiff steering lags its set-point by about 10 deg when a turn's commands arrive; the
+    path controller rolls off then (every wheel within reconfig_hold_tol, still turning) instead of
+    waiting until the wheels stop (seed 0 of slalom: three turns by 163-164 deg, whose trapezoid
+    at the steering limits takes 0.85 s)."""
+    from dataclasses import replace
+
+    from control.icr.config import Mode
+
+    turns = {}
+    for still in (np.pi, np.deg2rad(0.5)):
+        ctrl = ICRPathController(icr_config=replace(PATH_ICR_CONFIG, reconfig_still_tol=still))
+        log = run_episodes(ctrl, ["slalom"], [0], env_kwargs={"robot": "hex"})[0]
+        assert log.completed
+        recon = np.r_[0, (log.mode == int(Mode.RECONFIGURING)).astype(int), 0]
+        edges = np.flatnonzero(np.diff(recon))
+        turns[still] = ((edges[1::2] - edges[::2]) * log.dt)[1:], float(log.t[-1])  # after the start's
+    (new, lap_new), (old, lap_old) = turns[np.pi], turns[np.deg2rad(0.5)]
+    assert new.size == old.size == 3
+    assert np.all(new < 0.9) and np.all(old > 0.9) and lap_new < lap_old - 0.15  # 0.88 s, 0.92-0.96 s
