@@ -85,7 +85,8 @@ def arg_tracks(text: str) -> list[str]:
         try:
             names = arg_choice_list(ALL_TRACK_NAMES)(",".join(t for t in expanded if t not in files))
         except argparse.ArgumentTypeError as exc:
-            raise argparse.ArgumentTypeError(f"{exc}; or the path of a waypoint file (x,y per line, .csv)") from None
+            raise argparse.ArgumentTypeError(f"{exc}; or suite (every scenario); or the path of a waypoint file "
+                                             "(x,y per line, .csv)") from None
     if len(set(expanded)) != len(expanded):
         raise argparse.ArgumentTypeError(f"repeated entries in {text!r}")
     return [t for t in expanded if t in files or t in names]
