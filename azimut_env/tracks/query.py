@@ -90,32 +90,53 @@ def wrap_progress(s, closed, length):
     return min(max(s, 0.0), length)
 
 
+#: the cosine of the smallest turn of the path at a sample [5°] that the projection treats as a
+#: corner (:func:`segment_step`); the built-in tracks' arcs, sampled every 2 cm, turn by under 1°
+CORNER_COS = math.cos(math.radians(5.0))
+
+
 @njit(cache=True, inline="always")
-def segment_step(X, Y, TH, rho, bi, m, px, py, pth) -> tuple[bool, float]:
+def _segment(X, Y, TH, rho, a, b) -> tuple[float, float, float, float]:
+    """The segment from sample ``a`` to ``b`` in (x, y, ρθ) and its length."""
+    sx = X[b] - X[a]
+    sy = Y[b] - Y[a]
+    st = rho * (TH[b] - TH[a])
+    return sx, sy, st, math.sqrt(sx * sx + sy * sy + st * st)
+
+
+@njit(cache=True, inline="always")
+def segment_step(X, Y, TH, rho, bi, m, closed, px, py, pth) -> tuple[bool, float]:
     """The refinement of a projection at sample ``bi`` along the segment that starts there (the
-    last one at the track's end): (whether the segment has a length, the step along it [m],
-    clipped to ± its length), in the metric ‖Δxy‖² + (ρ Δθ)²."""
-    i2 = min(bi, m - 2)
-    sx = X[i2 + 1] - X[i2]
-    sy = Y[i2 + 1] - Y[i2]
-    st = rho * (TH[i2 + 1] - TH[i2])
-    seg = math.sqrt(sx * sx + sy * sy + st * st)
+    last one at the track's end), in the metric ‖Δxy‖² + (ρ Δθ)²: (whether it moved, the step [m],
+    clipped to ± the segment's length). At a corner (the path turns there by more than 5°,
+    :data:`CORNER_COS`), a pose behind ``bi`` along that segment but ahead of it along the
+    segment that ends there (on a closed track the last one before sample 0) is past the corner on
+    its outside, and its projection is the corner itself. (Stepping back along the next segment's
+    direction put a robot that overran a square's corner by 2 cm 2 cm before it, where the
+    feed-forward along the old leg and the position feedback back to it balanced, and the robot
+    stalled.) On a smooth path the two segments agree to first order, and the step is as ever."""
+    last = bi >= m - 1  # an open track's end: its last segment
+    sx, sy, st, seg = _segment(X, Y, TH, rho, m - 2 if last else bi, m - 1 if last else bi + 1)
     if not seg > 0:
         return False, 0.0
     rx = px - X[bi]
     ry = py - Y[bi]
     rt = rho * wrap_pi(pth - TH[bi])
     step = (rx * sx + ry * sy + rt * st) / seg
+    if step < 0 and not last and (bi > 0 or closed):
+        gx, gy, gt, seg_b = _segment(X, Y, TH, rho, bi - 1 if bi > 0 else m - 2, bi if bi > 0 else m - 1)
+        if seg_b > 0 and sx * gx + sy * gy + st * gt < CORNER_COS * seg * seg_b and rx * gx + ry * gy + rt * gt >= 0:
+            return False, 0.0
     return True, min(max(step, -seg), seg)
 
 
 @njit(cache=True, inline="always")
 def refined_progress(S, X, Y, TH, rho, closed, length, bi, lap_offset, base, px, py, pth):
     """The progress of the nearest sample ``bi`` (S[bi] + ``lap_offset`` + ``base``, in that
-    order: whole laps of a closed track) moved along its segment (:func:`segment_step`) and, on an
+    order: whole laps of a closed track) moved along its segments (:func:`segment_step`) and, on an
     open track, clamped to [0, length]: the end of every windowed and whole-track projection."""
     s = S[bi] + lap_offset + base
-    moved, step = segment_step(X, Y, TH, rho, bi, S.shape[0], px, py, pth)
+    moved, step = segment_step(X, Y, TH, rho, bi, S.shape[0], closed, px, py, pth)
     if moved:
         s += step
     if not closed:

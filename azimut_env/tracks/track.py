@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from azimut_env.tracks.query import query_batch_kernel, query_one_kernel, wrap_angle
+from azimut_env.tracks.query import query_batch_kernel, query_one_kernel, segment_step, wrap_angle
 from azimut_env.validation import check_bool, check_nonnegative, check_positive, check_real_array
 from estimation.libm import atan2
 
@@ -334,16 +334,12 @@ class Track:
         j = int(np.argmin(cost))
         i = int(wrapped[j])
         s = self.s[i] + offsets[j] + base
-        # refine along the segment's direction in (x, y, ρθ) space
-        i2 = min(i, m - 2)
-        seg = np.array([self.xy[i2 + 1, 0] - self.xy[i2, 0], self.xy[i2 + 1, 1] - self.xy[i2, 1],
-                        self.progress_radius * (self.heading[i2 + 1] - self.heading[i2])])
-        seg_len = math.sqrt(seg[0] * seg[0] + seg[1] * seg[1] + seg[2] * seg[2])
-        if seg_len > 0:
-            rel = np.array([pose[0] - self.xy[i, 0], pose[1] - self.xy[i, 1],
-                            self.progress_radius * float(wrap_angle(pose[2] - self.heading[i]))])
-            step = float(rel[0] * seg[0] + rel[1] * seg[1] + rel[2] * seg[2]) / seg_len
-            s += float(np.clip(step, -seg_len, seg_len))
+        # refine along the segments at the sample in (x, y, ρθ) space (the compiled refinement, one
+        # rule for every projection: azimut_env.tracks.query.segment_step)
+        moved, step = segment_step(self._x, self._y, self.heading, float(self.progress_radius), i, m,
+                                   bool(self.closed), float(pose[0]), float(pose[1]), float(pose[2]))
+        if moved:
+            s += step
         if not self.closed:
             s = float(np.clip(s, 0.0, self.length))
         return float(s)

@@ -45,6 +45,35 @@ def test_projection_recovers_progress_and_counts_laps():
     assert s_next == pytest.approx(t.length + 0.05, abs=1e-3)
 
 
+def test_a_pose_past_a_corner_on_its_outside_projects_onto_the_corner():
+    """A robot that overran the square's first corner (3, 0) by 1.7 cm and drifted 2.7 cm to the
+    outside is at the corner, not 2 cm before it along the old leg (the refinement used to step
+    back along the next leg's direction, and the robot stalled there); the compiled window
+    projection gives the same. On a smooth path (no sample turns by 5°) the refinement is as it
+    was: the step along the segment that starts at the nearest sample, clipped to its length."""
+    from azimut_env.tracks.query import project_window_kernel
+
+    t = Track.from_waypoints([[0.0, 0.0], [3.0, 0.0], [3.0, 3.0]], spacing=0.02)
+    pose = np.array([3.0172, -0.0273, 0.0])
+    corner = float(t.s[np.argmin(np.hypot(t.xy[:, 0] - 3.0, t.xy[:, 1]))])
+    assert t.project(pose, s_hint=corner - 0.02) == corner
+    assert project_window_kernel(t.s, t._x, t._y, t.heading, False, t.length, t.progress_radius, *pose,
+                                 corner - 0.02, 0.5, 1.0, True) == corner
+    c = make_track("circle")
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        s0 = rng.uniform(0, c.length)
+        pose = c.sample(s0)[:3] + rng.normal(0, 0.03, 3)
+        d = (c.xy[:-1, 0] - pose[0]) ** 2 + (c.xy[:-1, 1] - pose[1]) ** 2 \
+            + (c.progress_radius * wrap_angle(c.heading[:-1] - pose[2])) ** 2
+        i = int(np.argmin(d))
+        seg = np.array([*(c.xy[i + 1] - c.xy[i]), c.progress_radius * (c.heading[i + 1] - c.heading[i])])
+        rel = np.array([*(pose[:2] - c.xy[i]), c.progress_radius * wrap_angle(pose[2] - c.heading[i])])
+        n = np.linalg.norm(seg)
+        expected = c.s[i] + np.clip(rel @ seg / n, -n, n)
+        assert c.project(pose) == pytest.approx(expected, abs=1e-12)
+
+
 def test_rotation_in_place_has_progress():
     t = make_track("crab")
     # the rotation segment: position fixed, heading turns, progress grows by ρ·Δθ

@@ -353,3 +353,12 @@ def test_a_reconfiguration_ends_when_the_commands_arrive_with_every_wheel_near_i
     (new, lap_new), (old, lap_old) = turns[np.pi], turns[np.deg2rad(0.5)]
     assert new.size == old.size == 3
     assert np.all(new < 0.9) and np.all(old > 0.9) and lap_new < lap_old - 0.15  # 0.88 s, 0.92-0.96 s
+
+
+@pytest.mark.parametrize("robot,seed,scale", [("tri", 3, 1.2), ("hex", 2, 1.2), ("hex", 2, 1.4)])
+def test_a_robot_that_overruns_a_corner_drives_on(robot, seed, scale):
+    """These episodes stalled 2 cm before square's first corner until the time limit: the robot
+    had overrun it on the outside and the projection put it back on the old leg, where the
+    feed-forward and the position feedback balanced (azimut_env.tracks.query.segment_step)."""
+    log = run_episodes(ICRPathController(speed_scale=scale), ["square"], [seed], env_kwargs={"robot": robot})[0]
+    assert log.completed and log.events <= 13

@@ -107,9 +107,10 @@ def test_progress_past_a_cusp_is_the_cusp_and_the_preview_turns_to_the_next_leg(
     """A robot 6 mm past a cusp along the incoming leg is nearest to the cusp sample; the
     projection's refinement along the *outgoing* leg (pointing back) put its progress up to one
     segment before the cusp, where the follower's feed-forward and feedback balanced: the
-    ``reverse`` scenario's stall. The follower's progress is the cusp (control.follow.cusps), and
-    once there the preview points along the outgoing leg; the compiled follower gives the same
-    bits."""
+    ``reverse`` scenario's stall. The projection now takes a pose past a corner on its outside as
+    the corner (azimut_env.tracks.query.segment_step), the follower's progress is the cusp
+    (control.follow.cusps), and once there the preview points along the outgoing leg; the
+    compiled follower gives the same bits."""
     from control.follow.cusps import cusp_table
 
     tr = _cusp_track()
@@ -118,7 +119,7 @@ def test_progress_past_a_cusp_is_the_cusp_and_the_preview_turns_to_the_next_leg(
     i = int(table[0, 0])
     s_cusp = tr.s[i]
     pose = np.array([1.006, 0.0, 0.0])
-    assert tr.project(pose, s_hint=s_cusp - 0.05) < s_cusp - 0.005  # the projection alone: before the cusp
+    assert tr.project(pose, s_hint=s_cusp - 0.05) == s_cusp  # the projection alone: the corner
     f = PathFollower(tr, dt=0.02)
     f.reset(s_cusp - 0.05)
     out = f.step(pose)
