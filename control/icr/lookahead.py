@@ -56,7 +56,7 @@ from numba import njit
 from control.follow.path_follower import reference_lambdas
 from control.icr.config import ICRControllerConfig
 from control.icr.kernel_constants import stop_circle_normals
-from control.icr.kernels import EXCURSION_END, EXCURSION_PLANNED, in_cell, nearest_in_cell, steering_row
+from control.icr.kernels import EXCURSION_END, EXCURSION_NONE, EXCURSION_PLANNED, in_cell, nearest_in_cell, steering_row
 from control.limits import ActuatorLimits
 from estimation.geometry import RobotGeometry
 from estimation.validation import check_fields, check_positive_fields, check_range
@@ -349,7 +349,7 @@ def _lookup(starts, sides, counts, exc, exc_counts, end_from, closed, lengths, p
     for i in range(progress.shape[0]):
         K = counts[i]
         out[i, :] = 0.0
-        out_exc[i] = 0.0
+        out_exc[i] = EXCURSION_NONE
         if K == 0 or not math.isfinite(progress[i]):
             continue
         s = progress[i]

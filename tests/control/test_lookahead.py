@@ -151,29 +151,35 @@ def test_a_planned_change_of_cell_stops_and_reconfigures_into_the_planned_cell()
     assert in_cell(ctl.state.lam[0], target_cell, N)
 
 
-def test_a_planned_excursion_is_held_not_stopped_for():
-    # the target 10 deg beyond a stop circle at 0.5 m/s misses stop_hold_distance (1 cm) in 0.1 s:
-    # without the plan's excursion flag the controller stops; with it, it holds at the cell's rim
+def _target_beyond_a_stop(degrees: float, flag: float, mu: float, steps: int):
+    """The path controller at λ0 in its cell, stepped ``steps`` times toward a target ``degrees``
+    beyond the nearest stop circle at ``mu`` [m/s] with the plan's excursion ``flag``; returns
+    (the controller, its last command, the cell's sides, the target)."""
     lam0 = np.array([0.0, 1.0, 0.2])
     lam0 /= np.linalg.norm(lam0)
     side = _cell(lam0)
     k = int(np.argmin(np.abs(N @ lam0)))
-    lam_d = lam0 - (N[k] @ lam0 + side[k] * np.sin(np.radians(10.0))) * N[k]
+    lam_d = lam0 - (N[k] @ lam0 + side[k] * np.sin(np.radians(degrees))) * N[k]
     lam_d /= np.linalg.norm(lam_d)
-    assert not in_cell(lam_d, side, N)
-    results = {}
-    for flag in (0.0, 1.0):
-        ctl = BatchICRController(1, GEOM, LIMITS, 0.02, PATH_ICR_CONFIG)
-        beta = steering_from_lambda(lam0, GEOM)[None]
-        ctl.reset([0], lam0[None], beta, np.zeros((1, GEOM.n)))
-        events = 0
-        for _ in range(150):
-            cmd = ctl.step(None, lam0[None], np.array([0.5]), beta, np.zeros((1, GEOM.n)), lam_d[None],
-                           np.array([0.5]), plan_side=side[None], plan_excursion=np.array([flag]))
-            beta = cmd.beta
-            events = int(cmd.events[0])
-        results[flag] = events
-    assert results[1.0] == 0 and results[0.0] >= 1
+    ctl = BatchICRController(1, GEOM, LIMITS, 0.02, PATH_ICR_CONFIG)
+    beta = steering_from_lambda(lam0, GEOM)[None]
+    ctl.reset([0], lam0[None], beta, np.zeros((1, GEOM.n)))
+    for _ in range(steps):
+        cmd = ctl.step(None, lam0[None], np.array([mu]), beta, np.zeros((1, GEOM.n)), lam_d[None],
+                       np.array([mu]), plan_side=side[None], plan_excursion=np.array([flag]))
+        beta = cmd.beta
+    return ctl, cmd, side, lam_d
+
+
+def test_a_planned_excursion_is_held_not_stopped_for():
+    # the target 10 deg beyond a stop circle at 0.5 m/s misses stop_hold_distance (1 cm) in 0.1 s:
+    # without the plan's excursion flag the controller stops; with it, it holds at the cell's rim
+    events = {}
+    for flag in (EXCURSION_NONE, EXCURSION_PLANNED):
+        _, cmd, side, lam_d = _target_beyond_a_stop(10.0, flag, 0.5, 150)
+        assert not in_cell(lam_d, side, N)
+        events[flag] = int(cmd.events[0])
+    assert events[EXCURSION_PLANNED] == 0 and events[EXCURSION_NONE] >= 1
 
 
 def test_plan_inputs_are_checked():
@@ -299,21 +305,9 @@ def test_the_approach_to_an_open_tracks_end_is_flagged():
 def test_on_the_approach_to_the_end_a_target_at_any_angle_is_held():
     # a target 60 deg beyond a stop circle: beyond the hold angle, so an expected excursion stops
     # for it; on the approach to the end it is held at the cell's rim
-    lam0 = np.array([0.0, 1.0, 0.2])
-    lam0 /= np.linalg.norm(lam0)
-    side = _cell(lam0)
-    k = int(np.argmin(np.abs(N @ lam0)))
-    lam_d = lam0 - (N[k] @ lam0 + side[k] * np.sin(np.radians(60.0))) * N[k]
-    lam_d /= np.linalg.norm(lam_d)
     events = {}
     for flag in (EXCURSION_PLANNED, EXCURSION_END):
-        ctl = BatchICRController(1, GEOM, LIMITS, 0.02, PATH_ICR_CONFIG)
-        beta = steering_from_lambda(lam0, GEOM)[None]
-        ctl.reset([0], lam0[None], beta, np.zeros((1, GEOM.n)))
-        for _ in range(20):
-            cmd = ctl.step(None, lam0[None], np.array([0.1]), beta, np.zeros((1, GEOM.n)), lam_d[None],
-                           np.array([0.1]), plan_side=side[None], plan_excursion=np.array([flag]))
-            beta = cmd.beta
+        ctl, cmd, side, _ = _target_beyond_a_stop(60.0, flag, 0.1, 20)
         events[flag] = int(cmd.events[0])
         if flag == EXCURSION_END:
             assert cmd.info["held_at_stop"][0] and in_cell(ctl.state.lam[0], side, N)
